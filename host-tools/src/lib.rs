@@ -1,0 +1,9 @@
+//! Host side of hammer-monitor: the hammer simulator, trace files and the
+//! `hammer` command line.
+
+pub mod cli;
+pub mod config;
+pub mod plot;
+pub mod sim;
+pub mod simulate;
+pub mod trace;

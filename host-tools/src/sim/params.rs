@@ -1,0 +1,307 @@
+//! Every parameter of the simulated hammer, with its default and its source.
+//!
+//! `docs/model.md` lists the same values with the reasoning behind each choice;
+//! where the paper is silent the default is an engineering estimate, marked so.
+
+use serde::{Deserialize, Serialize};
+
+use super::effects::Effects;
+use super::sensor::SensorModel;
+use crate::config::{check_range, ConfigError};
+
+/// Geometry and masses of the hammer (the paper, section 3.1.3, unless noted).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct HammerParams {
+    pub piston_mass_kg: f64,
+    pub bore_diameter_m: f64,
+    pub rod_diameter_m: f64,
+    pub piston_length_m: f64,
+    /// Piston position at rest when the simulation starts (paper: 10 mm).
+    pub initial_position_m: f64,
+    /// Position at which the piston's striking face meets the shank:
+    /// initial position + the paper's 42 mm stroke.
+    pub impact_position_m: f64,
+    /// Position of the rear face at which the rear outlet starts to open (paper: l1 = 30 mm).
+    pub rear_outlet_opens_m: f64,
+    /// Position below which the front outlet is uncovered (paper: l3 − lp = 55 − 35 = 20 mm).
+    pub front_outlet_opens_m: f64,
+    pub outlet_diameter_m: f64,
+    /// Number of outlet holes per chamber (estimate: one, as drawn in the paper's figure 1).
+    pub outlet_count: u32,
+    pub outlet_cd: f64,
+    /// Dead volume of the rear chamber at x = 0 (estimate: cover recess and port 3 passage).
+    pub rear_dead_volume_m3: f64,
+    /// Dead volume of the front chamber at impact (estimate: port 4 passage and shank bore).
+    pub front_dead_volume_m3: f64,
+    /// Inclination of the hammer axis below the horizontal; positive means the
+    /// stroke runs downhill. The paper's bench is horizontal.
+    pub inclination_deg: f64,
+}
+
+impl Default for HammerParams {
+    fn default() -> Self {
+        let g = hammer_estimator::Geometry::PAPER;
+        Self {
+            piston_mass_kg: g.piston_mass_kg,
+            bore_diameter_m: g.bore_diameter_m,
+            rod_diameter_m: g.rod_diameter_m,
+            piston_length_m: 0.035,
+            initial_position_m: 0.010,
+            impact_position_m: 0.052,
+            rear_outlet_opens_m: 0.030,
+            front_outlet_opens_m: 0.020,
+            outlet_diameter_m: 0.005,
+            outlet_count: 1,
+            outlet_cd: 0.62,
+            rear_dead_volume_m3: 15.6e-6,
+            front_dead_volume_m3: 19.2e-6,
+            inclination_deg: 0.0,
+        }
+    }
+}
+
+impl HammerParams {
+    pub fn geometry(&self) -> hammer_estimator::Geometry {
+        hammer_estimator::Geometry {
+            piston_mass_kg: self.piston_mass_kg,
+            bore_diameter_m: self.bore_diameter_m,
+            rod_diameter_m: self.rod_diameter_m,
+        }
+    }
+
+    fn validate(&self) -> Result<(), ConfigError> {
+        check_range("hammer.piston_mass_kg", self.piston_mass_kg, 0.01, 100.0)?;
+        check_range("hammer.bore_diameter_m", self.bore_diameter_m, 0.005, 0.5)?;
+        check_range(
+            "hammer.rod_diameter_m",
+            self.rod_diameter_m,
+            0.0,
+            self.bore_diameter_m * 0.95,
+        )?;
+        check_range("hammer.piston_length_m", self.piston_length_m, 0.005, 1.0)?;
+        check_range(
+            "hammer.initial_position_m",
+            self.initial_position_m,
+            0.0,
+            self.impact_position_m,
+        )?;
+        check_range("hammer.impact_position_m", self.impact_position_m, 0.005, 1.0)?;
+        check_range(
+            "hammer.rear_outlet_opens_m",
+            self.rear_outlet_opens_m,
+            0.0,
+            self.impact_position_m,
+        )?;
+        check_range(
+            "hammer.front_outlet_opens_m",
+            self.front_outlet_opens_m,
+            0.0,
+            self.impact_position_m,
+        )?;
+        check_range("hammer.outlet_diameter_m", self.outlet_diameter_m, 1e-4, 0.05)?;
+        check_range("hammer.outlet_count", self.outlet_count as f64, 1.0, 16.0)?;
+        check_range("hammer.outlet_cd", self.outlet_cd, 0.1, 1.0)?;
+        check_range("hammer.rear_dead_volume_m3", self.rear_dead_volume_m3, 1e-7, 1e-3)?;
+        check_range("hammer.front_dead_volume_m3", self.front_dead_volume_m3, 1e-7, 1e-3)?;
+        check_range("hammer.inclination_deg", self.inclination_deg, -90.0, 90.0)?;
+        Ok(())
+    }
+}
+
+/// The pilot-operated 2-position 3-way valve (paper 3.1.2–3.1.3; pilot areas estimated).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ValveParams {
+    pub mass_kg: f64,
+    pub travel_m: f64,
+    /// Stroke over which a control port opens (zero lap: port 3 over the last
+    /// `opening_m` of travel, port 4 over the first).
+    pub opening_m: f64,
+    pub cd: f64,
+    /// Effective flow area of the poppet at full opening. The paper models the
+    /// valve as AMESim's conical poppet with a sharp-edged seat but gives no seat
+    /// geometry; this value is calibrated to its 4 bar anchors (docs/model.md).
+    /// The area grows linearly with lift and acts in series with the port bore.
+    pub full_open_area_m2: f64,
+    pub control_port_diameter_m: f64,
+    /// Pilot face fed by the rear chamber; pushes the valve towards "feed rear".
+    pub pilot_area_rear_m2: f64,
+    /// Pilot face fed by the front chamber; pushes the valve towards "feed front".
+    pub pilot_area_front_m2: f64,
+    /// Viscous damping of the spool in its bore (estimate).
+    pub damping_n_s_per_m: f64,
+}
+
+impl Default for ValveParams {
+    fn default() -> Self {
+        Self {
+            mass_kg: 0.005,
+            travel_m: 0.002,
+            opening_m: 0.001,
+            cd: 0.62,
+            full_open_area_m2: 2.76e-6,
+            control_port_diameter_m: 0.008,
+            pilot_area_rear_m2: 50e-6,
+            pilot_area_front_m2: 25e-6,
+            damping_n_s_per_m: 15.0,
+        }
+    }
+}
+
+impl ValveParams {
+    fn validate(&self) -> Result<(), ConfigError> {
+        check_range("valve.mass_kg", self.mass_kg, 1e-4, 1.0)?;
+        check_range("valve.travel_m", self.travel_m, 1e-4, 0.02)?;
+        check_range("valve.opening_m", self.opening_m, 1e-5, self.travel_m)?;
+        check_range("valve.cd", self.cd, 0.1, 1.0)?;
+        check_range("valve.full_open_area_m2", self.full_open_area_m2, 1e-8, 1e-3)?;
+        check_range(
+            "valve.control_port_diameter_m",
+            self.control_port_diameter_m,
+            1e-3,
+            0.05,
+        )?;
+        check_range("valve.pilot_area_rear_m2", self.pilot_area_rear_m2, 1e-6, 1e-2)?;
+        check_range("valve.pilot_area_front_m2", self.pilot_area_front_m2, 1e-6, 1e-2)?;
+        check_range("valve.damping_n_s_per_m", self.damping_n_s_per_m, 0.0, 1e3)?;
+        Ok(())
+    }
+}
+
+/// How the piston meets the shank (paper 3.1.1: spring plus damper; no pulling force).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ContactLaw {
+    SpringDamper,
+    HuntCrossley,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ContactParams {
+    pub law: ContactLaw,
+    /// Axial stiffness of the steel contact, ~E·A/L of the 28 mm striking end (estimate).
+    pub stiffness_n_per_m: f64,
+    /// Coefficient of restitution the damper is sized for; the rest of the
+    /// energy is what the shank carries away (estimate).
+    pub restitution: f64,
+    /// Hertzian exponent of the Hunt–Crossley law.
+    pub hunt_crossley_exponent: f64,
+}
+
+impl Default for ContactParams {
+    fn default() -> Self {
+        Self {
+            law: ContactLaw::SpringDamper,
+            stiffness_n_per_m: 2.0e9,
+            restitution: 0.28,
+            hunt_crossley_exponent: 1.5,
+        }
+    }
+}
+
+impl ContactParams {
+    fn validate(&self) -> Result<(), ConfigError> {
+        check_range("contact.stiffness_n_per_m", self.stiffness_n_per_m, 1e6, 1e11)?;
+        check_range("contact.restitution", self.restitution, 0.01, 0.99)?;
+        check_range("contact.hunt_crossley_exponent", self.hunt_crossley_exponent, 1.0, 2.0)?;
+        Ok(())
+    }
+}
+
+/// Supply and ambient conditions.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SupplyParams {
+    /// Gauge supply pressure at the valve inlet (the paper runs 4–7 bar).
+    pub pressure_bar: f64,
+    pub temperature_k: f64,
+    pub ambient_temperature_k: f64,
+}
+
+impl Default for SupplyParams {
+    fn default() -> Self {
+        Self {
+            pressure_bar: 4.0,
+            temperature_k: 293.15,
+            ambient_temperature_k: 293.15,
+        }
+    }
+}
+
+impl SupplyParams {
+    fn validate(&self) -> Result<(), ConfigError> {
+        check_range("supply.pressure_bar", self.pressure_bar, 0.5, 20.0)?;
+        check_range("supply.temperature_k", self.temperature_k, 200.0, 400.0)?;
+        check_range("supply.ambient_temperature_k", self.ambient_temperature_k, 200.0, 400.0)?;
+        Ok(())
+    }
+}
+
+/// Integration and output settings.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SolverParams {
+    pub duration_s: f64,
+    /// Uniform output grid (the bench board samples at 100 kS/s).
+    pub output_step_s: f64,
+    pub rtol: f64,
+    pub max_step_s: f64,
+}
+
+impl Default for SolverParams {
+    fn default() -> Self {
+        Self {
+            duration_s: 0.5,
+            output_step_s: 10e-6,
+            rtol: 1e-6,
+            max_step_s: 2e-4,
+        }
+    }
+}
+
+impl SolverParams {
+    fn validate(&self) -> Result<(), ConfigError> {
+        check_range("solver.duration_s", self.duration_s, 1e-3, 600.0)?;
+        check_range("solver.output_step_s", self.output_step_s, 1e-7, 1e-2)?;
+        check_range("solver.rtol", self.rtol, 1e-12, 1e-2)?;
+        check_range("solver.max_step_s", self.max_step_s, 1e-7, 1e-2)?;
+        Ok(())
+    }
+}
+
+/// Everything a simulation run needs.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+#[serde(deny_unknown_fields, default)]
+pub struct SimConfig {
+    pub hammer: HammerParams,
+    pub valve: ValveParams,
+    pub contact: ContactParams,
+    pub supply: SupplyParams,
+    pub solver: SolverParams,
+    pub effects: Effects,
+    pub sensors: SensorModel,
+    /// Seed of the sensor noise and of the zero-shift signs.
+    pub seed: u64,
+}
+
+impl SimConfig {
+    /// The nominal model at a supply pressure: every effect off, default sensors.
+    pub fn nominal(supply_bar: f64) -> Self {
+        let mut c = Self::default();
+        c.supply.pressure_bar = supply_bar;
+        c
+    }
+
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        self.hammer.validate()?;
+        self.valve.validate()?;
+        self.contact.validate()?;
+        self.supply.validate()?;
+        self.solver.validate()?;
+        self.effects.validate()?;
+        self.sensors.validate()?;
+        Ok(())
+    }
+}

@@ -1,0 +1,399 @@
+//! Drives the integrator through the hammer's events and resamples the
+//! solution onto the uniform output grid.
+
+use serde::{Deserialize, Serialize};
+
+use super::gas::P_ATM_PA;
+use super::model::{self, HammerModel, N, N_DYN};
+use super::params::SimConfig;
+use super::solver::{Dense, Dopri5, SolverError, SolverStats};
+
+/// The noiseless solution on the output grid (SI, gauge pressures).
+#[derive(Debug, Clone, Default)]
+pub struct TruthTrace {
+    pub dt_s: f64,
+    pub t_s: Vec<f64>,
+    pub x_m: Vec<f64>,
+    pub v_mps: Vec<f64>,
+    pub accel_mps2: Vec<f64>,
+    pub p_rear_pa: Vec<f64>,
+    pub p_front_pa: Vec<f64>,
+    pub valve_m: Vec<f64>,
+    pub friction_n: Vec<f64>,
+    pub contact_n: Vec<f64>,
+    pub supply_pa: Vec<f64>,
+}
+
+impl TruthTrace {
+    pub fn len(&self) -> usize {
+        self.t_s.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.t_s.is_empty()
+    }
+}
+
+/// What happened at an event, with the full state at that instant.
+#[derive(Debug, Clone, Copy)]
+pub struct EventRecord {
+    pub t_s: f64,
+    pub y: [f64; N],
+}
+
+#[derive(Debug, Clone, Default)]
+pub struct Events {
+    /// Contact onsets (the impacts).
+    pub impacts: Vec<EventRecord>,
+    /// Contact ends (piston leaves the shank).
+    pub contact_ends: Vec<EventRecord>,
+    /// Velocity crossing zero upwards: backhaul turns into stroke.
+    pub stroke_starts: Vec<EventRecord>,
+}
+
+/// Ground truth of one impact cycle: the stroke that ends in impact `index`
+/// and the backhaul that preceded it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CycleTruth {
+    pub index: usize,
+    pub t_impact_s: f64,
+    pub impact_velocity_mps: f64,
+    pub impact_energy_j: f64,
+    pub period_s: f64,
+    pub frequency_hz: f64,
+    /// From the backhaul's turning point to the impact position.
+    pub stroke_m: f64,
+    pub t_stroke_start_s: f64,
+    pub t_backhaul_start_s: f64,
+    /// Mean friction magnitude over the stroke and the backhaul (contact excluded).
+    pub friction_stroke_n: f64,
+    pub friction_backhaul_n: f64,
+    pub friction_cycle_n: f64,
+    /// Energy dissipated by friction over the whole cycle and over the stroke alone.
+    pub friction_work_j: f64,
+    pub friction_work_stroke_j: f64,
+    pub pressure_work_j: f64,
+    /// Net work of the contact forces over the cycle (negative: energy to the shank).
+    pub contact_work_j: f64,
+    /// Pressure − friction + contact + gravity work − ΔKE over the cycle.
+    pub energy_residual_j: f64,
+    pub peak_rear_pa: f64,
+    pub peak_front_pa: f64,
+}
+
+/// Air mass bookkeeping over the run.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct MassBalance {
+    pub drawn_kg: f64,
+    pub vented_kg: f64,
+    pub stored_change_kg: f64,
+    /// drawn − vented − stored change.
+    pub residual_kg: f64,
+}
+
+pub struct SimRun {
+    pub truth: TruthTrace,
+    pub events: Events,
+    pub cycles: Vec<CycleTruth>,
+    pub mass_balance: MassBalance,
+    pub stats: SolverStats,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum EventKind {
+    Kink,
+    ContactOnset,
+    ContactEnd,
+    ValveLeftStop,
+    ValveRightStop,
+    StrokeStart,
+    VelocityZeroDown,
+}
+
+struct EventFn {
+    kind_up: Option<EventKind>,
+    kind_down: Option<EventKind>,
+    component: usize,
+    level: f64,
+}
+
+/// Runs the model of `cfg` and extracts its per-cycle truth.
+pub fn simulate_truth(cfg: &SimConfig) -> Result<SimRun, SolverError> {
+    let model = HammerModel::new(cfg);
+    let y0 = model.initial_state(cfg.hammer.initial_position_m);
+    let rtol = cfg.solver.rtol;
+    let mut atol = [0.0; N];
+    let scale = [0.05, 3.0, 1e-4, 5e5, 1e-4, 5e5, 2e-3, 2.0, 5e5, 30.0];
+    for i in 0..N_DYN {
+        atol[i] = rtol * scale[i];
+    }
+    let mut solver = Dopri5::new(&model, 0.0, y0, rtol, atol, N_DYN, cfg.solver.max_step_s);
+
+    let mut fns = Vec::new();
+    for level in model.kink_positions() {
+        let is_contact = (level - model.x_impact_m).abs() < 1e-15;
+        fns.push(EventFn {
+            kind_up: Some(if is_contact {
+                EventKind::ContactOnset
+            } else {
+                EventKind::Kink
+            }),
+            kind_down: Some(if is_contact {
+                EventKind::ContactEnd
+            } else {
+                EventKind::Kink
+            }),
+            component: model::X,
+            level,
+        });
+    }
+    fns.push(EventFn {
+        kind_up: Some(EventKind::Kink),
+        kind_down: Some(EventKind::Kink),
+        component: model::X,
+        level: 0.0,
+    });
+    for level in model.valve_kinks() {
+        fns.push(EventFn {
+            kind_up: Some(EventKind::Kink),
+            kind_down: Some(EventKind::Kink),
+            component: model::XV,
+            level,
+        });
+    }
+    fns.push(EventFn {
+        kind_up: None,
+        kind_down: Some(EventKind::ValveLeftStop),
+        component: model::XV,
+        level: 0.0,
+    });
+    fns.push(EventFn {
+        kind_up: Some(EventKind::ValveRightStop),
+        kind_down: None,
+        component: model::XV,
+        level: model.valve_travel_m,
+    });
+    fns.push(EventFn {
+        kind_up: Some(EventKind::StrokeStart),
+        kind_down: Some(EventKind::VelocityZeroDown),
+        component: model::V,
+        level: 0.0,
+    });
+
+    let t_end = cfg.solver.duration_s;
+    let dt = cfg.solver.output_step_s;
+    let n_out = (t_end / dt + 1e-9).floor() as usize + 1;
+    let mut out = TruthTrace {
+        dt_s: dt,
+        ..Default::default()
+    };
+    for v in [
+        &mut out.t_s,
+        &mut out.x_m,
+        &mut out.v_mps,
+        &mut out.accel_mps2,
+        &mut out.p_rear_pa,
+        &mut out.p_front_pa,
+        &mut out.valve_m,
+        &mut out.friction_n,
+        &mut out.contact_n,
+        &mut out.supply_pa,
+    ] {
+        v.reserve_exact(n_out);
+    }
+    let mut next_out = 0usize;
+    push_sample(&model, &mut out, 0.0, &y0);
+    next_out += 1;
+
+    let mut events = Events::default();
+    while solver.t < t_end {
+        let t0 = solver.t;
+        let ya = solver.y;
+        let dense = solver.step(&model, t_end)?;
+        let yb = solver.y;
+        let t1 = solver.t;
+
+        let mut earliest: Option<(f64, EventKind)> = None;
+        for f in &fns {
+            let g0 = ya[f.component] - f.level;
+            let g1 = yb[f.component] - f.level;
+            let kind = if g0 < 0.0 && g1 >= 0.0 {
+                f.kind_up
+            } else if g0 > 0.0 && g1 <= 0.0 {
+                f.kind_down
+            } else {
+                None
+            };
+            if let Some(kind) = kind {
+                let tr = locate(&dense, t0, t1, f.component, f.level, g0);
+                if earliest.is_none_or(|(te, _)| tr < te) {
+                    earliest = Some((tr, kind));
+                }
+            }
+        }
+
+        let t_stop = earliest.map_or(t1, |(te, _)| te);
+        while next_out < n_out {
+            let t = next_out as f64 * dt;
+            if t > t_stop {
+                break;
+            }
+            let mut y = [0.0; N];
+            dense.all(t, &mut y);
+            push_sample(&model, &mut out, t, &y);
+            next_out += 1;
+        }
+
+        if let Some((te, kind)) = earliest {
+            let mut y = [0.0; N];
+            dense.all(te, &mut y);
+            let rec = EventRecord { t_s: te, y };
+            match kind {
+                EventKind::ContactOnset => {
+                    model.contact_v_in.set(y[model::V]);
+                    events.impacts.push(rec);
+                }
+                EventKind::ContactEnd => events.contact_ends.push(rec),
+                EventKind::StrokeStart => events.stroke_starts.push(rec),
+                EventKind::ValveLeftStop => {
+                    y[model::XV] = 0.0;
+                    y[model::VV] = 0.0;
+                }
+                EventKind::ValveRightStop => {
+                    y[model::XV] = model.valve_travel_m;
+                    y[model::VV] = 0.0;
+                }
+                EventKind::Kink | EventKind::VelocityZeroDown => {}
+            }
+            solver.restart(&model, te, y);
+        }
+    }
+    // The last grid point may sit a rounding error past t_end.
+    while next_out < n_out {
+        let t = next_out as f64 * dt;
+        push_sample(&model, &mut out, t, &solver.y);
+        next_out += 1;
+    }
+
+    let stored = |y: &[f64; N]| y[model::M1] + y[model::M2] + model.line_mass_kg(y);
+    let yf = solver.y;
+    let drawn = yf[model::M_IN];
+    let vented = yf[model::M_OUT];
+    let stored_change = stored(&yf) - stored(&y0);
+    let mass_balance = MassBalance {
+        drawn_kg: drawn,
+        vented_kg: vented,
+        stored_change_kg: stored_change,
+        residual_kg: drawn - vented - stored_change,
+    };
+    let cycles = extract_cycles(&model, &out, &events);
+    Ok(SimRun {
+        truth: out,
+        events,
+        cycles,
+        mass_balance,
+        stats: solver.stats,
+    })
+}
+
+/// Bisection on the dense output; returns the first time on the far side of the crossing.
+fn locate(dense: &Dense<N>, t0: f64, t1: f64, c: usize, level: f64, g0: f64) -> f64 {
+    let (mut lo, mut hi) = (t0, t1);
+    for _ in 0..60 {
+        let mid = 0.5 * (lo + hi);
+        if mid <= lo || mid >= hi {
+            break;
+        }
+        let g = dense.at(mid, c) - level;
+        if (g < 0.0) == (g0 < 0.0) && g != 0.0 {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    hi
+}
+
+fn push_sample(model: &HammerModel, out: &mut TruthTrace, t: f64, y: &[f64; N]) {
+    let f = model.piston_forces(y);
+    out.t_s.push(t);
+    out.x_m.push(y[model::X]);
+    out.v_mps.push(y[model::V]);
+    out.accel_mps2.push(f.total_n() / model.mass_kg);
+    out.p_rear_pa.push(y[model::P1] - P_ATM_PA);
+    out.p_front_pa.push(y[model::P2] - P_ATM_PA);
+    out.valve_m.push(y[model::XV]);
+    out.friction_n.push(f.friction_n);
+    out.contact_n.push(f.contact_n);
+    out.supply_pa.push(y[model::PS] - P_ATM_PA);
+}
+
+fn kinetic_j(m: f64, y: &[f64; N]) -> f64 {
+    0.5 * m * y[model::V] * y[model::V]
+}
+
+fn extract_cycles(model: &HammerModel, tr: &TruthTrace, ev: &Events) -> Vec<CycleTruth> {
+    let m = model.mass_kg;
+    let idx = |t: f64| ((t / tr.dt_s).ceil() as usize).min(tr.len());
+    let mut cycles = Vec::new();
+    for k in 1..ev.impacts.len() {
+        let prev = &ev.impacts[k - 1];
+        let imp = &ev.impacts[k];
+        let Some(ce) = ev.contact_ends.iter().find(|e| e.t_s > prev.t_s && e.t_s < imp.t_s) else {
+            continue;
+        };
+        let Some(ss) = ev
+            .stroke_starts
+            .iter()
+            .rev()
+            .find(|e| e.t_s > ce.t_s && e.t_s < imp.t_s)
+        else {
+            continue;
+        };
+        let mean_friction = |a: f64, b: f64, sign: f64| {
+            let (i0, i1) = (idx(a), idx(b));
+            if i1 <= i0 {
+                return 0.0;
+            }
+            tr.friction_n[i0..i1].iter().map(|f| -sign * f).sum::<f64>() / (i1 - i0) as f64
+        };
+        let fs = mean_friction(ss.t_s, imp.t_s, 1.0);
+        let fb = mean_friction(ce.t_s, ss.t_s, -1.0);
+        let ns = idx(imp.t_s).saturating_sub(idx(ss.t_s)) as f64;
+        let nb = idx(ss.t_s).saturating_sub(idx(ce.t_s)) as f64;
+        let fc = if ns + nb > 0.0 {
+            (fs * ns + fb * nb) / (ns + nb)
+        } else {
+            0.0
+        };
+        let d = |c: usize| imp.y[c] - prev.y[c];
+        let residual = d(model::W_PRESSURE) - d(model::W_FRICTION) + d(model::W_CONTACT) + d(model::W_GRAVITY)
+            - (kinetic_j(m, &imp.y) - kinetic_j(m, &prev.y));
+        let (i0, i1) = (idx(prev.t_s), idx(imp.t_s));
+        let peak = |v: &[f64]| v[i0..i1].iter().cloned().fold(f64::NEG_INFINITY, f64::max);
+        let v_imp = imp.y[model::V];
+        let period = imp.t_s - prev.t_s;
+        cycles.push(CycleTruth {
+            index: k,
+            t_impact_s: imp.t_s,
+            impact_velocity_mps: v_imp,
+            impact_energy_j: 0.5 * m * v_imp * v_imp,
+            period_s: period,
+            frequency_hz: 1.0 / period,
+            stroke_m: model.x_impact_m - ss.y[model::X],
+            t_stroke_start_s: ss.t_s,
+            t_backhaul_start_s: ce.t_s,
+            friction_stroke_n: fs,
+            friction_backhaul_n: fb,
+            friction_cycle_n: fc,
+            friction_work_j: d(model::W_FRICTION),
+            friction_work_stroke_j: imp.y[model::W_FRICTION] - ss.y[model::W_FRICTION],
+            pressure_work_j: d(model::W_PRESSURE),
+            contact_work_j: d(model::W_CONTACT),
+            energy_residual_j: residual,
+            peak_rear_pa: peak(&tr.p_rear_pa),
+            peak_front_pa: peak(&tr.p_front_pa),
+        });
+    }
+    cycles
+}

@@ -1,0 +1,266 @@
+//! What the bench board's ADC sees: sensor gain and offset, bandwidth, noise,
+//! clipping and quantisation, plus the sensor-side effects of the catalogue
+//! (`accel_zero_shift`, `pressure_gain_error`).
+
+use serde::{Deserialize, Serialize};
+
+use super::effects::Effects;
+use super::run::{EventRecord, TruthTrace};
+use crate::config::{check_range, ConfigError};
+
+/// One measurement channel from transducer to ADC code. In a config file a
+/// channel is given whole (every key), since defaults differ per channel.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SensorChannel {
+    /// Physical value at ADC code 0.
+    pub range_min: f64,
+    /// Physical value at the top ADC code.
+    pub range_max: f64,
+    pub adc_bits: u32,
+    /// Standard deviation of white noise before the ADC, in channel units.
+    pub noise_std: f64,
+    pub offset: f64,
+    /// First-order bandwidth of transducer plus anti-alias filter, Hz; 0 = none.
+    pub bandwidth_hz: f64,
+}
+
+impl SensorChannel {
+    pub fn lsb(&self) -> f64 {
+        (self.range_max - self.range_min) / self.full_scale_code() as f64
+    }
+
+    pub fn full_scale_code(&self) -> u32 {
+        (1u32 << self.adc_bits) - 1
+    }
+
+    /// ADC code of a physical value, clipped to the converter's range.
+    pub fn code(&self, value: f64) -> u32 {
+        let c = ((value - self.range_min) / self.lsb()).round();
+        if c.is_nan() {
+            0
+        } else {
+            c.clamp(0.0, self.full_scale_code() as f64) as u32
+        }
+    }
+
+    pub fn value(&self, code: u32) -> f64 {
+        self.range_min + code as f64 * self.lsb()
+    }
+
+    fn validate(&self, name: &str) -> Result<(), ConfigError> {
+        let f = |k: &str| format!("sensors.{name}.{k}");
+        check_range(&f("range_min"), self.range_min, -1e9, 1e9)?;
+        check_range(&f("range_max"), self.range_max, self.range_min + 1e-9, 1e9)?;
+        check_range(&f("adc_bits"), self.adc_bits as f64, 8.0, 24.0)?;
+        check_range(&f("noise_std"), self.noise_std, 0.0, 1e9)?;
+        check_range(&f("offset"), self.offset, -1e9, 1e9)?;
+        check_range(&f("bandwidth_hz"), self.bandwidth_hz, 0.0, 1e7)?;
+        Ok(())
+    }
+}
+
+/// The three channels of the bench board (defaults: 12-bit ADC; pressure
+/// 0–10 bar gauge like the paper's Kistler sensors; ±2000 m/s² so flight
+/// accelerations, under 1000 m/s² at 7 bar, are resolved and impacts clip).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SensorModel {
+    pub rear: SensorChannel,
+    pub front: SensorChannel,
+    pub accel: SensorChannel,
+    /// False gives the ideal (noiseless, unquantised) signals.
+    pub enabled: bool,
+}
+
+impl Default for SensorModel {
+    fn default() -> Self {
+        let pressure = SensorChannel {
+            range_min: 0.0,
+            range_max: 10e5,
+            adc_bits: 12,
+            noise_std: 500.0,
+            offset: 0.0,
+            bandwidth_hz: 20e3,
+        };
+        Self {
+            rear: pressure.clone(),
+            front: pressure,
+            accel: SensorChannel {
+                range_min: -2000.0,
+                range_max: 2000.0,
+                adc_bits: 12,
+                noise_std: 1.0,
+                offset: 0.0,
+                bandwidth_hz: 20e3,
+            },
+            enabled: true,
+        }
+    }
+}
+
+impl SensorModel {
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        self.rear.validate("rear")?;
+        self.front.validate("front")?;
+        self.accel.validate("accel")
+    }
+}
+
+/// Measured channels on the output grid: physical values of the ADC codes.
+#[derive(Debug, Clone, Default)]
+pub struct Measured {
+    pub p_rear_pa: Vec<f64>,
+    pub p_front_pa: Vec<f64>,
+    pub accel_mps2: Vec<f64>,
+    /// Samples at either end of the ADC range, per channel (rear, front, accel).
+    pub clipped: [usize; 3],
+}
+
+/// Deterministic xoshiro256++ so a seed reproduces a trace on every machine.
+pub struct Rng([u64; 4]);
+
+impl Rng {
+    pub fn new(seed: u64) -> Self {
+        let mut z = seed;
+        let mut next = || {
+            z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
+            let mut x = z;
+            x = (x ^ (x >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+            x = (x ^ (x >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+            x ^ (x >> 31)
+        };
+        Rng([next(), next(), next(), next()])
+    }
+
+    pub fn next_u64(&mut self) -> u64 {
+        let s = &mut self.0;
+        let r = (s[0].wrapping_add(s[3])).rotate_left(23).wrapping_add(s[0]);
+        let t = s[1] << 17;
+        s[2] ^= s[0];
+        s[3] ^= s[1];
+        s[1] ^= s[2];
+        s[0] ^= s[3];
+        s[2] ^= t;
+        s[3] = s[3].rotate_left(45);
+        r
+    }
+
+    /// Uniform in [0, 1).
+    pub fn uniform(&mut self) -> f64 {
+        (self.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
+    }
+
+    /// Standard normal (Box–Muller).
+    pub fn normal(&mut self) -> f64 {
+        let u1 = 1.0 - self.uniform();
+        let u2 = self.uniform();
+        (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
+    }
+}
+
+/// Offsets left on the accelerometer by each impact: random sign, magnitude
+/// between 0.5 and 1.5 times the configured amplitude.
+pub fn zero_shift_offsets(amplitude: f64, impacts: &[EventRecord], rng: &mut Rng) -> Vec<(f64, f64)> {
+    impacts
+        .iter()
+        .map(|e| {
+            let sign = if rng.next_u64() & 1 == 0 { 1.0 } else { -1.0 };
+            (e.t_s, sign * amplitude * (0.5 + rng.uniform()))
+        })
+        .collect()
+}
+
+/// Applies the sensor chain to the truth.
+pub fn measure(
+    model: &SensorModel,
+    effects: &Effects,
+    truth: &TruthTrace,
+    impacts: &[EventRecord],
+    seed: u64,
+) -> Measured {
+    let mut rng = Rng::new(seed ^ 0x5EED_5E45_0000_0001);
+    let (g_rear, g_front) = effects
+        .pressure_gain_error
+        .as_ref()
+        .map_or((0.0, 0.0), |g| (g.rear, g.front));
+    let shifts = effects
+        .accel_zero_shift
+        .as_ref()
+        .map(|z| (zero_shift_offsets(z.amplitude_mps2, impacts, &mut rng), z.tau_s));
+
+    let mut accel_in = truth.accel_mps2.clone();
+    if let Some((offsets, tau)) = &shifts {
+        // Superpose decaying offsets; each impact's lasts ~10 τ.
+        for &(t_imp, off) in offsets {
+            let i0 = (t_imp / truth.dt_s).ceil() as usize;
+            let i1 = (i0 + (10.0 * tau / truth.dt_s) as usize).min(accel_in.len());
+            for (i, a) in accel_in.iter_mut().enumerate().take(i1).skip(i0) {
+                *a += off * (-(truth.t_s[i] - t_imp) / tau).exp();
+            }
+        }
+    }
+    let rear_in: Vec<f64> = truth.p_rear_pa.iter().map(|p| p * (1.0 + g_rear)).collect();
+    let front_in: Vec<f64> = truth.p_front_pa.iter().map(|p| p * (1.0 + g_front)).collect();
+
+    let mut m = Measured::default();
+    let (p_rear_pa, c0) = channel(&model.rear, model.enabled, &rear_in, truth.dt_s, &mut rng);
+    let (p_front_pa, c1) = channel(&model.front, model.enabled, &front_in, truth.dt_s, &mut rng);
+    let (accel_mps2, c2) = channel(&model.accel, model.enabled, &accel_in, truth.dt_s, &mut rng);
+    m.p_rear_pa = p_rear_pa;
+    m.p_front_pa = p_front_pa;
+    m.accel_mps2 = accel_mps2;
+    m.clipped = [c0, c1, c2];
+    m
+}
+
+fn channel(ch: &SensorChannel, enabled: bool, input: &[f64], dt: f64, rng: &mut Rng) -> (Vec<f64>, usize) {
+    if !enabled {
+        return (input.to_vec(), 0);
+    }
+    let alpha = if ch.bandwidth_hz > 0.0 {
+        1.0 - (-2.0 * std::f64::consts::PI * ch.bandwidth_hz * dt).exp()
+    } else {
+        1.0
+    };
+    let mut state = input.first().copied().unwrap_or(0.0) + ch.offset;
+    let mut clipped = 0;
+    let top = ch.full_scale_code();
+    let out = input
+        .iter()
+        .map(|&x| {
+            state += alpha * (x + ch.offset - state);
+            let code = ch.code(state + ch.noise_std * rng.normal());
+            if code == 0 || code == top {
+                clipped += 1;
+            }
+            ch.value(code)
+        })
+        .collect();
+    (out, clipped)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn codes_round_trip_and_clip() {
+        let ch = SensorModel::default().rear;
+        assert_eq!(ch.code(-5.0), 0);
+        assert_eq!(ch.code(2e6), 4095);
+        assert_eq!(ch.code(f64::NAN), 0);
+        let v = ch.value(ch.code(3.21e5));
+        assert!((v - 3.21e5).abs() <= ch.lsb() / 2.0 + 1e-9);
+    }
+
+    #[test]
+    fn normal_deviates_have_unit_variance() {
+        let mut r = Rng::new(7);
+        let n = 200_000;
+        let xs: Vec<f64> = (0..n).map(|_| r.normal()).collect();
+        let mean = xs.iter().sum::<f64>() / n as f64;
+        let var = xs.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / n as f64;
+        assert!(mean.abs() < 0.01 && (var - 1.0).abs() < 0.02, "{mean} {var}");
+    }
+}
