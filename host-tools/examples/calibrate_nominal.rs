@@ -14,6 +14,26 @@ type Candidate = [f64; 7];
 const LO: Candidate = [6.0, 10.0, 1.0, 0.5, 1.0, 2.0, 0.1];
 const HI: Candidate = [25.0, 35.0, 1.99, 1.6, 6.0, 20.0, 0.4];
 
+fn steady_energy(cfg: &SimConfig) -> Option<f64> {
+    let run = simulate_truth(cfg).ok()?;
+    let e: Vec<f64> = run
+        .cycles
+        .iter()
+        .filter(|c| c.t_impact_s > 0.15)
+        .map(|c| c.impact_energy_j)
+        .collect();
+    (e.len() >= 3).then(|| e.iter().sum::<f64>() / e.len() as f64)
+}
+
+/// Relative impact-energy drop caused by the paper's friction at `bar`.
+fn friction_drop(base: &SimConfig, bar: f64) -> Option<f64> {
+    let mut cfg = base.clone();
+    cfg.supply.pressure_bar = bar;
+    let e0 = steady_energy(&cfg)?;
+    cfg.effects.apply_spec("coulomb_friction").ok()?;
+    Some(1.0 - steady_energy(&cfg)? / e0)
+}
+
 fn evaluate(c: &Candidate) -> Option<(f64, [f64; 5])> {
     let mut cfg = SimConfig::nominal(4.0);
     cfg.solver.duration_s = 0.4;
@@ -48,6 +68,14 @@ fn evaluate(c: &Candidate) -> Option<(f64, [f64; 5])> {
         + ((p1 / 3.282 - 1.0) / 0.05).powi(2)
         + ((p2 / 2.489 - 1.0) / 0.05).powi(2)
         + (spread / 0.005).powi(2)
+        + if std::env::var("CALIBRATE_FRICTION").is_ok() {
+            // The paper: friction lowers impact energy by 13 % at 4 bar and 17 % at 7 bar.
+            let d4 = friction_drop(&cfg, 4.0)?;
+            let d7 = friction_drop(&cfg, 7.0)?;
+            ((d4 - 0.13) / 0.013).powi(2) + ((d7 - 0.17) / 0.013).powi(2)
+        } else {
+            0.0
+        }
         // The piston must turn on its air cushion, well clear of the rear cover.
         + if s > 47.0 { 1e3 } else { 0.0 };
     Some((err, [v, s, p1, p2, f]))

@@ -123,8 +123,8 @@ pub struct SupplyRestriction {
 impl Default for SupplyRestriction {
     fn default() -> Self {
         Self {
-            orifice_diameter_m: 0.004,
-            line_volume_m3: 100e-6,
+            orifice_diameter_m: 0.0016,
+            line_volume_m3: 50e-6,
         }
     }
 }

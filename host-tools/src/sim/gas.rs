@@ -57,7 +57,7 @@ fn subsonic_psi(ratio: f64) -> f64 {
 
 fn choked_psi() -> f64 {
     // sqrt(γ)·(2/(γ+1))^((γ+1)/(2(γ−1))) for γ = 1.4.
-    0.684_731_441_356_184_5
+    0.684_731_456_377_270_4
 }
 
 /// Laminar isothermal leakage through an annular gap of radial height `gap_m`,

@@ -54,8 +54,8 @@ impl Default for HammerParams {
             outlet_diameter_m: 0.005,
             outlet_count: 1,
             outlet_cd: 0.62,
-            rear_dead_volume_m3: 15.6e-6,
-            front_dead_volume_m3: 19.2e-6,
+            rear_dead_volume_m3: 14.5e-6,
+            front_dead_volume_m3: 19.9e-6,
             inclination_deg: 0.0,
         }
     }
@@ -140,11 +140,11 @@ impl Default for ValveParams {
             travel_m: 0.002,
             opening_m: 0.001,
             cd: 0.62,
-            full_open_area_m2: 2.76e-6,
+            full_open_area_m2: 2.96e-6,
             control_port_diameter_m: 0.008,
             pilot_area_rear_m2: 50e-6,
-            pilot_area_front_m2: 25e-6,
-            damping_n_s_per_m: 15.0,
+            pilot_area_front_m2: 25.8e-6,
+            damping_n_s_per_m: 13.1,
         }
     }
 }
@@ -195,7 +195,7 @@ impl Default for ContactParams {
         Self {
             law: ContactLaw::SpringDamper,
             stiffness_n_per_m: 2.0e9,
-            restitution: 0.28,
+            restitution: 0.19,
             hunt_crossley_exponent: 1.5,
         }
     }

@@ -206,33 +206,29 @@ pub fn simulate_truth(cfg: &SimConfig) -> Result<SimRun, SolverError> {
     next_out += 1;
 
     let mut events = Events::default();
+    // The redone step may stop a rounding error short of the crossing; the same
+    // crossing must then not count twice.
+    let mut last_event: Option<(usize, f64)> = None;
     while solver.t < t_end {
+        let checkpoint = solver.checkpoint();
         let t0 = solver.t;
         let ya = solver.y;
-        let dense = solver.step(&model, t_end)?;
-        let yb = solver.y;
-        let t1 = solver.t;
-
-        let mut earliest: Option<(f64, EventKind)> = None;
-        for f in &fns {
-            let g0 = ya[f.component] - f.level;
-            let g1 = yb[f.component] - f.level;
-            let kind = if g0 < 0.0 && g1 >= 0.0 {
-                f.kind_up
-            } else if g0 > 0.0 && g1 <= 0.0 {
-                f.kind_down
-            } else {
-                None
-            };
-            if let Some(kind) = kind {
-                let tr = locate(&dense, t0, t1, f.component, f.level, g0);
-                if earliest.is_none_or(|(te, _)| tr < te) {
-                    earliest = Some((tr, kind));
+        let mut dense = solver.step(&model, t_end)?;
+        let mut earliest = first_event(&fns, &dense, &ya, &solver.y, last_event);
+        if let Some((te, _, _)) = earliest {
+            // The step's later stages saw the far side of a discontinuity, so
+            // its interpolant is polluted there: redo it to end at the event.
+            if te - t0 > 1e-12 {
+                solver.rewind(&checkpoint);
+                dense = solver.step(&model, te)?;
+                if solver.t < te {
+                    earliest = None; // error control cut the step short; look again next step
                 }
+            } else {
+                dense = Dense::constant(t0, &ya);
             }
         }
-
-        let t_stop = earliest.map_or(t1, |(te, _)| te);
+        let t_stop = solver.t;
         while next_out < n_out {
             let t = next_out as f64 * dt;
             if t > t_stop {
@@ -244,9 +240,10 @@ pub fn simulate_truth(cfg: &SimConfig) -> Result<SimRun, SolverError> {
             next_out += 1;
         }
 
-        if let Some((te, kind)) = earliest {
-            let mut y = [0.0; N];
-            dense.all(te, &mut y);
+        if let Some((_, kind, which)) = earliest {
+            let te = solver.t;
+            last_event = Some((which, te));
+            let mut y = solver.y;
             let rec = EventRecord { t_s: te, y };
             match kind {
                 EventKind::ContactOnset => {
@@ -294,6 +291,38 @@ pub fn simulate_truth(cfg: &SimConfig) -> Result<SimRun, SolverError> {
         mass_balance,
         stats: solver.stats,
     })
+}
+
+/// The earliest event function that changes sign over the step.
+fn first_event(
+    fns: &[EventFn],
+    dense: &Dense<N>,
+    ya: &[f64; N],
+    yb: &[f64; N],
+    last: Option<(usize, f64)>,
+) -> Option<(f64, EventKind, usize)> {
+    let mut earliest: Option<(f64, EventKind, usize)> = None;
+    for (which, f) in fns.iter().enumerate() {
+        let g0 = ya[f.component] - f.level;
+        let g1 = yb[f.component] - f.level;
+        let kind = if g0 < 0.0 && g1 >= 0.0 {
+            f.kind_up
+        } else if g0 > 0.0 && g1 <= 0.0 {
+            f.kind_down
+        } else {
+            None
+        };
+        if let Some(kind) = kind {
+            let tr = locate(dense, dense.t0, dense.t1(), f.component, f.level, g0);
+            if last.is_some_and(|(w, t)| w == which && tr - t < 1e-9) {
+                continue;
+            }
+            if earliest.is_none_or(|(te, _, _)| tr < te) {
+                earliest = Some((tr, kind, which));
+            }
+        }
+    }
+    earliest
 }
 
 /// Bisection on the dense output; returns the first time on the far side of the crossing.

@@ -62,6 +62,13 @@ pub struct Dense<const N: usize> {
 }
 
 impl<const N: usize> Dense<N> {
+    /// An interpolant that holds `y` (for a zero-length step).
+    pub fn constant(t0: f64, y: &[f64; N]) -> Self {
+        let mut r = [[0.0; N]; 5];
+        r[0] = *y;
+        Self { t0, h: 1.0, r }
+    }
+
     pub fn t1(&self) -> f64 {
         self.t0 + self.h
     }
@@ -98,6 +105,14 @@ pub enum SolverError {
     StepUnderflow { t_s: f64, h_s: f64 },
     #[error("non-finite state at t = {t_s} s")]
     NonFinite { t_s: f64 },
+}
+
+pub struct Checkpoint<const N: usize> {
+    t: f64,
+    y: [f64; N],
+    k1: [f64; N],
+    h: f64,
+    fac_old: f64,
 }
 
 pub struct Dopri5<const N: usize> {
@@ -139,6 +154,26 @@ impl<const N: usize> Dopri5<N> {
         };
         s.restart(sys, t0, y0);
         s
+    }
+
+    /// The integrator's state, to return to with [`Dopri5::rewind`].
+    pub fn checkpoint(&self) -> Checkpoint<N> {
+        Checkpoint {
+            t: self.t,
+            y: self.y,
+            k1: self.k1,
+            h: self.h,
+            fac_old: self.fac_old,
+        }
+    }
+
+    /// Undoes the steps taken since `c` (statistics are kept).
+    pub fn rewind(&mut self, c: &Checkpoint<N>) {
+        self.t = c.t;
+        self.y = c.y;
+        self.k1 = c.k1;
+        self.h = c.h;
+        self.fac_old = c.fac_old;
     }
 
     /// Continue from a new point (after an event or a state reset).
