@@ -7,7 +7,7 @@ use anyhow::{Context, Result};
 use clap::{Args, Parser, Subcommand};
 
 use crate::config::load_toml;
-use crate::sim::{SimConfig, EFFECT_NAMES};
+use crate::sim::SimConfig;
 use crate::simulate::simulate;
 use crate::trace::{write_csv, write_sidecar};
 
@@ -32,6 +32,7 @@ pub enum Command {
 }
 
 #[derive(Args, Debug)]
+#[command(allow_negative_numbers = true)]
 pub struct SimulateArgs {
     /// Gauge supply pressure at the valve inlet, bar (the paper runs 4–7). Overrides the config.
     #[arg(long)]
@@ -135,7 +136,6 @@ pub fn run(cli: Cli) -> Result<()> {
 }
 
 pub fn main() -> ExitCode {
-    let _ = EFFECT_NAMES;
     match run(Cli::parse()) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {

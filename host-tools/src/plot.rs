@@ -189,14 +189,11 @@ pub fn effect_figures(dir: &Path, supply_bar: f64) -> Result<Vec<PathBuf>> {
                 None,
             ),
         ];
-        let params = serde_json::to_value(&cfg.effects)?
-            .get(name)
-            .map(|v| v.to_string())
-            .unwrap_or_default();
+        let params = effect_params_text(&cfg.effects, name)?;
         let path = dir.join(format!("effect-{name}.png"));
         stacked_png(
             &path,
-            &format!("{name} {params} vs nominal, {supply_bar} bar, one cycle from impact"),
+            &format!("{name}:{params} vs nominal, {supply_bar} bar"),
             "time since impact, ms",
             &panels,
             1100,
@@ -205,4 +202,21 @@ pub fn effect_figures(dir: &Path, supply_bar: f64) -> Result<Vec<PathBuf>> {
         files.push(path);
     }
     Ok(files)
+}
+
+/// `key=value` pairs of an effect's parameters, short enough for a title.
+pub fn effect_params_text(effects: &crate::sim::Effects, name: &str) -> Result<String> {
+    let value = serde_json::to_value(effects)?;
+    let Some(obj) = value.get(name).and_then(|v| v.as_object()) else {
+        return Ok(String::new());
+    };
+    Ok(obj
+        .iter()
+        .map(|(k, v)| match v.as_f64() {
+            Some(x) if x != 0.0 && !(1e-3..1e5).contains(&x.abs()) => format!("{k}={x:.3e}"),
+            Some(x) => format!("{k}={}", (x * 1e4).round() / 1e4),
+            None => format!("{k}={v}"),
+        })
+        .collect::<Vec<_>>()
+        .join(","))
 }

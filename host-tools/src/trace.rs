@@ -94,7 +94,7 @@ pub fn write_csv(path: &Path, trace: &Trace) -> Result<(), TraceError> {
         use std::fmt::Write as _;
         let _ = write!(
             line,
-            "{:.6e},{},{},{}",
+            "{:.9},{},{},{}",
             trace.t_s[i], trace.p_rear_pa[i], trace.p_front_pa[i], trace.accel_mps2[i]
         );
         for col in trace.extra.values() {

@@ -118,7 +118,11 @@ pub struct Measured {
 }
 
 /// Deterministic xoshiro256++ so a seed reproduces a trace on every machine.
-pub struct Rng([u64; 4]);
+pub struct Rng {
+    s: [u64; 4],
+    /// Box–Muller makes deviates in pairs; the second waits here.
+    spare: Option<f64>,
+}
 
 impl Rng {
     pub fn new(seed: u64) -> Self {
@@ -130,11 +134,14 @@ impl Rng {
             x = (x ^ (x >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
             x ^ (x >> 31)
         };
-        Rng([next(), next(), next(), next()])
+        Rng {
+            s: [next(), next(), next(), next()],
+            spare: None,
+        }
     }
 
     pub fn next_u64(&mut self) -> u64 {
-        let s = &mut self.0;
+        let s = &mut self.s;
         let r = (s[0].wrapping_add(s[3])).rotate_left(23).wrapping_add(s[0]);
         let t = s[1] << 17;
         s[2] ^= s[0];
@@ -153,9 +160,15 @@ impl Rng {
 
     /// Standard normal (Box–Muller).
     pub fn normal(&mut self) -> f64 {
+        if let Some(z) = self.spare.take() {
+            return z;
+        }
         let u1 = 1.0 - self.uniform();
         let u2 = self.uniform();
-        (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
+        let r = (-2.0 * u1.ln()).sqrt();
+        let (sin, cos) = (2.0 * std::f64::consts::PI * u2).sin_cos();
+        self.spare = Some(r * sin);
+        r * cos
     }
 }
 

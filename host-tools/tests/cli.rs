@@ -1,0 +1,142 @@
+//! The `hammer` binary as a user runs it.
+
+use std::path::PathBuf;
+use std::process::Command;
+
+fn hammer(args: &[&str]) -> (i32, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_hammer"))
+        .args(args)
+        .output()
+        .expect("runs");
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+fn tmp_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("hammer-cli-test-{}-{name}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+#[test]
+fn simulate_prints_a_cycle_summary_and_writes_trace_and_sidecar() {
+    let dir = tmp_dir("sim");
+    let out = dir.join("run.csv");
+    let (code, stdout, stderr) = hammer(&[
+        "simulate",
+        "--supply-bar",
+        "4",
+        "--duration",
+        "0.3",
+        "--effect",
+        "coulomb_friction:f0_n=1.7,k_n_per_bar=2.14",
+        "--seed",
+        "3",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    assert!(stdout.contains("effects: coulomb_friction"), "{stdout}");
+    assert!(stdout.contains("steady mean over"), "{stdout}");
+    let csv = std::fs::read_to_string(&out).unwrap();
+    assert!(
+        csv.starts_with("t_s,p_rear_pa,p_front_pa,accel_mps2,"),
+        "{}",
+        &csv[..80]
+    );
+    assert_eq!(csv.lines().count(), 1 + 30_001);
+    let side: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("run.json")).unwrap()).unwrap();
+    assert_eq!(side["supply_pressure_bar"], 4.0);
+    assert_eq!(side["simulation"]["config"]["effects"]["coulomb_friction"]["f0_n"], 1.7);
+    assert!(side["simulation"]["cycles"].as_array().unwrap().len() >= 4);
+    // Same seed, same trace.
+    let out2 = dir.join("again.csv");
+    hammer(&[
+        "simulate",
+        "--supply-bar",
+        "4",
+        "--duration",
+        "0.3",
+        "--effect",
+        "coulomb_friction:f0_n=1.7,k_n_per_bar=2.14",
+        "--seed",
+        "3",
+        "--out",
+        out2.to_str().unwrap(),
+    ]);
+    assert_eq!(std::fs::read(&out).unwrap(), std::fs::read(&out2).unwrap());
+}
+
+#[test]
+fn bad_arguments_and_configs_name_the_field() {
+    let (code, _, err) = hammer(&["simulate", "--effect", "leakage:gap=1e-5"]);
+    assert_eq!(code, 2);
+    assert!(err.contains("effects.leakage") && err.contains("gap"), "{err}");
+    let (code, _, err) = hammer(&["simulate", "--supply-bar", "-3"]);
+    assert_eq!(code, 2);
+    assert!(
+        err.contains("supply.pressure_bar") && err.contains("out of range"),
+        "{err}"
+    );
+    let (code, _, err) = hammer(&["simulate", "--effect", "gremlins"]);
+    assert_eq!(code, 2);
+    assert!(err.contains("unknown effect `gremlins`"), "{err}");
+
+    let dir = tmp_dir("cfg");
+    let cfg = dir.join("hammer.toml");
+    std::fs::write(&cfg, "[valve]\nmass_kg = 0.005\npilot_aera_rear_m2 = 1e-5\n").unwrap();
+    let (code, _, err) = hammer(&["simulate", "--config", cfg.to_str().unwrap()]);
+    assert_eq!(code, 2);
+    assert!(err.contains("pilot_aera_rear_m2") && err.contains("line 3"), "{err}");
+    std::fs::write(&cfg, "[hammer]\npiston_mass_kg = 0.0\n").unwrap();
+    let (code, _, err) = hammer(&["simulate", "--config", cfg.to_str().unwrap()]);
+    assert_eq!(code, 2);
+    assert!(err.contains("hammer.piston_mass_kg"), "{err}");
+    std::fs::write(
+        &cfg,
+        "[effects.valve_delay]\ntau_s = 0.002\n[supply]\npressure_bar = 6\n",
+    )
+    .unwrap();
+    let (code, out, err) = hammer(&["simulate", "--config", cfg.to_str().unwrap(), "--duration", "0.2"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.contains("supply 6.00 bar") && out.contains("valve_delay"), "{out}");
+}
+
+#[test]
+fn help_explains_units_and_defaults() {
+    let (code, out, _) = hammer(&["simulate", "--help"]);
+    assert_eq!(code, 0);
+    for needle in ["bar", "default 0.5", "coulomb_friction", "pressure_gain_error", "10e-6"] {
+        assert!(out.contains(needle), "help lacks `{needle}`:\n{out}");
+    }
+}
+
+fn png_size(path: &std::path::Path) -> (u32, u32) {
+    let b = std::fs::read(path).unwrap();
+    assert_eq!(&b[..8], b"\x89PNG\r\n\x1a\n", "{} is not a PNG", path.display());
+    let w = u32::from_be_bytes([b[16], b[17], b[18], b[19]]);
+    let h = u32::from_be_bytes([b[20], b[21], b[22], b[23]]);
+    (w, h)
+}
+
+#[test]
+fn one_figure_per_effect() {
+    let dir = tmp_dir("figs");
+    let (code, out, err) = hammer(&["figures", "--out", dir.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    for name in hammer_host::sim::EFFECT_NAMES {
+        let f = dir.join(format!("effect-{name}.png"));
+        assert!(out.contains(f.to_str().unwrap()));
+        assert_eq!(png_size(&f), (1100, 900));
+        // Four panels of two curves each: a blank canvas compresses to a few kB.
+        assert!(
+            std::fs::metadata(&f).unwrap().len() > 40_000,
+            "{} too small",
+            f.display()
+        );
+    }
+}
