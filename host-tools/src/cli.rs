@@ -29,6 +29,33 @@ pub enum Command {
     Simulate(SimulateArgs),
     /// Draw one PNG per catalogued effect: nominal vs with-effect over one steady cycle.
     Figures(FiguresArgs),
+    /// Run the estimator (the firmware's no_std crate) over a trace and print
+    /// one record per impact cycle: friction (N), impact energy (J) with and
+    /// without friction, frequency (Hz), wear index (J), each with its
+    /// expanded uncertainty, and quality flags.
+    Estimate(EstimateArgs),
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Format {
+    Jsonl,
+    Csv,
+    Table,
+}
+
+#[derive(Args, Debug)]
+pub struct EstimateArgs {
+    /// Trace in the project's format (CSV; its sidecar JSON is read if present).
+    pub trace: PathBuf,
+    /// Gauge supply pressure, bar: the operating point of the drift baseline
+    /// (default: the sidecar's; unknown means binning by peak rear pressure).
+    #[arg(long)]
+    pub supply_bar: Option<f64>,
+    /// TOML file: [hammer] geometry, [sensors.*] calibration ranges, [estimator] thresholds and accuracy.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    #[arg(long, value_enum, default_value_t = Format::Table)]
+    pub format: Format,
 }
 
 #[derive(Args, Debug)]
@@ -125,6 +152,7 @@ pub fn run(cli: Cli) -> Result<()> {
             }
             Ok(())
         }
+        Command::Estimate(args) => estimate_cmd(&args),
         Command::Figures(args) => {
             let files = crate::plot::effect_figures(&args.out, args.supply_bar)?;
             for f in files {
@@ -133,6 +161,41 @@ pub fn run(cli: Cli) -> Result<()> {
             Ok(())
         }
     }
+}
+
+fn estimate_cmd(args: &EstimateArgs) -> Result<()> {
+    use crate::estimate::*;
+    let file: SimConfig = match &args.config {
+        Some(p) => load_toml(p)?,
+        None => SimConfig::default(),
+    };
+    let trace = crate::trace::read_csv(&args.trace)?;
+    let sidecar = crate::trace::read_sidecar(&args.trace)?;
+    let supply = args.supply_bar.or(sidecar.as_ref().map(|s| s.supply_pressure_bar));
+    let sensors = sensors_for(sidecar.as_ref(), &file.sensors);
+    let hammer = sidecar
+        .as_ref()
+        .and_then(|s| s.simulation.as_ref())
+        .map_or(file.hammer.clone(), |s| s.config.hammer.clone());
+    let cfg = estimator_config(&hammer, &sensors, &file.estimator, 1.0 / trace.dt_s, supply)?;
+    let reports = run(&to_codes(&trace, &cfg), cfg)?;
+    let mut out = std::io::BufWriter::new(std::io::stdout().lock());
+    use std::io::Write as _;
+    match args.format {
+        Format::Jsonl => {
+            for r in &reports {
+                writeln!(out, "{}", jsonl_record(r))?;
+            }
+        }
+        Format::Csv => {
+            writeln!(out, "{CSV_HEADER}")?;
+            for r in &reports {
+                writeln!(out, "{}", csv_record(r))?;
+            }
+        }
+        Format::Table => write!(out, "{}", table(&reports))?,
+    }
+    Ok(())
 }
 
 pub fn main() -> ExitCode {

@@ -3,6 +3,7 @@
 
 pub mod cli;
 pub mod config;
+pub mod estimate;
 pub mod plot;
 pub mod sim;
 pub mod simulate;

@@ -28,6 +28,12 @@ pub struct CoulombFriction {
     pub k_n_per_bar: f64,
     /// Velocity below which the sign function is smoothed, m/s.
     pub smoothing_mps: f64,
+    /// Wear: relative growth of the friction per second of running (0 = constant).
+    pub growth_per_s: f64,
+    /// A sudden change (a scored bore, a lost lubricant film): from `step_at_s`
+    /// on, the friction is multiplied by `step_factor`.
+    pub step_at_s: f64,
+    pub step_factor: f64,
 }
 
 impl Default for CoulombFriction {
@@ -37,13 +43,27 @@ impl Default for CoulombFriction {
             f0_n: 10.27 - 4.0 * k,
             k_n_per_bar: k,
             smoothing_mps: 1e-3,
+            growth_per_s: 0.0,
+            step_at_s: 0.0,
+            step_factor: 1.0,
         }
     }
 }
 
 impl CoulombFriction {
+    /// The friction magnitude at the start of the run.
     pub fn force_n(&self, supply_bar: f64) -> f64 {
         self.f0_n + self.k_n_per_bar * supply_bar
+    }
+
+    /// Multiplier of [`Self::force_n`] at time `t_s`.
+    pub fn factor_at(&self, t_s: f64) -> f64 {
+        let step = if self.step_factor != 1.0 && t_s >= self.step_at_s {
+            self.step_factor
+        } else {
+            1.0
+        };
+        (1.0 + self.growth_per_s * t_s) * step
     }
 }
 
@@ -256,6 +276,9 @@ impl Effects {
             check_range("effects.coulomb_friction.f0_n", e.f0_n, 0.0, 1e3)?;
             check_range("effects.coulomb_friction.k_n_per_bar", e.k_n_per_bar, 0.0, 1e3)?;
             check_range("effects.coulomb_friction.smoothing_mps", e.smoothing_mps, 1e-6, 0.1)?;
+            check_range("effects.coulomb_friction.growth_per_s", e.growth_per_s, 0.0, 10.0)?;
+            check_range("effects.coulomb_friction.step_at_s", e.step_at_s, 0.0, 1e6)?;
+            check_range("effects.coulomb_friction.step_factor", e.step_factor, 0.0, 100.0)?;
         }
         if let Some(e) = &self.viscous_friction {
             check_range("effects.viscous_friction.c_n_s_per_m", e.c_n_s_per_m, 0.0, 1e3)?;

@@ -89,6 +89,7 @@ pub struct HammerModel {
     // effects (resolved to numbers; zero means off)
     coulomb_n: f64,
     coulomb_vs: f64,
+    coulomb: Option<super::effects::CoulombFriction>,
     viscous: f64,
     leak: Option<(f64, f64, f64)>, // gap, eccentricity, rod guide length
     valve_tau_s: f64,
@@ -148,6 +149,7 @@ impl HammerModel {
                 .as_ref()
                 .map_or(0.0, |f| f.force_n(cfg.supply.pressure_bar)),
             coulomb_vs: e.coulomb_friction.as_ref().map_or(1e-3, |f| f.smoothing_mps),
+            coulomb: e.coulomb_friction.clone(),
             viscous: e.viscous_friction.as_ref().map_or(0.0, |f| f.c_n_s_per_m),
             leak: e
                 .leakage
@@ -187,10 +189,11 @@ impl HammerModel {
         y[PS] * self.supply_volume_m3 / (R_AIR * self.t_supply_k)
     }
 
-    pub fn friction_n(&self, v: f64) -> f64 {
+    pub fn friction_n(&self, t: f64, v: f64) -> f64 {
         let mut f = 0.0;
-        if self.coulomb_n > 0.0 {
-            f -= self.coulomb_n * v / (v * v + self.coulomb_vs * self.coulomb_vs).sqrt();
+        if let Some(c) = &self.coulomb {
+            let fc = self.coulomb_n * c.factor_at(t);
+            f -= fc * v / (v * v + self.coulomb_vs * self.coulomb_vs).sqrt();
         }
         f - self.viscous * v
     }
@@ -214,10 +217,10 @@ impl HammerModel {
         f
     }
 
-    pub fn piston_forces(&self, y: &[f64; N]) -> PistonForces {
+    pub fn piston_forces(&self, t: f64, y: &[f64; N]) -> PistonForces {
         PistonForces {
             pressure_n: (y[P1] - P_ATM_PA) * self.a1_m2 - (y[P2] - P_ATM_PA) * self.a2_m2,
-            friction_n: self.friction_n(y[V]),
+            friction_n: self.friction_n(t, y[V]),
             contact_n: self.contact_n(y[X], y[V]),
             gravity_n: self.gravity_n,
         }
@@ -273,7 +276,7 @@ fn transfer(q: f64, t_a: f64, t_b: f64, a: &mut Chamber, b: &mut Chamber) {
 }
 
 impl OdeSystem<N> for HammerModel {
-    fn rhs(&self, _t: f64, y: &[f64; N], dy: &mut [f64; N]) {
+    fn rhs(&self, t: f64, y: &[f64; N], dy: &mut [f64; N]) {
         let x = y[X];
         let v = y[V];
         let p1 = y[P1].max(1.0);
@@ -350,7 +353,7 @@ impl OdeSystem<N> for HammerModel {
         };
 
         // Piston.
-        let f = self.piston_forces(y);
+        let f = self.piston_forces(t, y);
         dy[X] = v;
         dy[V] = f.total_n() / self.mass_kg;
 

@@ -284,6 +284,8 @@ pub struct SimConfig {
     pub sensors: SensorModel,
     /// Seed of the sensor noise and of the zero-shift signs.
     pub seed: u64,
+    /// How the estimator reads this hammer (thresholds, calibration accuracy).
+    pub estimator: crate::estimate::EstimatorParams,
 }
 
 impl SimConfig {

@@ -347,7 +347,7 @@ fn locate(dense: &Dense<N>, t0: f64, t1: f64, c: usize, level: f64, g0: f64) -> 
 }
 
 fn push_sample(model: &HammerModel, out: &mut TruthTrace, t: f64, y: &[f64; N]) {
-    let f = model.piston_forces(y);
+    let f = model.piston_forces(t, y);
     out.t_s.push(t);
     out.x_m.push(y[model::X]);
     out.v_mps.push(y[model::V]);

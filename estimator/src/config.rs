@@ -1,0 +1,348 @@
+//! Estimator configuration: the hammer, the sensor chain and the thresholds.
+//! Defaults describe the paper's hammer on the project's reference bench.
+
+use crate::geometry::{Geometry, STANDARD_GRAVITY_MPS2};
+use crate::math;
+
+/// Linear calibration of one ADC channel: `value = (code − zero_code)·scale`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ChannelCal {
+    /// Code that reads zero (set by tare).
+    pub zero_code: f32,
+    /// Physical units per code (Pa or m/s²).
+    pub scale: f32,
+    /// Highest code the converter delivers (4095 for 12 bits).
+    pub full_scale_code: u16,
+}
+
+impl ChannelCal {
+    /// A converter whose code 0 reads `min` and whose top code reads `max`.
+    pub fn from_range(min: f32, max: f32, bits: u8) -> Self {
+        let full = ((1u32 << bits) - 1) as u16;
+        let scale = (max - min) / full as f32;
+        Self {
+            zero_code: -min / scale,
+            scale,
+            full_scale_code: full,
+        }
+    }
+
+    #[inline]
+    pub fn value(&self, code: u16) -> f32 {
+        (code as f32 - self.zero_code) * self.scale
+    }
+
+    /// Physical value of the range's ends.
+    pub fn range(&self) -> (f32, f32) {
+        (self.value(0), self.value(self.full_scale_code))
+    }
+}
+
+/// Standard uncertainties of one channel after calibration and tare.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ChannelSpec {
+    /// Relative gain uncertainty (0.008 = 0.8 % of reading).
+    pub gain_rel: f32,
+    /// Offset uncertainty in the channel's units.
+    pub offset: f32,
+}
+
+/// Everything the estimator needs to know. Build with `Config::default()` and
+/// adjust; [`Config::validate`] rejects anything unusable with a typed error.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Config {
+    pub sample_rate_hz: f32,
+    pub geometry: Geometry,
+    /// Hammer axis below the horizontal, degrees (the stroke runs downhill when positive).
+    pub inclination_deg: f32,
+    pub rear: ChannelCal,
+    pub front: ChannelCal,
+    pub accel: ChannelCal,
+    pub rear_spec: ChannelSpec,
+    pub front_spec: ChannelSpec,
+    pub accel_spec: ChannelSpec,
+    /// An impact is an acceleration below −this (or the accelerometer at its bottom rail).
+    pub impact_threshold_mps2: f32,
+    /// Samples discarded before a detected impact (the shock's leading edge).
+    pub blank_before_s: f32,
+    /// Samples discarded after a detected impact: contact, ring-down and amplifier recovery.
+    pub blank_after_s: f32,
+    pub min_period_s: f32,
+    pub max_period_s: f32,
+    /// Discharge time constant of the piezo accelerometer: the zero shift an
+    /// impact leaves decays with it. 0 disables the zero-shift fit.
+    pub accel_zero_shift_tau_s: f32,
+    /// Expansion factor of the stated uncertainties (2 ≈ 95 % coverage).
+    pub coverage_factor: f32,
+    /// Within-cycle residuals are correlated; the random part of the
+    /// uncertainty is inflated by this factor.
+    pub residual_correlation_factor: f32,
+    /// A channel that keeps one code this long is stuck (0 disables).
+    pub stuck_after_s: f32,
+    /// Gauge supply pressure if known: the operating point of the drift baseline.
+    /// Unknown (NaN) means the baseline is keyed by the peak rear pressure.
+    pub supply_pressure_pa: f32,
+    pub wear: WearConfig,
+}
+
+/// The wear indicator and the friction drift alarm.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WearConfig {
+    /// Valid cycles that make a baseline at an operating point.
+    pub baseline_cycles: u16,
+    /// One-sided CUSUM allowance and decision threshold, in baseline standard deviations.
+    pub cusum_k: f32,
+    pub cusum_h: f32,
+    /// Floor of the baseline's standard deviation, relative and absolute (N):
+    /// the alarm is for wear, not for a friction change smaller than this.
+    pub sigma_floor_rel: f32,
+    pub sigma_floor_n: f32,
+    /// Friction work the piston and cylinder may dissipate before service (J, Archard-style budget).
+    pub budget_j: f32,
+    /// Width of an operating-point bin of the baseline table, Pa.
+    pub bin_width_pa: f32,
+}
+
+impl Default for WearConfig {
+    fn default() -> Self {
+        Self {
+            baseline_cycles: 50,
+            cusum_k: 0.5,
+            cusum_h: 10.0,
+            sigma_floor_rel: 0.01,
+            sigma_floor_n: 0.1,
+            budget_j: 5.0e7,
+            bin_width_pa: 0.5e5,
+        }
+    }
+}
+
+impl Default for Config {
+    fn default() -> Self {
+        Self {
+            sample_rate_hz: 100_000.0,
+            geometry: Geometry::PAPER,
+            inclination_deg: 0.0,
+            rear: ChannelCal::from_range(0.0, 10e5, 12),
+            front: ChannelCal::from_range(0.0, 10e5, 12),
+            accel: ChannelCal::from_range(-2000.0, 2000.0, 12),
+            // The paper's Kistler sensors: 0.8 % of reading; offsets after tare ~1 kPa.
+            rear_spec: ChannelSpec {
+                gain_rel: 0.008,
+                offset: 1000.0,
+            },
+            front_spec: ChannelSpec {
+                gain_rel: 0.008,
+                offset: 1000.0,
+            },
+            // The paper's accelerometer: 0.5 %; offset after tare ~1 m/s².
+            accel_spec: ChannelSpec {
+                gain_rel: 0.005,
+                offset: 1.0,
+            },
+            impact_threshold_mps2: 1500.0,
+            blank_before_s: 50e-6,
+            blank_after_s: 1.0e-3,
+            min_period_s: 5e-3,
+            max_period_s: 0.12,
+            accel_zero_shift_tau_s: 0.02,
+            coverage_factor: 2.0,
+            residual_correlation_factor: 1.0,
+            stuck_after_s: 5e-3,
+            supply_pressure_pa: f32::NAN,
+            wear: WearConfig::default(),
+        }
+    }
+}
+
+/// What is wrong with a configuration; `field` names it, `min`/`max` the allowed range.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum ConfigError {
+    OutOfRange {
+        field: &'static str,
+        value: f32,
+        min: f32,
+        max: f32,
+    },
+    /// The longest cycle does not fit the estimator's bounded checkpoint memory.
+    PeriodTooLongForMemory { max_period_s: f32, limit_s: f32 },
+}
+
+impl core::fmt::Display for ConfigError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            ConfigError::OutOfRange { field, value, min, max } => {
+                write!(f, "{field} = {value} is out of range: allowed {min} ..= {max}")
+            }
+            ConfigError::PeriodTooLongForMemory { max_period_s, limit_s } => write!(
+                f,
+                "max_period_s = {max_period_s} exceeds what the checkpoint memory holds ({limit_s} s)"
+            ),
+        }
+    }
+}
+
+fn check(field: &'static str, value: f32, min: f32, max: f32) -> Result<(), ConfigError> {
+    if math::is_finite(value) && value >= min && value <= max {
+        Ok(())
+    } else {
+        Err(ConfigError::OutOfRange { field, value, min, max })
+    }
+}
+
+fn check_cal(name: [&'static str; 2], c: &ChannelCal) -> Result<(), ConfigError> {
+    check(name[0], c.zero_code, -1e6, 1e6)?;
+    let s = abs_nonzero(c.scale);
+    check(name[1], s, 1e-9, 1e9)
+}
+
+fn abs_nonzero(x: f32) -> f32 {
+    if x == 0.0 {
+        f32::NAN
+    } else {
+        math::abs(x)
+    }
+}
+
+impl Config {
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        check("sample_rate_hz", self.sample_rate_hz, 1_000.0, 1_000_000.0)?;
+        let g = &self.geometry;
+        check("geometry.piston_mass_kg", g.piston_mass_kg as f32, 0.01, 1000.0)?;
+        check("geometry.bore_diameter_m", g.bore_diameter_m as f32, 0.001, 1.0)?;
+        check(
+            "geometry.rod_diameter_m",
+            g.rod_diameter_m as f32,
+            0.0,
+            g.bore_diameter_m as f32 * 0.99,
+        )?;
+        check("inclination_deg", self.inclination_deg, -90.0, 90.0)?;
+        check_cal(["rear.zero_code", "rear.scale"], &self.rear)?;
+        check_cal(["front.zero_code", "front.scale"], &self.front)?;
+        check_cal(["accel.zero_code", "accel.scale"], &self.accel)?;
+        for (n, s) in [
+            (["rear_spec.gain_rel", "rear_spec.offset"], &self.rear_spec),
+            (["front_spec.gain_rel", "front_spec.offset"], &self.front_spec),
+            (["accel_spec.gain_rel", "accel_spec.offset"], &self.accel_spec),
+        ] {
+            check(n[0], s.gain_rel, 0.0, 0.5)?;
+            check(n[1], s.offset, 0.0, 1e7)?;
+        }
+        check("impact_threshold_mps2", self.impact_threshold_mps2, 10.0, 1e7)?;
+        check("blank_before_s", self.blank_before_s, 0.0, 1e-3)?;
+        check("blank_after_s", self.blank_after_s, 0.0, 0.02)?;
+        check("min_period_s", self.min_period_s, 1e-3, 1.0)?;
+        check("max_period_s", self.max_period_s, self.min_period_s, 10.0)?;
+        check("accel_zero_shift_tau_s", self.accel_zero_shift_tau_s, 0.0, 10.0)?;
+        check("coverage_factor", self.coverage_factor, 1.0, 5.0)?;
+        check(
+            "residual_correlation_factor",
+            self.residual_correlation_factor,
+            1.0,
+            100.0,
+        )?;
+        check("stuck_after_s", self.stuck_after_s, 0.0, 10.0)?;
+        if !self.supply_pressure_pa.is_nan() {
+            check("supply_pressure_pa", self.supply_pressure_pa, 0.0, 1e8)?;
+        }
+        let w = &self.wear;
+        check("wear.baseline_cycles", w.baseline_cycles as f32, 5.0, 10_000.0)?;
+        check("wear.cusum_k", w.cusum_k, 0.0, 10.0)?;
+        check("wear.cusum_h", w.cusum_h, 0.5, 1000.0)?;
+        check("wear.sigma_floor_rel", w.sigma_floor_rel, 0.0, 1.0)?;
+        check("wear.sigma_floor_n", w.sigma_floor_n, 1e-4, 1e4)?;
+        check("wear.budget_j", w.budget_j, 1.0, 1e15)?;
+        check("wear.bin_width_pa", w.bin_width_pa, 1e3, 1e7)?;
+        let k = self.checkpoint_samples() as f32;
+        let limit_s = crate::cycle::MAX_CHECKPOINTS as f32 * k / self.sample_rate_hz;
+        if self.max_period_s > limit_s {
+            return Err(ConfigError::PeriodTooLongForMemory {
+                max_period_s: self.max_period_s,
+                limit_s,
+            });
+        }
+        Ok(())
+    }
+
+    /// Samples between two checkpoints: one per millisecond.
+    pub fn checkpoint_samples(&self) -> u32 {
+        let k = math::round(self.sample_rate_hz * 1e-3);
+        if k < 1.0 {
+            1
+        } else {
+            k as u32
+        }
+    }
+
+    pub fn dt_s(&self) -> f32 {
+        1.0 / self.sample_rate_hz
+    }
+
+    pub fn mass_kg(&self) -> f32 {
+        self.geometry.piston_mass_kg as f32
+    }
+
+    pub fn rear_area_m2(&self) -> f32 {
+        self.geometry.rear_area_m2() as f32
+    }
+
+    pub fn front_area_m2(&self) -> f32 {
+        self.geometry.front_area_m2() as f32
+    }
+
+    /// Gravity's force along the axis (forward positive).
+    pub fn gravity_n(&self) -> f32 {
+        self.mass_kg()
+            * STANDARD_GRAVITY_MPS2 as f32
+            * math::sin(self.inclination_deg * (core::f32::consts::PI / 180.0))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn default_is_valid_and_calibration_maps_the_range() {
+        let c = Config::default();
+        c.validate().unwrap();
+        assert_eq!(c.rear.value(0), 0.0);
+        assert!((c.rear.value(4095) - 10e5).abs() < 1.0);
+        assert!((c.accel.value(0) + 2000.0).abs() < 1e-3);
+        assert!((c.accel.value(4095) - 2000.0).abs() < 1e-2);
+    }
+
+    #[test]
+    fn bad_fields_are_named() {
+        let mut c = Config::default();
+        c.sample_rate_hz = 0.0;
+        assert!(matches!(
+            c.validate(),
+            Err(ConfigError::OutOfRange {
+                field: "sample_rate_hz",
+                ..
+            })
+        ));
+        let mut c = Config::default();
+        c.accel.scale = 0.0;
+        assert!(matches!(
+            c.validate(),
+            Err(ConfigError::OutOfRange {
+                field: "accel.scale",
+                ..
+            })
+        ));
+        let mut c = Config::default();
+        c.max_period_s = 5.0;
+        assert!(matches!(c.validate(), Err(ConfigError::PeriodTooLongForMemory { .. })));
+        let mut c = Config::default();
+        c.blank_after_s = f32::NAN;
+        assert!(matches!(
+            c.validate(),
+            Err(ConfigError::OutOfRange {
+                field: "blank_after_s",
+                ..
+            })
+        ));
+    }
+}

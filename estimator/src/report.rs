@@ -1,0 +1,145 @@
+//! What the estimator reports per impact cycle.
+
+/// Quality flags of a cycle. Bits in [`Flags::INVALIDATING`] mean the numbers
+/// of that cycle are not estimates and must not be used as such; the others
+/// are warnings whose effect is already in the stated uncertainty.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Hash)]
+pub struct Flags(pub u16);
+
+impl Flags {
+    pub const REAR_SATURATED: Flags = Flags(1 << 0);
+    pub const FRONT_SATURATED: Flags = Flags(1 << 1);
+    pub const ACCEL_SATURATED: Flags = Flags(1 << 2);
+    pub const REAR_STUCK: Flags = Flags(1 << 3);
+    pub const FRONT_STUCK: Flags = Flags(1 << 4);
+    pub const ACCEL_STUCK: Flags = Flags(1 << 5);
+    /// A channel sat at a rail for most of the cycle: open or shorted sensor.
+    pub const DISCONNECTED: Flags = Flags(1 << 6);
+    /// Samples were lost inside the cycle (ADC overrun, link gap).
+    pub const DROPPED_SAMPLES: Flags = Flags(1 << 7);
+    /// No turning point from backhaul to stroke was found.
+    pub const NO_REVERSAL: Flags = Flags(1 << 8);
+    /// Period, stroke or friction outside what a working hammer produces.
+    pub const IMPLAUSIBLE: Flags = Flags(1 << 9);
+    /// The cycle was longer than the checkpoint memory.
+    pub const OVERFLOW: Flags = Flags(1 << 10);
+    /// Warning: the accelerometer carried a zero shift after the impact; fitted and removed.
+    pub const ACCEL_ZERO_SHIFT: Flags = Flags(1 << 11);
+    /// Warning: stroke and backhaul friction disagree beyond their uncertainty
+    /// (a pressure or acceleration gain error looks like this).
+    pub const PHASE_MISMATCH: Flags = Flags(1 << 12);
+    /// Warning: the friction drift alarm is active.
+    pub const DRIFT_ALARM: Flags = Flags(1 << 13);
+
+    pub const INVALIDATING: Flags = Flags(
+        Self::REAR_SATURATED.0
+            | Self::FRONT_SATURATED.0
+            | Self::ACCEL_SATURATED.0
+            | Self::REAR_STUCK.0
+            | Self::FRONT_STUCK.0
+            | Self::ACCEL_STUCK.0
+            | Self::DISCONNECTED.0
+            | Self::DROPPED_SAMPLES.0
+            | Self::NO_REVERSAL.0
+            | Self::IMPLAUSIBLE.0
+            | Self::OVERFLOW.0,
+    );
+
+    pub const NAMES: [(Flags, &'static str); 14] = [
+        (Self::REAR_SATURATED, "rear_saturated"),
+        (Self::FRONT_SATURATED, "front_saturated"),
+        (Self::ACCEL_SATURATED, "accel_saturated"),
+        (Self::REAR_STUCK, "rear_stuck"),
+        (Self::FRONT_STUCK, "front_stuck"),
+        (Self::ACCEL_STUCK, "accel_stuck"),
+        (Self::DISCONNECTED, "disconnected"),
+        (Self::DROPPED_SAMPLES, "dropped_samples"),
+        (Self::NO_REVERSAL, "no_reversal"),
+        (Self::IMPLAUSIBLE, "implausible"),
+        (Self::OVERFLOW, "overflow"),
+        (Self::ACCEL_ZERO_SHIFT, "accel_zero_shift"),
+        (Self::PHASE_MISMATCH, "phase_mismatch"),
+        (Self::DRIFT_ALARM, "drift_alarm"),
+    ];
+
+    pub fn contains(self, other: Flags) -> bool {
+        self.0 & other.0 == other.0
+    }
+
+    pub fn intersects(self, other: Flags) -> bool {
+        self.0 & other.0 != 0
+    }
+
+    pub fn insert(&mut self, other: Flags) {
+        self.0 |= other.0;
+    }
+
+    pub fn is_empty(self) -> bool {
+        self.0 == 0
+    }
+
+    /// Names of the set flags.
+    pub fn names(self) -> impl Iterator<Item = &'static str> {
+        Self::NAMES
+            .into_iter()
+            .filter(move |(f, _)| self.contains(*f))
+            .map(|(_, n)| n)
+    }
+}
+
+impl core::ops::BitOr for Flags {
+    type Output = Flags;
+    fn bitor(self, rhs: Flags) -> Flags {
+        Flags(self.0 | rhs.0)
+    }
+}
+
+/// One impact cycle: the backhaul after an impact and the stroke that ends
+/// in the next. Uncertainties are expanded (coverage factor in the config).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct CycleReport {
+    /// Counts every closed cycle, valid or not, from 0: a gap in the sequence is a lost report.
+    pub seq: u32,
+    /// Time of the impact that closes the cycle, from the first sample.
+    pub t_impact_s: f64,
+    pub period_s: f32,
+    pub frequency_hz: f32,
+    /// Mean friction magnitude over the cycle (stroke and backhaul samples).
+    pub friction_n: f32,
+    pub friction_stroke_n: f32,
+    pub friction_backhaul_n: f32,
+    pub friction_uncertainty_n: f32,
+    pub friction_stroke_uncertainty_n: f32,
+    pub friction_backhaul_uncertainty_n: f32,
+    pub impact_velocity_mps: f32,
+    pub impact_velocity_frictionless_mps: f32,
+    pub impact_energy_j: f32,
+    pub impact_energy_frictionless_j: f32,
+    pub impact_energy_uncertainty_j: f32,
+    pub impact_energy_frictionless_uncertainty_j: f32,
+    /// Friction work of the cycle (stroke and backhaul).
+    pub friction_work_j: f32,
+    /// Stroke friction work over impact energy (the paper's "about 10 %").
+    pub friction_work_ratio: f32,
+    pub stroke_m: f32,
+    pub peak_rear_pa: f32,
+    pub peak_front_pa: f32,
+    /// Zero shift of the accelerometer fitted at the start of the backhaul.
+    pub accel_zero_shift_mps2: f32,
+    /// Archard-style wear index: cumulative friction work, J.
+    pub wear_index_j: f32,
+    /// Fraction of the configured wear budget left (1 = new).
+    pub wear_remaining_fraction: f32,
+    /// Cycles left at the current friction work per cycle.
+    pub remaining_life_cycles: f32,
+    /// One-sided CUSUM of the friction against its baseline, in baseline σ.
+    pub drift_score: f32,
+    pub flags: Flags,
+}
+
+impl CycleReport {
+    /// True when the numbers are estimates (no invalidating flag).
+    pub fn is_valid(&self) -> bool {
+        !self.flags.intersects(Flags::INVALIDATING)
+    }
+}
