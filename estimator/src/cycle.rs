@@ -205,7 +205,7 @@ impl CycleAcc {
         for ch in 0..3 {
             let c = codes[ch];
             if c == 0 || c >= full[ch] {
-                self.rail[ch] += 1;
+                self.rail[ch] = self.rail[ch].saturating_add(1);
                 if ch == 2 || c >= full[ch] {
                     // Pressure at the bottom rail is a vented chamber near 0 gauge;
                     // any other rail sample is a clipped reading.
@@ -214,7 +214,7 @@ impl CycleAcc {
                 }
             }
             if c == self.last_code[ch] {
-                self.run[ch] += 1;
+                self.run[ch] = self.run[ch].saturating_add(1);
                 if stuck_limit > 0 && self.run[ch] >= stuck_limit {
                     self.flags
                         .insert([Flags::REAR_STUCK, Flags::FRONT_STUCK, Flags::ACCEL_STUCK][ch]);

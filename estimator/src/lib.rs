@@ -148,8 +148,8 @@ impl Estimator {
     /// Feeds one sample-set. Returns the report of the cycle an impact closes.
     pub fn push(&mut self, s: RawSample) -> Option<CycleReport> {
         let index = self.next_index;
-        self.next_index += 1;
-        self.counters.samples += 1;
+        self.next_index = self.next_index.wrapping_add(1);
+        self.counters.samples = self.counters.samples.wrapping_add(1);
         let impact = self.is_impact(&s);
         match self.phase {
             Phase::Searching => {
@@ -161,7 +161,7 @@ impl Estimator {
             Phase::Blanking { left, in_shock } => {
                 let still = in_shock && impact;
                 if still {
-                    self.contact_samples += 1;
+                    self.contact_samples = self.contact_samples.saturating_add(1);
                 }
                 self.phase = if left <= 1 {
                     self.start_collecting()
@@ -180,8 +180,8 @@ impl Estimator {
                     return Some(report);
                 }
                 if let Some(last) = self.last_impact {
-                    if index - last > self.max_period_samples {
-                        self.counters.stalls += 1;
+                    if index.wrapping_sub(last) > self.max_period_samples {
+                        self.counters.stalls = self.counters.stalls.wrapping_add(1);
                         self.phase = Phase::Searching;
                         self.last_impact = None;
                         return None;
@@ -206,8 +206,8 @@ impl Estimator {
     /// Reports samples that never arrived (ADC overrun, link gap): the cycle
     /// under way cannot be estimated and is flagged; timing stays right.
     pub fn push_gap(&mut self, missing: u32) {
-        self.next_index += missing as u64;
-        self.counters.dropped_samples += missing as u64;
+        self.next_index = self.next_index.wrapping_add(missing as u64);
+        self.counters.dropped_samples = self.counters.dropped_samples.wrapping_add(missing as u64);
         match self.phase {
             Phase::Collecting => self.dropped_in_cycle = true,
             Phase::Blanking { left, .. } => {
@@ -226,7 +226,7 @@ impl Estimator {
     }
 
     fn begin_cycle(&mut self, index: u64) {
-        self.counters.impacts += 1;
+        self.counters.impacts = self.counters.impacts.wrapping_add(1);
         self.last_impact = Some(index);
         self.delay.clear();
         self.dropped_in_cycle = false;
@@ -264,7 +264,7 @@ impl Estimator {
 
     fn close_cycle(&mut self, index: u64) -> CycleReport {
         let start = self.last_impact.unwrap_or(index);
-        let period_s = (index - start) as f32 * self.d.dt;
+        let period_s = index.wrapping_sub(start) as f32 * self.d.dt;
         let tail = self.delay.len() as u32;
         let mut e = cycle::estimate(
             &self.acc,
@@ -336,9 +336,9 @@ impl Estimator {
             }
             self.friction_guess = r.friction_n;
         } else {
-            self.counters.invalid_cycles += 1;
+            self.counters.invalid_cycles = self.counters.invalid_cycles.wrapping_add(1);
         }
-        self.counters.cycles += 1;
+        self.counters.cycles = self.counters.cycles.wrapping_add(1);
         self.seq = self.seq.wrapping_add(1);
         r
     }

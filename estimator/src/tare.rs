@@ -51,7 +51,12 @@ pub struct TareResult {
 const NAMES: [&str; 3] = ["rear", "front", "accel"];
 
 impl Tare {
+    /// Adds a sample; beyond 10⁶ samples the tare has enough and ignores more
+    /// (which also keeps the integer sums far from overflow).
     pub fn push(&mut self, s: RawSample) {
+        if self.n >= 1_000_000 {
+            return;
+        }
         let codes = [s.rear, s.front, s.accel];
         self.n += 1;
         for ch in 0..3 {

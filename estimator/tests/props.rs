@@ -1,0 +1,113 @@
+//! Arbitrary input never panics the estimator, every buffer stays bounded,
+//! and whatever it reports is either flagged or finite.
+
+use hammer_estimator::{Config, Estimator, RawSample};
+use proptest::prelude::*;
+
+/// A stretch of signal: base codes, a noise amplitude, a length; an impact
+/// (accelerometer at its bottom rail) may open it; a gap may follow it.
+#[derive(Debug, Clone)]
+struct Segment {
+    base: [u16; 3],
+    noise: u16,
+    len: u16,
+    impact: bool,
+    gap: u16,
+}
+
+fn segment() -> impl Strategy<Value = Segment> {
+    (
+        any::<[u16; 3]>(),
+        0u16..200,
+        1u16..6000,
+        any::<bool>(),
+        prop_oneof![Just(0u16), 0u16..500],
+    )
+        .prop_map(|(base, noise, len, impact, gap)| Segment {
+            base: base.map(|b| b % 4096),
+            noise,
+            len,
+            impact,
+            gap,
+        })
+}
+
+fn config() -> impl Strategy<Value = Config> {
+    (
+        10_000.0f32..200_000.0,
+        100.0f32..5000.0,
+        0.0f32..2e-3,
+        0.0f32..0.05,
+        0.0f32..30.0,
+    )
+        .prop_map(|(fs, thr, blank, tau, incl)| {
+            let mut c = Config::default();
+            c.sample_rate_hz = fs;
+            c.impact_threshold_mps2 = thr;
+            c.blank_after_s = blank;
+            c.accel_zero_shift_tau_s = tau;
+            c.inclination_deg = incl;
+            c.max_period_s = 0.1;
+            c
+        })
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 200, ..ProptestConfig::default() })]
+
+    #[test]
+    fn arbitrary_streams_never_panic_and_reports_are_flagged_or_finite(
+        cfg in config(),
+        segments in prop::collection::vec(segment(), 1..40),
+        seed in any::<u32>(),
+    ) {
+        let mut est = Estimator::new(cfg).unwrap();
+        let mut x = seed | 1;
+        let mut lcg = move || { x ^= x << 13; x ^= x >> 17; x ^= x << 5; x };
+        let mut last_seq = None;
+        for s in &segments {
+            for i in 0..s.len {
+                let jitter = |b: u16, r: u32| {
+                    let n = if s.noise == 0 { 0 } else { (r % (2 * s.noise as u32 + 1)) as i32 - s.noise as i32 };
+                    (b as i32 + n).clamp(0, 4095) as u16
+                };
+                let accel = if s.impact && i < 5 { 0 } else { jitter(s.base[2], lcg()) };
+                let sample = RawSample { rear: jitter(s.base[0], lcg()), front: jitter(s.base[1], lcg()), accel };
+                if let Some(r) = est.push(sample) {
+                    if r.is_valid() {
+                        for v in [r.friction_n, r.friction_uncertainty_n, r.impact_energy_j, r.impact_energy_uncertainty_j, r.frequency_hz, r.stroke_m] {
+                            prop_assert!(v.is_finite(), "valid report with a non-finite field: {:?}", r);
+                        }
+                        prop_assert!(r.friction_uncertainty_n >= 0.0 && r.impact_energy_uncertainty_j >= 0.0);
+                    }
+                    if let Some(prev) = last_seq {
+                        prop_assert_eq!(r.seq, prev + 1, "sequence numbers are continuous");
+                    }
+                    last_seq = Some(r.seq);
+                }
+            }
+            if s.gap > 0 {
+                est.push_gap(s.gap as u32);
+            }
+        }
+        let c = est.counters();
+        prop_assert!(c.invalid_cycles <= c.cycles);
+    }
+
+    #[test]
+    fn out_of_range_configs_are_rejected_not_accepted(fs in -1e7f32..1e7, tau in -1.0f32..20.0) {
+        let mut c = Config::default();
+        c.sample_rate_hz = fs;
+        c.accel_zero_shift_tau_s = tau;
+        let ok = (1_000.0..=1_000_000.0).contains(&fs) && (0.0..=10.0).contains(&tau);
+        prop_assert_eq!(Estimator::new(c).is_ok(), ok);
+    }
+}
+
+#[test]
+fn the_estimator_state_fits_its_memory_budget() {
+    // The firmware keeps one estimator in static RAM; the aim is ≤ 8 KiB.
+    let size = core::mem::size_of::<Estimator>();
+    println!("estimator state: {size} bytes");
+    assert!(size <= 8 * 1024, "{size} bytes");
+}

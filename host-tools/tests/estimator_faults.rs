@@ -1,0 +1,146 @@
+//! Bad input gets a flagged cycle, never a silent wrong number: disconnected,
+//! stuck and saturated sensors, dropped samples, a hammer that stops.
+
+use hammer_estimator::{CycleReport, Estimator, Flags, RawSample};
+use hammer_host::estimate::{estimator_config, to_codes, EstimatorParams};
+use hammer_host::sim::SimConfig;
+use hammer_host::simulate::simulate;
+
+fn stream(sensors_tweak: impl Fn(&mut SimConfig)) -> (Vec<RawSample>, hammer_estimator::Config) {
+    let mut cfg = SimConfig::nominal(5.0);
+    cfg.solver.duration_s = 1.0;
+    cfg.effects.apply_spec("coulomb_friction").unwrap();
+    sensors_tweak(&mut cfg);
+    let sim = simulate(&cfg).unwrap();
+    let est = estimator_config(&cfg.hammer, &cfg.sensors, &EstimatorParams::default(), 1e5, Some(5.0)).unwrap();
+    (to_codes(&sim.trace(), &est), est)
+}
+
+fn run(samples: &[RawSample], cfg: hammer_estimator::Config) -> Vec<CycleReport> {
+    let mut e = Estimator::new(cfg).unwrap();
+    let mut out = vec![];
+    e.push_block(samples, |r| out.push(r));
+    out
+}
+
+/// Cycles whose kept samples (after the 1 ms blanking) overlap [t0, t1] by at
+/// least 6 ms: longer than the 5 ms a channel must hold one code to be stuck.
+fn overlapping(reports: &[CycleReport], t0: f64, t1: f64) -> Vec<&CycleReport> {
+    reports
+        .iter()
+        .filter(|r| {
+            let start = r.t_impact_s - r.period_s as f64 + 0.001;
+            r.t_impact_s.min(t1) - start.max(t0) >= 0.006
+        })
+        .collect()
+}
+
+#[test]
+fn a_disconnected_or_stuck_channel_flags_the_cycles_it_touches_and_only_those() {
+    let (clean, cfg) = stream(|_| {});
+    let baseline = run(&clean, cfg);
+    assert!(baseline.iter().filter(|r| r.t_impact_s > 0.15).all(|r| r.is_valid()));
+
+    let mut open = clean.clone();
+    for s in &mut open[40_000..60_000] {
+        s.rear = 0; // open circuit: the amplifier sits at its bottom rail
+    }
+    let reports = run(&open, cfg);
+    for r in overlapping(&reports, 0.4, 0.6) {
+        assert!(
+            r.flags.intersects(Flags::DISCONNECTED | Flags::REAR_STUCK),
+            "{:?}",
+            r.flags.names().collect::<Vec<_>>()
+        );
+        assert!(!r.is_valid());
+    }
+    let after: Vec<_> = reports
+        .iter()
+        .filter(|r| r.t_impact_s - r.period_s as f64 > 0.62)
+        .collect();
+    assert!(
+        !after.is_empty() && after.iter().all(|r| r.is_valid()),
+        "the estimator recovers"
+    );
+
+    let mut stuck = clean.clone();
+    for s in &mut stuck[40_000..50_000] {
+        s.front = 1234;
+    }
+    let reports = run(&stuck, cfg);
+    let hit = overlapping(&reports, 0.4, 0.5);
+    assert!(!hit.is_empty());
+    for r in hit {
+        assert!(r.flags.contains(Flags::FRONT_STUCK) && !r.is_valid());
+    }
+}
+
+#[test]
+fn saturated_channels_are_flagged() {
+    // A 0–3 bar pressure range clips the 5 bar hammer's peaks.
+    let (s, cfg) = stream(|c| {
+        c.sensors.rear.range_max = 3e5;
+        c.sensors.front.range_max = 3e5;
+    });
+    let reports = run(&s, cfg);
+    assert!(reports
+        .iter()
+        .filter(|r| r.t_impact_s > 0.15)
+        .all(|r| r.flags.contains(Flags::REAR_SATURATED) && !r.is_valid()));
+    // A ±300 m/s² accelerometer clips in flight, not only at impacts.
+    let (s, cfg) = stream(|c| {
+        c.sensors.accel.range_min = -300.0;
+        c.sensors.accel.range_max = 300.0;
+    });
+    let reports = run(&s, cfg);
+    assert!(!reports.is_empty());
+    assert!(reports
+        .iter()
+        .filter(|r| r.t_impact_s > 0.15)
+        .all(|r| r.flags.contains(Flags::ACCEL_SATURATED) && !r.is_valid()));
+}
+
+#[test]
+fn dropped_samples_flag_their_cycle_keep_the_timing_and_the_sequence() {
+    let (clean, cfg) = stream(|_| {});
+    let baseline = run(&clean, cfg);
+    let mut e = Estimator::new(cfg).unwrap();
+    let mut out = vec![];
+    e.push_block(&clean[..45_000], |r| out.push(r));
+    e.push_gap(300); // an ADC overrun lost 3 ms
+    e.push_block(&clean[45_300..], |r| out.push(r));
+    assert_eq!(e.counters().dropped_samples, 300);
+    assert_eq!(out.len(), baseline.len());
+    for (a, b) in out.iter().zip(&baseline) {
+        assert_eq!(a.seq, b.seq);
+        assert!((a.t_impact_s - b.t_impact_s).abs() < 1e-9, "timing survives the gap");
+        let touched = a.t_impact_s > 0.45 && a.t_impact_s - (a.period_s as f64) < 0.453;
+        assert_eq!(
+            a.flags.contains(Flags::DROPPED_SAMPLES),
+            touched,
+            "cycle at {}",
+            a.t_impact_s
+        );
+        if touched {
+            assert!(!a.is_valid());
+        }
+    }
+}
+
+#[test]
+fn a_hammer_that_stops_is_counted_as_a_stall_not_reported_as_a_cycle() {
+    let (clean, cfg) = stream(|_| {});
+    // Cut out 0.4–0.7 s and hold the last sample: the piston stands still.
+    let mut s = clean[..40_000].to_vec();
+    s.extend(std::iter::repeat(clean[40_000]).take(30_000));
+    s.extend_from_slice(&clean[70_000..]);
+    let mut e = Estimator::new(cfg).unwrap();
+    let mut out = vec![];
+    e.push_block(&s, |r| out.push(r));
+    assert_eq!(e.counters().stalls, 1);
+    assert!(out.iter().all(|r| !(r.t_impact_s > 0.4 && r.t_impact_s < 0.7)));
+    // Sequence numbers stay continuous over the stall: reports were not lost, cycles were not closed.
+    for w in out.windows(2) {
+        assert_eq!(w[1].seq, w[0].seq + 1);
+    }
+}
