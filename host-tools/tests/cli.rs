@@ -140,3 +140,65 @@ fn one_figure_per_effect() {
         );
     }
 }
+
+#[test]
+fn estimate_prints_one_record_per_cycle_in_each_format() {
+    let dir = tmp_dir("est");
+    let trace = dir.join("run.csv");
+    let (code, _, err) = hammer(&[
+        "simulate",
+        "--supply-bar",
+        "6",
+        "--duration",
+        "0.6",
+        "--effect",
+        "coulomb_friction",
+        "--out",
+        trace.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let side: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("run.json")).unwrap()).unwrap();
+    let truth_cycles = side["simulation"]["cycles"].as_array().unwrap().len();
+
+    let (code, out, err) = hammer(&["estimate", trace.to_str().unwrap(), "--format", "jsonl"]);
+    assert_eq!(code, 0, "{err}");
+    let records: Vec<serde_json::Value> = out.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    // The estimator's first cycle closes at the second impact, like the truth's.
+    assert_eq!(records.len(), truth_cycles);
+    for key in [
+        "t_impact_s",
+        "frequency_hz",
+        "friction_n",
+        "friction_stroke_n",
+        "friction_backhaul_n",
+        "friction_uncertainty_n",
+        "impact_velocity_mps",
+        "impact_energy_j",
+        "impact_energy_frictionless_j",
+        "impact_energy_uncertainty_j",
+        "wear_index",
+        "flags",
+    ] {
+        assert!(records.iter().all(|r| r.get(key).is_some()), "missing {key}");
+    }
+    let last = records.last().unwrap();
+    assert!((last["friction_n"].as_f64().unwrap() - 14.55).abs() < 0.3, "{last}");
+    assert!(last["flags"].as_array().unwrap().is_empty());
+
+    let (code, out, _) = hammer(&["estimate", trace.to_str().unwrap(), "--format", "csv"]);
+    assert_eq!(code, 0);
+    assert!(out.starts_with("seq,t_impact_s,frequency_hz,friction_n"));
+    assert_eq!(out.lines().count(), truth_cycles + 1);
+
+    let (code, out, _) = hammer(&["estimate", trace.to_str().unwrap(), "--supply-bar", "6"]);
+    assert_eq!(code, 0);
+    assert!(out.lines().last().unwrap().starts_with("summary:"), "{out}");
+
+    // Bad input: a clear error, exit code 2, no panic.
+    let bad = dir.join("bad.csv");
+    std::fs::write(&bad, "t_s,p_rear_pa,p_front_pa,accel_mps2\n0,1,2,3\n0.00001,1,oops,3\n").unwrap();
+    let (code, _, err) = hammer(&["estimate", bad.to_str().unwrap()]);
+    assert_eq!(code, 2);
+    assert!(err.contains(":3:") && err.contains("oops"), "{err}");
+}
