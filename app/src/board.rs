@@ -1,0 +1,34 @@
+//! What a board provides. The app is written against these small traits only,
+//! so it runs unchanged on the Nucleo-G474RE (ADC + DMA, ST-LINK UART), on the
+//! QEMU mps2-an386 board (samples over the UART) and in host tests.
+
+use hammer_estimator::RawSample;
+
+/// Samples were lost before they reached the app (ADC/DMA overrun, a gap in
+/// the stream): `lost` sample-sets. The app flags the cycle and counts them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Overrun {
+    pub lost: u32,
+}
+
+/// The three-channel sample stream, in blocks (a DMA half-buffer, a frame).
+pub trait SampleSource {
+    /// Fills `buf` from the front with the next sample-sets and returns how
+    /// many; `Err` reports lost samples (the stream continues after them).
+    async fn read(&mut self, buf: &mut [RawSample]) -> Result<usize, Overrun>;
+}
+
+/// The byte link's transmit side (UART, USB VCP, a pipe in tests).
+pub trait LinkTx {
+    async fn write_all(&mut self, bytes: &[u8]);
+}
+
+/// The byte link's receive side: returns at least one byte.
+pub trait LinkRx {
+    async fn read(&mut self, buf: &mut [u8]) -> usize;
+}
+
+/// Monotonic time since boot.
+pub trait Clock {
+    fn now_us(&self) -> u64;
+}

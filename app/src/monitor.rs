@@ -1,0 +1,315 @@
+//! The monitor's synchronous core: samples in, messages out, commands applied.
+//! No I/O and no time source of its own, so it is tested on the host as is.
+
+use hammer_estimator::tare::Tare;
+use hammer_estimator::wear::WEAR_STATE_BYTES;
+use hammer_estimator::{Config, Estimator, Flags, RawSample, WearState};
+use hammer_wire::{
+    Alarm, AlarmKind, CaptureChunk, CommandKind, DeviceConfig, DeviceInfo, DeviceMsg, HostMsg, RejectReason, Report,
+    Status, WearBlob, BLOCK_SAMPLES, PROTOCOL_VERSION,
+};
+
+/// Sample-sets a raw capture holds: one full cycle of the paper's hammer
+/// (≤ 50 ms at 4 bar) at 100 kS/s, with margin. 6 bytes each.
+pub const CAPTURE_SAMPLES: usize = 5_600;
+
+/// The firmware's own version, reported in `Hello` and `Status`.
+pub const FIRMWARE_VERSION: [u8; 3] = [0, 1, 0];
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum CaptureState {
+    Idle,
+    /// Waiting for the next impact to start recording `cycles` cycles.
+    Armed { cycles: u8 },
+    Recording { cycles_left: u8 },
+    /// Recorded; `sent` sample-sets streamed so far.
+    Streaming { sent: usize },
+}
+
+/// Counters the monitor keeps beyond the estimator's.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct MonitorCounters {
+    pub adc_overruns: u32,
+    pub rejected_commands: u32,
+    pub messages_dropped: u32,
+}
+
+pub struct Monitor {
+    est: Estimator,
+    board: &'static str,
+    tare: Option<(Tare, u32)>,
+    capture: CaptureState,
+    capture_buf: [RawSample; CAPTURE_SAMPLES],
+    capture_len: usize,
+    capture_id: u16,
+    alarm_on: bool,
+    pub counters: MonitorCounters,
+    config_hash: u32,
+}
+
+impl Monitor {
+    pub fn new(cfg: Config, board: &'static str) -> Result<Self, hammer_estimator::ConfigError> {
+        let est = Estimator::new(cfg)?;
+        Ok(Self {
+            config_hash: DeviceConfig::from(&cfg).hash(),
+            est,
+            board,
+            tare: None,
+            capture: CaptureState::Idle,
+            capture_buf: [RawSample::default(); CAPTURE_SAMPLES],
+            capture_len: 0,
+            capture_id: 0,
+            alarm_on: false,
+            counters: MonitorCounters::default(),
+        })
+    }
+
+    pub fn config(&self) -> &Config {
+        self.est.config()
+    }
+
+    pub fn estimator(&self) -> &Estimator {
+        &self.est
+    }
+
+    pub fn info(&self) -> DeviceInfo {
+        let mut board = heapless::Vec::new();
+        for &b in self.board.as_bytes().iter().take(24) {
+            let _ = board.push(b);
+        }
+        DeviceInfo { protocol_version: PROTOCOL_VERSION, firmware_version: FIRMWARE_VERSION, board, config_hash: self.config_hash }
+    }
+
+    /// Samples lost before they arrived: the cycle under way is flagged.
+    pub fn on_overrun(&mut self, lost: u32) {
+        self.counters.adc_overruns = self.counters.adc_overruns.wrapping_add(1);
+        self.est.push_gap(lost);
+        if matches!(self.capture, CaptureState::Recording { .. }) {
+            // A capture with a hole is not a trace: start over at the next impact.
+            self.capture = CaptureState::Armed { cycles: 1 };
+            self.capture_len = 0;
+        }
+    }
+
+    /// Feeds samples; reports, alarms and tare results go to `out`.
+    pub fn on_samples(&mut self, block: &[RawSample], out: &mut impl FnMut(DeviceMsg)) {
+        for &s in block {
+            if let Some((tare, left)) = &mut self.tare {
+                tare.push(s);
+                *left -= 1;
+                if *left == 0 {
+                    let t = *tare;
+                    self.tare = None;
+                    self.finish_tare(&t, out);
+                }
+            }
+            let report = self.est.push(s);
+            if let Some(r) = &report {
+                self.capture_on_impact();
+                out(DeviceMsg::Report(Report::from(r)));
+                self.alarms(r, out);
+            }
+            if matches!(self.capture, CaptureState::Recording { .. }) {
+                if self.capture_len < CAPTURE_SAMPLES {
+                    self.capture_buf[self.capture_len] = s;
+                    self.capture_len += 1;
+                } else {
+                    // Longer than the buffer: stream what there is.
+                    self.capture = CaptureState::Streaming { sent: 0 };
+                }
+            }
+        }
+    }
+
+    fn capture_on_impact(&mut self) {
+        self.capture = match self.capture {
+            CaptureState::Armed { cycles } => {
+                self.capture_len = 0;
+                self.capture_id = self.capture_id.wrapping_add(1);
+                CaptureState::Recording { cycles_left: cycles }
+            }
+            CaptureState::Recording { cycles_left } if cycles_left <= 1 => CaptureState::Streaming { sent: 0 },
+            CaptureState::Recording { cycles_left } => CaptureState::Recording { cycles_left: cycles_left - 1 },
+            other => other,
+        };
+    }
+
+    fn alarms(&mut self, r: &hammer_estimator::CycleReport, out: &mut impl FnMut(DeviceMsg)) {
+        let drift = r.flags.contains(Flags::DRIFT_ALARM);
+        if r.is_valid() && drift != self.alarm_on {
+            self.alarm_on = drift;
+            let kind = if drift { AlarmKind::DriftOn } else { AlarmKind::DriftOff };
+            out(DeviceMsg::Alarm(Alarm { kind, cycle_seq: r.seq, flags: r.flags.0, drift_score: r.drift_score }));
+        }
+        let faults = Flags::REAR_SATURATED
+            | Flags::FRONT_SATURATED
+            | Flags::ACCEL_SATURATED
+            | Flags::REAR_STUCK
+            | Flags::FRONT_STUCK
+            | Flags::ACCEL_STUCK
+            | Flags::DISCONNECTED;
+        if r.flags.intersects(faults) {
+            out(DeviceMsg::Alarm(Alarm {
+                kind: AlarmKind::SensorFault,
+                cycle_seq: r.seq,
+                flags: r.flags.0,
+                drift_score: r.drift_score,
+            }));
+        }
+    }
+
+    /// The next chunk of a finished capture, if any: call until `None`.
+    pub fn next_capture_chunk(&mut self) -> Option<DeviceMsg> {
+        let CaptureState::Streaming { sent } = self.capture else { return None };
+        if sent >= self.capture_len {
+            self.capture = CaptureState::Idle;
+            return None;
+        }
+        let end = (sent + BLOCK_SAMPLES).min(self.capture_len);
+        let mut samples = heapless::Vec::new();
+        for s in &self.capture_buf[sent..end] {
+            let _ = samples.push([s.rear, s.front, s.accel]);
+        }
+        self.capture = CaptureState::Streaming { sent: end };
+        Some(DeviceMsg::Capture(CaptureChunk {
+            capture_id: self.capture_id,
+            offset: sent as u32,
+            total: self.capture_len as u32,
+            samples,
+        }))
+    }
+
+    fn reject(&mut self, command: CommandKind, reason: RejectReason, out: &mut impl FnMut(DeviceMsg)) {
+        self.counters.rejected_commands = self.counters.rejected_commands.wrapping_add(1);
+        out(DeviceMsg::Rejected { command, reason });
+    }
+
+    /// Counts a frame that did not decode and says so to the host.
+    pub fn on_bad_frame(&mut self, reason: RejectReason, out: &mut impl FnMut(DeviceMsg)) {
+        self.reject(CommandKind::Unknown, reason, out);
+    }
+
+    fn finish_tare(&mut self, t: &Tare, out: &mut impl FnMut(DeviceMsg)) {
+        match t.finish(self.est.config()) {
+            Ok(r) => {
+                if self.replace_config(r.config).is_ok() {
+                    out(DeviceMsg::Ack(CommandKind::Tare));
+                    out(DeviceMsg::Config(DeviceConfig::from(self.est.config())));
+                } else {
+                    self.reject(CommandKind::Tare, RejectReason::InvalidConfig, out);
+                }
+            }
+            Err(_) => self.reject(CommandKind::Tare, RejectReason::TareNotAtRest, out),
+        }
+    }
+
+    /// A new configuration restarts the estimator but keeps the wear state.
+    fn replace_config(&mut self, cfg: Config) -> Result<(), hammer_estimator::ConfigError> {
+        let mut est = Estimator::new(cfg)?;
+        est.restore_wear(*self.est.wear_state());
+        self.est = est;
+        self.config_hash = DeviceConfig::from(&cfg).hash();
+        Ok(())
+    }
+
+    /// Applies a host command. `Samples` is not a command: the link task
+    /// routes it to the sample source.
+    pub fn on_command(&mut self, cmd: HostMsg, now_us: u64, out: &mut impl FnMut(DeviceMsg)) {
+        match cmd {
+            HostMsg::Hello { protocol_version } => {
+                if protocol_version == PROTOCOL_VERSION {
+                    out(DeviceMsg::Hello(self.info()));
+                } else {
+                    self.reject(CommandKind::Hello, RejectReason::ProtocolMismatch { device: PROTOCOL_VERSION }, out);
+                    out(DeviceMsg::Hello(self.info()));
+                }
+            }
+            HostMsg::GetConfig => out(DeviceMsg::Config(DeviceConfig::from(self.est.config()))),
+            HostMsg::SetConfig(c) => {
+                let cfg = c.to_config(self.est.config());
+                match self.replace_config(cfg) {
+                    Ok(()) => {
+                        out(DeviceMsg::Ack(CommandKind::SetConfig));
+                        out(DeviceMsg::Config(DeviceConfig::from(self.est.config())));
+                    }
+                    Err(_) => self.reject(CommandKind::SetConfig, RejectReason::InvalidConfig, out),
+                }
+            }
+            HostMsg::Tare { samples } => {
+                if self.tare.is_some() || samples < hammer_estimator::tare::MIN_TARE_SAMPLES || samples > 1_000_000 {
+                    self.reject(CommandKind::Tare, RejectReason::Busy, out);
+                } else {
+                    self.tare = Some((Tare::default(), samples));
+                }
+            }
+            HostMsg::StartCapture { cycles } => {
+                if self.capture != CaptureState::Idle || cycles == 0 {
+                    self.reject(CommandKind::StartCapture, RejectReason::Busy, out);
+                } else {
+                    self.capture = CaptureState::Armed { cycles };
+                    out(DeviceMsg::Ack(CommandKind::StartCapture));
+                }
+            }
+            HostMsg::GetStatus => out(DeviceMsg::Status(self.status(now_us, 0, Default::default()))),
+            HostMsg::ResetWear => {
+                self.est.restore_wear(WearState::default());
+                self.alarm_on = false;
+                out(DeviceMsg::Ack(CommandKind::ResetWear));
+            }
+            HostMsg::GetWear => out(DeviceMsg::Wear(self.wear_blob())),
+            HostMsg::RestoreWear(blob) => match WearState::from_bytes(&blob.bytes) {
+                Ok(w) => {
+                    self.est.restore_wear(w);
+                    out(DeviceMsg::Ack(CommandKind::RestoreWear));
+                }
+                Err(_) => self.reject(CommandKind::RestoreWear, RejectReason::BadWearState, out),
+            },
+            HostMsg::Samples(_) => self.reject(CommandKind::Samples, RejectReason::Busy, out),
+        }
+    }
+
+    pub fn wear_blob(&self) -> WearBlob {
+        let bytes = self.est.wear_state().to_bytes();
+        let mut v = heapless::Vec::<u8, WEAR_STATE_BYTES>::new();
+        let _ = v.extend_from_slice(&bytes);
+        WearBlob { bytes: v }
+    }
+
+    /// The device's health. `cpu_load_permille` and the link counters come from the board's tasks.
+    pub fn status(&self, now_us: u64, cpu_load_permille: u16, link: LinkCounters) -> Status {
+        let c = self.est.counters();
+        Status {
+            uptime_us: now_us,
+            samples: c.samples,
+            dropped_samples: c.dropped_samples,
+            adc_overruns: self.counters.adc_overruns,
+            cycles: c.cycles,
+            invalid_cycles: c.invalid_cycles,
+            stalls: c.stalls,
+            frames_sent: link.frames_sent,
+            frames_dropped: link.frames_dropped.wrapping_add(self.counters.messages_dropped),
+            rx_frames: link.rx_frames,
+            rx_crc_errors: link.rx_crc_errors,
+            rx_cobs_errors: link.rx_cobs_errors,
+            rx_decode_errors: link.rx_decode_errors,
+            rx_oversize: link.rx_oversize,
+            rejected_commands: self.counters.rejected_commands,
+            cpu_load_permille,
+            protocol_version: PROTOCOL_VERSION,
+            firmware_version: FIRMWARE_VERSION,
+            config_hash: self.config_hash,
+        }
+    }
+}
+
+/// Link-side counters, kept by the link tasks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct LinkCounters {
+    pub frames_sent: u32,
+    pub frames_dropped: u32,
+    pub rx_frames: u32,
+    pub rx_crc_errors: u32,
+    pub rx_cobs_errors: u32,
+    pub rx_decode_errors: u32,
+    pub rx_oversize: u32,
+}

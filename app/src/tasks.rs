@@ -1,0 +1,224 @@
+//! The app's async tasks, generic over the board traits. A board spawns each
+//! in an embassy task (the sampling one at a priority the link cannot starve)
+//! and connects them through one [`Shared`].
+
+use core::sync::atomic::{AtomicU32, Ordering};
+
+use embassy_sync::blocking_mutex::raw::RawMutex;
+use embassy_sync::channel::Channel;
+use hammer_estimator::RawSample;
+use hammer_wire::{encode, DecodeError, Decoder, DeviceMsg, HostMsg, RejectReason, SampleBlock, BLOCK_SAMPLES, MAX_FRAME};
+
+use crate::board::{Clock, LinkRx, LinkTx, Overrun, SampleSource};
+use crate::monitor::{LinkCounters, Monitor};
+
+/// How often the device sends a `Status` without being asked.
+pub const STATUS_PERIOD_US: u64 = 1_000_000;
+/// Outgoing messages waiting for the link.
+pub const OUTGOING: usize = 16;
+
+#[derive(Default)]
+pub struct LinkAtomics {
+    pub frames_sent: AtomicU32,
+    pub frames_dropped: AtomicU32,
+    pub rx_frames: AtomicU32,
+    pub rx_crc_errors: AtomicU32,
+    pub rx_cobs_errors: AtomicU32,
+    pub rx_decode_errors: AtomicU32,
+    pub rx_oversize: AtomicU32,
+}
+
+impl LinkAtomics {
+    pub const fn new() -> Self {
+        Self {
+            frames_sent: AtomicU32::new(0),
+            frames_dropped: AtomicU32::new(0),
+            rx_frames: AtomicU32::new(0),
+            rx_crc_errors: AtomicU32::new(0),
+            rx_cobs_errors: AtomicU32::new(0),
+            rx_decode_errors: AtomicU32::new(0),
+            rx_oversize: AtomicU32::new(0),
+        }
+    }
+
+    pub fn snapshot(&self) -> LinkCounters {
+        let l = |a: &AtomicU32| a.load(Ordering::Relaxed);
+        LinkCounters {
+            frames_sent: l(&self.frames_sent),
+            frames_dropped: l(&self.frames_dropped),
+            rx_frames: l(&self.rx_frames),
+            rx_crc_errors: l(&self.rx_crc_errors),
+            rx_cobs_errors: l(&self.rx_cobs_errors),
+            rx_decode_errors: l(&self.rx_decode_errors),
+            rx_oversize: l(&self.rx_oversize),
+        }
+    }
+}
+
+/// Queues between the tasks; `const`-constructible so a board keeps it in a `static`.
+pub struct Shared<M: RawMutex> {
+    pub commands: Channel<M, HostMsg, 4>,
+    pub outgoing: Channel<M, DeviceMsg, OUTGOING>,
+    /// Sample blocks that arrive over the link (boards without an ADC).
+    pub samples: Channel<M, SampleBlock, 4>,
+    pub link: LinkAtomics,
+}
+
+impl<M: RawMutex> Shared<M> {
+    pub const fn new() -> Self {
+        Self { commands: Channel::new(), outgoing: Channel::new(), samples: Channel::new(), link: LinkAtomics::new() }
+    }
+
+    /// Queues a message; a full queue drops it and counts the drop.
+    pub fn send(&self, m: DeviceMsg) {
+        if self.outgoing.try_send(m).is_err() {
+            self.link.frames_dropped.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+}
+
+impl<M: RawMutex> Default for Shared<M> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// Sampling → estimator → outgoing queue; applies commands between blocks,
+/// streams capture chunks when the queue has room, sends a periodic status.
+pub async fn sampling<S: SampleSource, M: RawMutex, C: Clock>(
+    source: &mut S,
+    monitor: &mut Monitor,
+    shared: &Shared<M>,
+    clock: &C,
+) -> ! {
+    let mut buf = [RawSample::default(); 4 * BLOCK_SAMPLES];
+    let mut window_start = clock.now_us();
+    let mut busy_us = 0u64;
+    let mut load_permille = 0u16;
+    let mut next_status = window_start + STATUS_PERIOD_US;
+    loop {
+        let res = source.read(&mut buf).await;
+        let t0 = clock.now_us();
+        let mut emit = |m| shared.send(m);
+        match res {
+            Ok(n) => monitor.on_samples(&buf[..n.min(buf.len())], &mut emit),
+            Err(Overrun { lost }) => monitor.on_overrun(lost),
+        }
+        while let Ok(cmd) = shared.commands.try_receive() {
+            if cmd == HostMsg::GetStatus {
+                emit(DeviceMsg::Status(monitor.status(t0, load_permille, shared.link.snapshot())));
+            } else {
+                monitor.on_command(cmd, t0, &mut emit);
+            }
+        }
+        // Capture chunks never crowd out reports: only into spare room.
+        while shared.outgoing.free_capacity() > 4 {
+            match monitor.next_capture_chunk() {
+                Some(m) => emit(m),
+                None => break,
+            }
+        }
+        let t1 = clock.now_us();
+        busy_us += t1.saturating_sub(t0);
+        if t1 >= next_status {
+            let window = t1.saturating_sub(window_start).max(1);
+            load_permille = (busy_us * 1000 / window).min(1000) as u16;
+            window_start = t1;
+            busy_us = 0;
+            next_status = t1 + STATUS_PERIOD_US;
+            emit(DeviceMsg::Status(monitor.status(t1, load_permille, shared.link.snapshot())));
+        }
+    }
+}
+
+/// Link receive: frames → commands and sample blocks. Garbage is counted,
+/// answered with a rejection, and the decoder resynchronises at the next frame.
+pub async fn link_rx<R: LinkRx, M: RawMutex>(rx: &mut R, shared: &Shared<M>) -> ! {
+    let mut dec = Decoder::<MAX_FRAME>::new();
+    let mut buf = [0u8; 64];
+    loop {
+        let n = rx.read(&mut buf).await;
+        for &b in &buf[..n.min(buf.len())] {
+            let Some(res) = dec.push::<HostMsg>(b) else { continue };
+            let link = &shared.link;
+            match res {
+                Ok(HostMsg::Samples(block)) => {
+                    link.rx_frames.fetch_add(1, Ordering::Relaxed);
+                    shared.samples.send(block).await;
+                }
+                Ok(cmd) => {
+                    link.rx_frames.fetch_add(1, Ordering::Relaxed);
+                    shared.commands.send(cmd).await;
+                }
+                Err(e) => {
+                    let (counter, reason) = match e {
+                        DecodeError::Cobs => (&link.rx_cobs_errors, RejectReason::CorruptFrame),
+                        DecodeError::Crc => (&link.rx_crc_errors, RejectReason::CorruptFrame),
+                        DecodeError::Message => (&link.rx_decode_errors, RejectReason::CorruptFrame),
+                        DecodeError::Oversize => (&link.rx_oversize, RejectReason::Oversize),
+                    };
+                    counter.fetch_add(1, Ordering::Relaxed);
+                    shared.send(DeviceMsg::Rejected { command: hammer_wire::CommandKind::Unknown, reason });
+                }
+            }
+        }
+    }
+}
+
+/// Link transmit: outgoing messages → frames.
+pub async fn link_tx<T: LinkTx, M: RawMutex>(tx: &mut T, shared: &Shared<M>) -> ! {
+    let mut buf = [0u8; MAX_FRAME];
+    loop {
+        let m = shared.outgoing.receive().await;
+        match encode(&m, &mut buf) {
+            Ok(n) => {
+                tx.write_all(&buf[..n]).await;
+                shared.link.frames_sent.fetch_add(1, Ordering::Relaxed);
+            }
+            Err(_) => {
+                shared.link.frames_dropped.fetch_add(1, Ordering::Relaxed);
+            }
+        }
+    }
+}
+
+/// The sample source of a board that receives its samples over the link.
+/// Block sequence numbers reveal lost blocks, which become an overrun.
+pub struct LinkSamples<'a, M: RawMutex> {
+    shared: &'a Shared<M>,
+    pending: Option<SampleBlock>,
+    expected_seq: Option<u32>,
+}
+
+impl<'a, M: RawMutex> LinkSamples<'a, M> {
+    pub fn new(shared: &'a Shared<M>) -> Self {
+        Self { shared, pending: None, expected_seq: None }
+    }
+}
+
+impl<M: RawMutex> SampleSource for LinkSamples<'_, M> {
+    async fn read(&mut self, buf: &mut [RawSample]) -> Result<usize, Overrun> {
+        let block = match self.pending.take() {
+            Some(b) => b,
+            None => {
+                let b = self.shared.samples.receive().await;
+                if let Some(exp) = self.expected_seq {
+                    if b.seq != exp {
+                        // A block went missing (or the host restarted its count).
+                        let lost = b.seq.wrapping_sub(exp).min(1 << 20) * BLOCK_SAMPLES as u32;
+                        self.expected_seq = Some(b.seq.wrapping_add(1));
+                        self.pending = Some(b);
+                        return Err(Overrun { lost });
+                    }
+                }
+                b
+            }
+        };
+        self.expected_seq = Some(block.seq.wrapping_add(1));
+        let n = block.samples.len().min(buf.len());
+        for (dst, c) in buf.iter_mut().zip(block.samples.iter()) {
+            *dst = RawSample { rear: c[0], front: c[1], accel: c[2] };
+        }
+        Ok(n)
+    }
+}

@@ -1,0 +1,25 @@
+//! The wire protocol shared by the firmware and the host tools, `no_std`.
+//!
+//! A frame is `COBS(postcard(message) ‖ CRC-32(postcard bytes)) ‖ 0x00`: the
+//! UART has no integrity check of its own, COBS makes `0x00` a frame boundary
+//! to resynchronise on after garbage. postcard is not self-describing, so any
+//! change to a message's fields changes the bytes: [`PROTOCOL_VERSION`] is
+//! exchanged in the handshake, and golden byte snapshots in the tests make an
+//! accidental change fail CI. Policy: `docs/wire-protocol.md`.
+#![no_std]
+#![forbid(unsafe_code)]
+
+pub mod cobs;
+pub mod convert;
+pub mod frame;
+pub mod msg;
+
+pub use frame::{encode, DecodeError, Decoder, DecoderStats, EncodeError};
+pub use msg::*;
+
+/// Bumped on every change of any message's layout or meaning.
+pub const PROTOCOL_VERSION: u16 = 1;
+/// Largest frame on the wire, delimiter included. Bounds every buffer.
+pub const MAX_FRAME: usize = 400;
+/// Sample-sets per `Samples` or `Capture` block.
+pub const BLOCK_SAMPLES: usize = 32;

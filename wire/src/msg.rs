@@ -1,0 +1,219 @@
+//! Every message on the link. Field order is wire order: append nothing,
+//! reorder nothing without bumping `PROTOCOL_VERSION`.
+
+use heapless::Vec;
+use serde::{Deserialize, Serialize};
+
+use crate::BLOCK_SAMPLES;
+
+/// One sample-set as ADC codes: rear pressure, front pressure, acceleration.
+pub type Codes = [u16; 3];
+
+/// A block of consecutive sample-sets; `seq` counts blocks so a lost one shows.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SampleBlock {
+    pub seq: u32,
+    pub samples: Vec<Codes, BLOCK_SAMPLES>,
+}
+
+/// Host → device.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum HostMsg {
+    /// Handshake; the device answers with [`DeviceMsg::Hello`].
+    Hello { protocol_version: u16 },
+    GetConfig,
+    SetConfig(DeviceConfig),
+    /// Zero the offsets from the next `samples` sample-sets (hammer at rest, unpressurised).
+    Tare { samples: u32 },
+    /// Record the raw samples of the next `cycles` impact cycles and stream them.
+    StartCapture { cycles: u8 },
+    GetStatus,
+    /// Start the wear index, baselines and alarm from scratch.
+    ResetWear,
+    /// Send the wear state ([`DeviceMsg::Wear`]).
+    GetWear,
+    /// Continue from a saved wear state.
+    RestoreWear(WearBlob),
+    /// The sample stream, where the board has no ADC of its own (the emulated board).
+    Samples(SampleBlock),
+}
+
+/// Which command an acknowledgement or a rejection is about.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum CommandKind {
+    Hello,
+    GetConfig,
+    SetConfig,
+    Tare,
+    StartCapture,
+    GetStatus,
+    ResetWear,
+    GetWear,
+    RestoreWear,
+    Samples,
+    /// A frame that did not decode (CRC, COBS, unknown message).
+    Unknown,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum RejectReason {
+    ProtocolMismatch { device: u16 },
+    InvalidConfig,
+    Busy,
+    BadWearState,
+    CorruptFrame,
+    Oversize,
+    TareNotAtRest,
+    /// A sample block arrived out of order: `expected` block seq, the gap was counted as lost samples.
+    SampleGap { expected: u32, got: u32 },
+}
+
+/// Device → host.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum DeviceMsg {
+    Hello(DeviceInfo),
+    Report(Report),
+    Status(Status),
+    Capture(CaptureChunk),
+    Alarm(Alarm),
+    Config(DeviceConfig),
+    Wear(WearBlob),
+    Ack(CommandKind),
+    Rejected { command: CommandKind, reason: RejectReason },
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DeviceInfo {
+    pub protocol_version: u16,
+    pub firmware_version: [u8; 3],
+    pub board: Vec<u8, 24>,
+    pub config_hash: u32,
+}
+
+/// Everything the estimator reports for one cycle (see `hammer_estimator::CycleReport`).
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct Report {
+    pub seq: u32,
+    pub t_impact_s: f64,
+    pub period_s: f32,
+    pub frequency_hz: f32,
+    pub friction_n: f32,
+    pub friction_stroke_n: f32,
+    pub friction_backhaul_n: f32,
+    pub friction_uncertainty_n: f32,
+    pub friction_stroke_uncertainty_n: f32,
+    pub friction_backhaul_uncertainty_n: f32,
+    pub impact_velocity_mps: f32,
+    pub impact_velocity_frictionless_mps: f32,
+    pub impact_energy_j: f32,
+    pub impact_energy_frictionless_j: f32,
+    pub impact_energy_uncertainty_j: f32,
+    pub impact_energy_frictionless_uncertainty_j: f32,
+    pub friction_work_j: f32,
+    pub friction_work_ratio: f32,
+    pub stroke_m: f32,
+    pub peak_rear_pa: f32,
+    pub peak_front_pa: f32,
+    pub accel_zero_shift_mps2: f32,
+    pub wear_index_j: f32,
+    pub wear_remaining_fraction: f32,
+    pub remaining_life_cycles: f32,
+    pub drift_score: f32,
+    pub flags: u16,
+}
+
+/// Device health. Every counter only grows; a host compares two to see losses.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct Status {
+    pub uptime_us: u64,
+    pub samples: u64,
+    pub dropped_samples: u64,
+    pub adc_overruns: u32,
+    pub cycles: u32,
+    pub invalid_cycles: u32,
+    pub stalls: u32,
+    pub frames_sent: u32,
+    /// Outgoing frames dropped because the transmit queue was full.
+    pub frames_dropped: u32,
+    pub rx_frames: u32,
+    pub rx_crc_errors: u32,
+    pub rx_cobs_errors: u32,
+    pub rx_decode_errors: u32,
+    pub rx_oversize: u32,
+    pub rejected_commands: u32,
+    /// Share of time spent processing samples, per mille.
+    pub cpu_load_permille: u16,
+    pub protocol_version: u16,
+    pub firmware_version: [u8; 3],
+    pub config_hash: u32,
+}
+
+/// A piece of a raw capture: ADC codes plus what is needed to turn them into a trace.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CaptureChunk {
+    pub capture_id: u16,
+    /// Index of the first sample-set of this chunk within the capture.
+    pub offset: u32,
+    /// Sample-sets in the whole capture.
+    pub total: u32,
+    pub samples: Vec<Codes, BLOCK_SAMPLES>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum AlarmKind {
+    /// The friction drift alarm came on (sustained rise against the baseline).
+    DriftOn,
+    DriftOff,
+    /// A cycle carried sensor fault flags (saturated, stuck, disconnected).
+    SensorFault,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Alarm {
+    pub kind: AlarmKind,
+    pub cycle_seq: u32,
+    pub flags: u16,
+    pub drift_score: f32,
+}
+
+/// The saved wear state (`hammer_estimator::WearState::to_bytes`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct WearBlob {
+    pub bytes: Vec<u8, { hammer_estimator::wear::WEAR_STATE_BYTES }>,
+}
+
+/// One channel's calibration: `value = (code − zero_code)·scale`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ChannelCalibration {
+    pub zero_code: f32,
+    pub scale: f32,
+    pub full_scale_code: u16,
+    pub gain_uncertainty: f32,
+    pub offset_uncertainty: f32,
+}
+
+/// The device's configuration: the hammer, the sensors, the thresholds.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct DeviceConfig {
+    pub sample_rate_hz: f32,
+    pub piston_mass_kg: f32,
+    pub bore_diameter_m: f32,
+    pub rod_diameter_m: f32,
+    pub inclination_deg: f32,
+    pub rear: ChannelCalibration,
+    pub front: ChannelCalibration,
+    pub accel: ChannelCalibration,
+    pub impact_threshold_mps2: f32,
+    pub blank_before_s: f32,
+    pub blank_after_s: f32,
+    pub min_period_s: f32,
+    pub max_period_s: f32,
+    pub accel_zero_shift_tau_s: f32,
+    pub coverage_factor: f32,
+    /// Gauge supply pressure, NaN when unknown.
+    pub supply_pressure_pa: f32,
+    pub wear_budget_j: f32,
+    pub baseline_cycles: u16,
+    pub cusum_k: f32,
+    pub cusum_h: f32,
+}
