@@ -15,6 +15,7 @@ pub struct Overrun {
 pub trait SampleSource {
     /// Fills `buf` from the front with the next sample-sets and returns how
     /// many; `Err` reports lost samples (the stream continues after them).
+    /// Must be cancel-safe: dropping the future loses no samples.
     async fn read(&mut self, buf: &mut [RawSample]) -> Result<usize, Overrun>;
 }
 

@@ -20,10 +20,16 @@ pub const FIRMWARE_VERSION: [u8; 3] = [0, 1, 0];
 enum CaptureState {
     Idle,
     /// Waiting for the next impact to start recording `cycles` cycles.
-    Armed { cycles: u8 },
-    Recording { cycles_left: u8 },
+    Armed {
+        cycles: u8,
+    },
+    Recording {
+        cycles_left: u8,
+    },
     /// Recorded; `sent` sample-sets streamed so far.
-    Streaming { sent: usize },
+    Streaming {
+        sent: usize,
+    },
 }
 
 /// Counters the monitor keeps beyond the estimator's.
@@ -77,7 +83,12 @@ impl Monitor {
         for &b in self.board.as_bytes().iter().take(24) {
             let _ = board.push(b);
         }
-        DeviceInfo { protocol_version: PROTOCOL_VERSION, firmware_version: FIRMWARE_VERSION, board, config_hash: self.config_hash }
+        DeviceInfo {
+            protocol_version: PROTOCOL_VERSION,
+            firmware_version: FIRMWARE_VERSION,
+            board,
+            config_hash: self.config_hash,
+        }
     }
 
     /// Samples lost before they arrived: the cycle under way is flagged.
@@ -129,7 +140,9 @@ impl Monitor {
                 CaptureState::Recording { cycles_left: cycles }
             }
             CaptureState::Recording { cycles_left } if cycles_left <= 1 => CaptureState::Streaming { sent: 0 },
-            CaptureState::Recording { cycles_left } => CaptureState::Recording { cycles_left: cycles_left - 1 },
+            CaptureState::Recording { cycles_left } => CaptureState::Recording {
+                cycles_left: cycles_left - 1,
+            },
             other => other,
         };
     }
@@ -139,7 +152,12 @@ impl Monitor {
         if r.is_valid() && drift != self.alarm_on {
             self.alarm_on = drift;
             let kind = if drift { AlarmKind::DriftOn } else { AlarmKind::DriftOff };
-            out(DeviceMsg::Alarm(Alarm { kind, cycle_seq: r.seq, flags: r.flags.0, drift_score: r.drift_score }));
+            out(DeviceMsg::Alarm(Alarm {
+                kind,
+                cycle_seq: r.seq,
+                flags: r.flags.0,
+                drift_score: r.drift_score,
+            }));
         }
         let faults = Flags::REAR_SATURATED
             | Flags::FRONT_SATURATED
@@ -160,7 +178,9 @@ impl Monitor {
 
     /// The next chunk of a finished capture, if any: call until `None`.
     pub fn next_capture_chunk(&mut self) -> Option<DeviceMsg> {
-        let CaptureState::Streaming { sent } = self.capture else { return None };
+        let CaptureState::Streaming { sent } = self.capture else {
+            return None;
+        };
         if sent >= self.capture_len {
             self.capture = CaptureState::Idle;
             return None;
@@ -220,7 +240,13 @@ impl Monitor {
                 if protocol_version == PROTOCOL_VERSION {
                     out(DeviceMsg::Hello(self.info()));
                 } else {
-                    self.reject(CommandKind::Hello, RejectReason::ProtocolMismatch { device: PROTOCOL_VERSION }, out);
+                    self.reject(
+                        CommandKind::Hello,
+                        RejectReason::ProtocolMismatch {
+                            device: PROTOCOL_VERSION,
+                        },
+                        out,
+                    );
                     out(DeviceMsg::Hello(self.info()));
                 }
             }
@@ -250,7 +276,7 @@ impl Monitor {
                     out(DeviceMsg::Ack(CommandKind::StartCapture));
                 }
             }
-            HostMsg::GetStatus => out(DeviceMsg::Status(self.status(now_us, 0, Default::default()))),
+            HostMsg::GetStatus => out(DeviceMsg::Status(self.status(now_us, 0, 0, Default::default()))),
             HostMsg::ResetWear => {
                 self.est.restore_wear(WearState::default());
                 self.alarm_on = false;
@@ -276,7 +302,7 @@ impl Monitor {
     }
 
     /// The device's health. `cpu_load_permille` and the link counters come from the board's tasks.
-    pub fn status(&self, now_us: u64, cpu_load_permille: u16, link: LinkCounters) -> Status {
+    pub fn status(&self, now_us: u64, cpu_load_permille: u16, dsp_busy_us: u64, link: LinkCounters) -> Status {
         let c = self.est.counters();
         Status {
             uptime_us: now_us,
@@ -295,6 +321,7 @@ impl Monitor {
             rx_oversize: link.rx_oversize,
             rejected_commands: self.counters.rejected_commands,
             cpu_load_permille,
+            dsp_busy_us,
             protocol_version: PROTOCOL_VERSION,
             firmware_version: FIRMWARE_VERSION,
             config_hash: self.config_hash,

@@ -4,10 +4,13 @@
 
 use core::sync::atomic::{AtomicU32, Ordering};
 
+use embassy_futures::select::{select, Either};
 use embassy_sync::blocking_mutex::raw::RawMutex;
 use embassy_sync::channel::Channel;
 use hammer_estimator::RawSample;
-use hammer_wire::{encode, DecodeError, Decoder, DeviceMsg, HostMsg, RejectReason, SampleBlock, BLOCK_SAMPLES, MAX_FRAME};
+use hammer_wire::{
+    encode, DecodeError, Decoder, DeviceMsg, HostMsg, RejectReason, SampleBlock, BLOCK_SAMPLES, MAX_FRAME,
+};
 
 use crate::board::{Clock, LinkRx, LinkTx, Overrun, SampleSource};
 use crate::monitor::{LinkCounters, Monitor};
@@ -66,7 +69,12 @@ pub struct Shared<M: RawMutex> {
 
 impl<M: RawMutex> Shared<M> {
     pub const fn new() -> Self {
-        Self { commands: Channel::new(), outgoing: Channel::new(), samples: Channel::new(), link: LinkAtomics::new() }
+        Self {
+            commands: Channel::new(),
+            outgoing: Channel::new(),
+            samples: Channel::new(),
+            link: LinkAtomics::new(),
+        }
     }
 
     /// Queues a message; a full queue drops it and counts the drop.
@@ -83,7 +91,8 @@ impl<M: RawMutex> Default for Shared<M> {
     }
 }
 
-/// Sampling → estimator → outgoing queue; applies commands between blocks,
+/// Sampling → estimator → outgoing queue; applies commands between blocks
+/// (the source's `read` must be cancel-safe: a command may interrupt it),
 /// streams capture chunks when the queue has room, sends a periodic status.
 pub async fn sampling<S: SampleSource, M: RawMutex, C: Clock>(
     source: &mut S,
@@ -94,19 +103,28 @@ pub async fn sampling<S: SampleSource, M: RawMutex, C: Clock>(
     let mut buf = [RawSample::default(); 4 * BLOCK_SAMPLES];
     let mut window_start = clock.now_us();
     let mut busy_us = 0u64;
+    let mut busy_total_us = 0u64;
     let mut load_permille = 0u16;
     let mut next_status = window_start + STATUS_PERIOD_US;
     loop {
-        let res = source.read(&mut buf).await;
+        // Commands are answered even when no samples flow.
+        let first = select(source.read(&mut buf), shared.commands.receive()).await;
         let t0 = clock.now_us();
         let mut emit = |m| shared.send(m);
-        match res {
-            Ok(n) => monitor.on_samples(&buf[..n.min(buf.len())], &mut emit),
-            Err(Overrun { lost }) => monitor.on_overrun(lost),
+        let mut pending = None;
+        match first {
+            Either::First(Ok(n)) => monitor.on_samples(&buf[..n.min(buf.len())], &mut emit),
+            Either::First(Err(Overrun { lost })) => monitor.on_overrun(lost),
+            Either::Second(cmd) => pending = Some(cmd),
         }
-        while let Ok(cmd) = shared.commands.try_receive() {
+        while let Some(cmd) = pending.take().or_else(|| shared.commands.try_receive().ok()) {
             if cmd == HostMsg::GetStatus {
-                emit(DeviceMsg::Status(monitor.status(t0, load_permille, shared.link.snapshot())));
+                emit(DeviceMsg::Status(monitor.status(
+                    t0,
+                    load_permille,
+                    busy_total_us,
+                    shared.link.snapshot(),
+                )));
             } else {
                 monitor.on_command(cmd, t0, &mut emit);
             }
@@ -120,13 +138,19 @@ pub async fn sampling<S: SampleSource, M: RawMutex, C: Clock>(
         }
         let t1 = clock.now_us();
         busy_us += t1.saturating_sub(t0);
+        busy_total_us += t1.saturating_sub(t0);
         if t1 >= next_status {
             let window = t1.saturating_sub(window_start).max(1);
             load_permille = (busy_us * 1000 / window).min(1000) as u16;
             window_start = t1;
             busy_us = 0;
             next_status = t1 + STATUS_PERIOD_US;
-            emit(DeviceMsg::Status(monitor.status(t1, load_permille, shared.link.snapshot())));
+            emit(DeviceMsg::Status(monitor.status(
+                t1,
+                load_permille,
+                busy_total_us,
+                shared.link.snapshot(),
+            )));
         }
     }
 }
@@ -158,7 +182,10 @@ pub async fn link_rx<R: LinkRx, M: RawMutex>(rx: &mut R, shared: &Shared<M>) -> 
                         DecodeError::Oversize => (&link.rx_oversize, RejectReason::Oversize),
                     };
                     counter.fetch_add(1, Ordering::Relaxed);
-                    shared.send(DeviceMsg::Rejected { command: hammer_wire::CommandKind::Unknown, reason });
+                    shared.send(DeviceMsg::Rejected {
+                        command: hammer_wire::CommandKind::Unknown,
+                        reason,
+                    });
                 }
             }
         }
@@ -192,7 +219,11 @@ pub struct LinkSamples<'a, M: RawMutex> {
 
 impl<'a, M: RawMutex> LinkSamples<'a, M> {
     pub fn new(shared: &'a Shared<M>) -> Self {
-        Self { shared, pending: None, expected_seq: None }
+        Self {
+            shared,
+            pending: None,
+            expected_seq: None,
+        }
     }
 }
 
@@ -217,7 +248,11 @@ impl<M: RawMutex> SampleSource for LinkSamples<'_, M> {
         self.expected_seq = Some(block.seq.wrapping_add(1));
         let n = block.samples.len().min(buf.len());
         for (dst, c) in buf.iter_mut().zip(block.samples.iter()) {
-            *dst = RawSample { rear: c[0], front: c[1], accel: c[2] };
+            *dst = RawSample {
+                rear: c[0],
+                front: c[1],
+                accel: c[2],
+            };
         }
         Ok(n)
     }

@@ -60,8 +60,15 @@ fn cal(c: &ChannelCal, s: &ChannelSpec) -> ChannelCalibration {
 
 fn uncal(c: &ChannelCalibration) -> (ChannelCal, ChannelSpec) {
     (
-        ChannelCal { zero_code: c.zero_code, scale: c.scale, full_scale_code: c.full_scale_code },
-        ChannelSpec { gain_rel: c.gain_uncertainty, offset: c.offset_uncertainty },
+        ChannelCal {
+            zero_code: c.zero_code,
+            scale: c.scale,
+            full_scale_code: c.full_scale_code,
+        },
+        ChannelSpec {
+            gain_rel: c.gain_uncertainty,
+            offset: c.offset_uncertainty,
+        },
     )
 }
 

@@ -72,7 +72,14 @@ impl<const N: usize> Decoder<N> {
             buf: [0; N],
             len: 0,
             overflow: false,
-            stats: DecoderStats { frames: 0, cobs_errors: 0, crc_errors: 0, message_errors: 0, oversize: 0, discarded_bytes: 0 },
+            stats: DecoderStats {
+                frames: 0,
+                cobs_errors: 0,
+                crc_errors: 0,
+                message_errors: 0,
+                oversize: 0,
+                discarded_bytes: 0,
+            },
         }
     }
 

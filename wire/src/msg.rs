@@ -20,13 +20,19 @@ pub struct SampleBlock {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub enum HostMsg {
     /// Handshake; the device answers with [`DeviceMsg::Hello`].
-    Hello { protocol_version: u16 },
+    Hello {
+        protocol_version: u16,
+    },
     GetConfig,
     SetConfig(DeviceConfig),
     /// Zero the offsets from the next `samples` sample-sets (hammer at rest, unpressurised).
-    Tare { samples: u32 },
+    Tare {
+        samples: u32,
+    },
     /// Record the raw samples of the next `cycles` impact cycles and stream them.
-    StartCapture { cycles: u8 },
+    StartCapture {
+        cycles: u8,
+    },
     GetStatus,
     /// Start the wear index, baselines and alarm from scratch.
     ResetWear,
@@ -57,7 +63,9 @@ pub enum CommandKind {
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub enum RejectReason {
-    ProtocolMismatch { device: u16 },
+    ProtocolMismatch {
+        device: u16,
+    },
     InvalidConfig,
     Busy,
     BadWearState,
@@ -65,7 +73,10 @@ pub enum RejectReason {
     Oversize,
     TareNotAtRest,
     /// A sample block arrived out of order: `expected` block seq, the gap was counted as lost samples.
-    SampleGap { expected: u32, got: u32 },
+    SampleGap {
+        expected: u32,
+        got: u32,
+    },
 }
 
 /// Device → host.
@@ -143,6 +154,9 @@ pub struct Status {
     pub rejected_commands: u32,
     /// Share of time spent processing samples, per mille.
     pub cpu_load_permille: u16,
+    /// Total time spent processing samples since boot (under QEMU with
+    /// `-icount shift=0`: thousands of instructions).
+    pub dsp_busy_us: u64,
     pub protocol_version: u16,
     pub firmware_version: [u8; 3],
     pub config_hash: u32,

@@ -1,0 +1,294 @@
+//! The app on the host: commands, capture, and the async tasks over an
+//! in-memory link, fed with a simulated hammer.
+
+use embassy_futures::select::{select, select3, Either};
+use embassy_sync::blocking_mutex::raw::NoopRawMutex;
+use embassy_sync::pipe::Pipe;
+use hammer_app::{link_rx, link_tx, sampling, Clock, LinkRx, LinkSamples, LinkTx, Monitor, Shared};
+use hammer_estimator::{Config, Estimator, RawSample};
+use hammer_host::estimate::{estimator_config, to_codes, EstimatorParams};
+use hammer_host::sim::SimConfig;
+use hammer_host::simulate::simulate;
+use hammer_wire::*;
+
+fn codes(bar: f64, seconds: f64) -> Vec<RawSample> {
+    let mut cfg = SimConfig::nominal(bar);
+    cfg.solver.duration_s = seconds;
+    cfg.effects.apply_spec("coulomb_friction").unwrap();
+    let sim = simulate(&cfg).unwrap();
+    let est = estimator_config(&cfg.hammer, &cfg.sensors, &EstimatorParams::default(), 1e5, None).unwrap();
+    // Compared as wire bytes: the unknown supply pressure is a NaN.
+    assert_eq!(
+        DeviceConfig::from(&est).hash(),
+        DeviceConfig::from(&Config::default()).hash(),
+        "simulator sensors = device defaults"
+    );
+    to_codes(&sim.trace(), &est)
+}
+
+fn monitor() -> Box<Monitor> {
+    Box::new(Monitor::new(Config::default(), "host-test").unwrap())
+}
+
+#[test]
+fn reports_are_the_estimators_and_a_capture_reassembles_one_cycle() {
+    let samples = codes(5.0, 0.6);
+    let mut m = monitor();
+    let mut out = vec![];
+    let mut emit = |msg| out.push(msg);
+    m.on_command(HostMsg::StartCapture { cycles: 1 }, 0, &mut emit);
+    m.on_samples(&samples, &mut emit);
+    while let Some(c) = m.next_capture_chunk() {
+        emit(c);
+    }
+    let mut est = Estimator::new(Config::default()).unwrap();
+    let mut expected = vec![];
+    est.push_block(&samples, |r| expected.push(Report::from(&r)));
+    let reports: Vec<Report> = out
+        .iter()
+        .filter_map(|m| if let DeviceMsg::Report(r) = m { Some(*r) } else { None })
+        .collect();
+    assert_eq!(reports, expected);
+    assert!(matches!(out[0], DeviceMsg::Ack(CommandKind::StartCapture)));
+    // The capture: from the first reported impact to the next, contiguous, equal to the input.
+    let chunks: Vec<&CaptureChunk> = out
+        .iter()
+        .filter_map(|m| if let DeviceMsg::Capture(c) = m { Some(c) } else { None })
+        .collect();
+    let total = chunks[0].total as usize;
+    let mut got = vec![];
+    for c in &chunks {
+        assert_eq!(c.offset as usize, got.len());
+        got.extend(c.samples.iter().map(|s| RawSample {
+            rear: s[0],
+            front: s[1],
+            accel: s[2],
+        }));
+    }
+    assert_eq!(got.len(), total);
+    let period = (reports[1].period_s * 1e5).round() as usize;
+    assert!(
+        (total as i64 - period as i64).abs() <= 2,
+        "{total} vs one period {period}"
+    );
+    let start = samples
+        .windows(got.len())
+        .position(|w| w == got.as_slice())
+        .expect("capture is a slice of the input");
+    let t_first_report = (reports[0].t_impact_s * 1e5 + 0.5) as usize;
+    assert!((start as i64 - t_first_report as i64).abs() <= 1);
+}
+
+#[test]
+fn commands_are_applied_or_rejected_with_a_reason() {
+    let mut m = monitor();
+    let mut out = vec![];
+    let mut emit = |msg| out.push(msg);
+    m.on_command(HostMsg::Hello { protocol_version: 99 }, 0, &mut emit);
+    assert_eq!(
+        out[0],
+        DeviceMsg::Rejected {
+            command: CommandKind::Hello,
+            reason: RejectReason::ProtocolMismatch {
+                device: PROTOCOL_VERSION
+            }
+        }
+    );
+    assert!(matches!(&out[1], DeviceMsg::Hello(i) if i.protocol_version == PROTOCOL_VERSION));
+    out.clear();
+    let mut bad = DeviceConfig::from(&Config::default());
+    bad.sample_rate_hz = 0.0;
+    let mut emit = |msg| out.push(msg);
+    m.on_command(HostMsg::SetConfig(bad), 0, &mut emit);
+    m.on_command(
+        HostMsg::RestoreWear(WearBlob {
+            bytes: heapless::Vec::from_slice(&[1, 2, 3]).unwrap(),
+        }),
+        0,
+        &mut emit,
+    );
+    m.on_command(HostMsg::StartCapture { cycles: 0 }, 0, &mut emit);
+    assert_eq!(
+        out,
+        vec![
+            DeviceMsg::Rejected {
+                command: CommandKind::SetConfig,
+                reason: RejectReason::InvalidConfig
+            },
+            DeviceMsg::Rejected {
+                command: CommandKind::RestoreWear,
+                reason: RejectReason::BadWearState
+            },
+            DeviceMsg::Rejected {
+                command: CommandKind::StartCapture,
+                reason: RejectReason::Busy
+            },
+        ]
+    );
+    assert_eq!(m.counters.rejected_commands, 4);
+
+    // Tare: a moving hammer is refused, a resting one zeroes the offsets.
+    out.clear();
+    let mut emit = |msg| out.push(msg);
+    m.on_command(HostMsg::Tare { samples: 2000 }, 0, &mut emit);
+    m.on_samples(&codes(5.0, 0.2)[..2000], &mut emit);
+    assert_eq!(
+        out.last().unwrap(),
+        &DeviceMsg::Rejected {
+            command: CommandKind::Tare,
+            reason: RejectReason::TareNotAtRest
+        }
+    );
+    out.clear();
+    let mut emit = |msg| out.push(msg);
+    m.on_command(HostMsg::Tare { samples: 2000 }, 0, &mut emit);
+    let rest: Vec<RawSample> = (0..2000)
+        .map(|i| RawSample {
+            rear: 20 + (i % 3) as u16,
+            front: 25,
+            accel: 2052,
+        })
+        .collect();
+    m.on_samples(&rest, &mut emit);
+    assert_eq!(out[0], DeviceMsg::Ack(CommandKind::Tare));
+    assert!((m.config().rear.zero_code - 21.0).abs() < 0.01 && (m.config().accel.zero_code - 2052.0).abs() < 0.01);
+
+    // Wear state: out and back in.
+    let blob = m.wear_blob();
+    out.clear();
+    let mut emit = |msg| out.push(msg);
+    m.on_command(HostMsg::RestoreWear(blob), 0, &mut emit);
+    assert_eq!(out, vec![DeviceMsg::Ack(CommandKind::RestoreWear)]);
+}
+
+/// An in-memory byte link: one pipe each way.
+struct PipeRx<'a>(&'a Pipe<NoopRawMutex, 4096>);
+struct PipeTx<'a>(&'a Pipe<NoopRawMutex, 4096>);
+impl LinkRx for PipeRx<'_> {
+    async fn read(&mut self, buf: &mut [u8]) -> usize {
+        self.0.read(buf).await
+    }
+}
+impl LinkTx for PipeTx<'_> {
+    async fn write_all(&mut self, bytes: &[u8]) {
+        self.0.write_all(bytes).await
+    }
+}
+struct FakeClock(std::cell::Cell<u64>);
+impl Clock for FakeClock {
+    fn now_us(&self) -> u64 {
+        let t = self.0.get() + 10;
+        self.0.set(t);
+        t
+    }
+}
+
+#[test]
+fn tasks_over_a_link_report_reject_garbage_and_count_gaps() {
+    let samples = codes(6.0, 0.4);
+    let mut est = Estimator::new(Config::default()).unwrap();
+    let mut expected = vec![];
+    // Block 5 of the stream is lost on the way: the host-side reference sees a gap there.
+    let blocks: Vec<&[RawSample]> = samples.chunks(BLOCK_SAMPLES).collect();
+    for (i, b) in blocks.iter().enumerate() {
+        if i == 5 {
+            est.push_gap(b.len() as u32);
+        } else {
+            est.push_block(b, |r| expected.push(Report::from(&r)));
+        }
+    }
+
+    let host_to_dev: Pipe<NoopRawMutex, 4096> = Pipe::new();
+    let dev_to_host: Pipe<NoopRawMutex, 4096> = Pipe::new();
+    let shared: Shared<NoopRawMutex> = Shared::new();
+    let mut monitor = monitor();
+    let clock = FakeClock(std::cell::Cell::new(0));
+    let (mut rx, mut tx) = (PipeRx(&host_to_dev), PipeTx(&dev_to_host));
+    let device = select3(
+        async {
+            let mut src = LinkSamples::new(&shared);
+            sampling(&mut src, &mut monitor, &shared, &clock).await
+        },
+        link_rx(&mut rx, &shared),
+        link_tx(&mut tx, &shared),
+    );
+    let host = async {
+        let mut frame = [0u8; MAX_FRAME];
+        let mut send = async |m: &HostMsg| {
+            let n = encode(m, &mut frame).unwrap();
+            host_to_dev.write_all(&frame[..n]).await;
+        };
+        send(&HostMsg::Hello {
+            protocol_version: PROTOCOL_VERSION,
+        })
+        .await;
+        host_to_dev.write_all(&[0x55, 0x12, 0x00]).await; // garbage
+        for (i, b) in blocks.iter().enumerate() {
+            if i == 5 {
+                continue;
+            }
+            let block = SampleBlock {
+                seq: i as u32,
+                samples: b.iter().map(|s| [s.rear, s.front, s.accel]).collect(),
+            };
+            send(&HostMsg::Samples(block)).await;
+        }
+        // Samples and commands travel in separate queues: ask for the status
+        // until it has seen every sample sent.
+        let want = (samples.len() - BLOCK_SAMPLES) as u64;
+        let mut dec = Decoder::<MAX_FRAME>::new();
+        let mut got = vec![];
+        let mut buf = [0u8; 256];
+        for _ in 0..100 {
+            send(&HostMsg::GetStatus).await;
+            loop {
+                let n = dev_to_host.read(&mut buf).await;
+                let mut status = None;
+                for &b in &buf[..n] {
+                    if let Some(Ok(m)) = dec.push::<DeviceMsg>(b) {
+                        if let DeviceMsg::Status(s) = &m {
+                            status = Some(s.samples);
+                        }
+                        got.push(m);
+                    }
+                }
+                match status {
+                    Some(seen) if seen == want => return got,
+                    Some(_) => break,
+                    None => {}
+                }
+            }
+        }
+        got
+    };
+    let got = match embassy_futures::block_on(select(device, host)) {
+        Either::First(_) => unreachable!("device tasks never return"),
+        Either::Second(got) => got,
+    };
+    // The garbage is answered by the receive task at once, the Hello by the
+    // sampling task: their order may vary.
+    assert!(got
+        .iter()
+        .any(|m| matches!(m, DeviceMsg::Hello(i) if i.board.as_slice() == b"host-test")));
+    let rejected = DeviceMsg::Rejected {
+        command: CommandKind::Unknown,
+        reason: RejectReason::CorruptFrame,
+    };
+    assert_eq!(got.iter().filter(|m| **m == rejected).count(), 1);
+    let reports: Vec<Report> = got
+        .iter()
+        .filter_map(|m| if let DeviceMsg::Report(r) = m { Some(*r) } else { None })
+        .collect();
+    assert_eq!(
+        reports, expected,
+        "device reports equal the host estimator's on the same samples"
+    );
+    let DeviceMsg::Status(s) = got.last().unwrap() else {
+        unreachable!()
+    };
+    assert_eq!(s.rx_cobs_errors + s.rx_crc_errors + s.rx_decode_errors, 1);
+    assert_eq!(s.dropped_samples, BLOCK_SAMPLES as u64);
+    assert_eq!(s.adc_overruns, 1);
+    assert_eq!(s.frames_dropped, 0);
+    assert_eq!(s.samples as usize, samples.len() - BLOCK_SAMPLES);
+}
