@@ -171,7 +171,7 @@ fn estimate_cmd(args: &EstimateArgs) -> Result<()> {
     };
     let trace = crate::trace::read_csv(&args.trace)?;
     let sidecar = crate::trace::read_sidecar(&args.trace)?;
-    let supply = args.supply_bar.or(sidecar.as_ref().map(|s| s.supply_pressure_bar));
+    let supply = args.supply_bar.or(sidecar.as_ref().and_then(|s| s.supply_pressure_bar));
     let sensors = sensors_for(sidecar.as_ref(), &file.sensors);
     let hammer = sidecar
         .as_ref()

@@ -1,9 +1,12 @@
 //! Host side of hammer-monitor: the hammer simulator, trace files and the
 //! `hammer` command line.
 
+pub mod capture;
 pub mod cli;
 pub mod config;
+pub mod emulator;
 pub mod estimate;
+pub mod link;
 pub mod plot;
 pub mod sim;
 pub mod simulate;

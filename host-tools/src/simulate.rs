@@ -57,7 +57,7 @@ impl Simulation {
     }
 
     pub fn sidecar(&self) -> Sidecar {
-        let mut s = Sidecar::new(self.config.supply.pressure_bar, "simulator");
+        let mut s = Sidecar::new(Some(self.config.supply.pressure_bar), "simulator");
         s.simulation = Some(SimulationInfo {
             active_effects: self.config.effects.active().iter().map(|s| s.to_string()).collect(),
             config: self.config.clone(),

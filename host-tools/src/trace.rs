@@ -228,8 +228,8 @@ pub struct SimulationInfo {
 pub struct Sidecar {
     pub format: String,
     pub version: u32,
-    /// Gauge supply pressure: the operating point.
-    pub supply_pressure_bar: f64,
+    /// Gauge supply pressure: the operating point (null when unknown, e.g. a device capture).
+    pub supply_pressure_bar: Option<f64>,
     /// Where the trace came from: "simulator", "device", "import", ...
     pub source: String,
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -237,7 +237,7 @@ pub struct Sidecar {
 }
 
 impl Sidecar {
-    pub fn new(supply_pressure_bar: f64, source: &str) -> Self {
+    pub fn new(supply_pressure_bar: Option<f64>, source: &str) -> Self {
         Self {
             format: SIDECAR_FORMAT.into(),
             version: SIDECAR_VERSION,

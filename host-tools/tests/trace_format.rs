@@ -31,7 +31,7 @@ fn simulated_trace_round_trips_exactly_with_its_sidecar() {
     assert_eq!(back.extra["v_mps"], trace.extra["v_mps"]);
     assert!((back.dt_s - 10e-6).abs() < 1e-12);
     let side = read_sidecar(&path).unwrap().expect("sidecar");
-    assert_eq!(side.supply_pressure_bar, 5.0);
+    assert_eq!(side.supply_pressure_bar, Some(5.0));
     let info = side.simulation.expect("simulation info");
     assert_eq!(info.active_effects, vec!["coulomb_friction"]);
     assert_eq!(info.config, cfg);
@@ -94,7 +94,7 @@ fn malformed_files_get_errors_that_say_where_and_what() {
 #[test]
 fn sidecars_of_another_format_or_a_newer_version_are_refused() {
     let path = tmp("side.csv");
-    let mut s = Sidecar::new(4.0, "device");
+    let mut s = Sidecar::new(Some(4.0), "device");
     s.version = 99;
     write_sidecar(&path, &s).unwrap();
     let e = read_sidecar(&path).unwrap_err().to_string();

@@ -1,6 +1,8 @@
 //! Project automation. `cargo xtask ci` is the one command that runs every
 //! test: host tests, the no_std estimator built for the target, the firmware.
 
+mod elf;
+
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitCode, Stdio};
@@ -73,17 +75,41 @@ fn firmware(args: &[&str]) -> Result<(), String> {
     run(&root().join("firmware"), "cargo", args)
 }
 
+/// The firmware binaries: (name, ELF path).
+fn firmware_elves() -> [(&'static str, PathBuf); 2] {
+    let dir = root().join("firmware/target").join(TARGET).join("release");
+    [
+        ("reference board (Nucleo-G474RE)", dir.join("hammer-firmware")),
+        ("emulated board (QEMU mps2-an386)", dir.join("hammer-firmware-emu")),
+    ]
+}
+
+fn size() -> Result<(), String> {
+    for (name, path) in firmware_elves() {
+        let s = elf::sizes(&path)?;
+        println!(
+            "{name}: flash {} bytes ({:.1} KiB), static RAM {} bytes ({:.1} KiB)",
+            s.flash,
+            s.flash as f64 / 1024.0,
+            s.ram,
+            s.ram as f64 / 1024.0
+        );
+    }
+    Ok(())
+}
+
 fn ci() -> Result<(), String> {
     let root = root();
     run(&root, "cargo", &["fmt", "--all", "--", "--check"])?;
-    run(&root.join("firmware"), "cargo", &["fmt", "--", "--check"])?;
+    run(&root.join("firmware"), "cargo", &["fmt", "--all", "--", "--check"])?;
     // The estimator must stay no_std and build for the Cortex-M4F.
     run(
         &root,
         "cargo",
         &["build", "--release", "-p", "hammer-estimator", "--target", TARGET],
     )?;
-    firmware(&["build", "--release"])?;
+    firmware(&["build", "--release", "--workspace"])?;
+    size()?;
     let mut totals = (0, 0);
     let mut result = cargo_test(&root, &["test", "--workspace", "--release"], &mut totals);
     // Once more with overflow checks on (the test profile): arithmetic that
@@ -96,12 +122,22 @@ fn ci() -> Result<(), String> {
     result
 }
 
+const USAGE: &str = "usage: cargo xtask <command>
+  ci              every test: formatting, firmware build, host and emulator tests
+  firmware        build both firmware binaries and print their flash and RAM
+  size            flash and static RAM of the built firmware binaries
+  bench-firmware  estimator cost on the Cortex-M4 ISA under QEMU (-icount), with sizes";
+
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let result = match args.first().map(String::as_str) {
         Some("ci") => ci(),
-        Some("firmware") => firmware(&["build", "--release"]),
-        _ => Err("usage: cargo xtask <ci|firmware>\n  ci        every test: fmt, host tests, no_std target build, firmware build\n  firmware  build the firmware for the reference board".into()),
+        Some("firmware") => firmware(&["build", "--release", "--workspace"]).and_then(|_| size()),
+        Some("size") => size(),
+        Some("bench-firmware") => firmware(&["build", "--release", "--workspace"])
+            .and_then(|_| size())
+            .and_then(|_| run(&root(), "cargo", &["bench", "-p", "hammer-host", "--bench", "firmware"])),
+        _ => Err(USAGE.into()),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,0 +1,64 @@
+//! Raw captures from a device, turned into the project's trace format.
+
+use hammer_estimator::Config;
+use hammer_wire::CaptureChunk;
+
+use crate::trace::{Sidecar, Trace};
+
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum CaptureError {
+    #[error("capture {id}: chunk at offset {offset} where {expected} was expected (a chunk was lost)")]
+    Gap { id: u16, offset: u32, expected: u32 },
+    #[error("capture {id}: {got} of {total} sample-sets arrived")]
+    Incomplete { id: u16, got: u32, total: u32 },
+    #[error("capture chunks of different captures ({a} and {b})")]
+    Mixed { a: u16, b: u16 },
+    #[error("empty capture")]
+    Empty,
+}
+
+/// Reassembles the chunks of one capture (in order, no gaps) into ADC codes.
+pub fn assemble(chunks: &[CaptureChunk]) -> Result<Vec<[u16; 3]>, CaptureError> {
+    let first = chunks.first().ok_or(CaptureError::Empty)?;
+    let mut codes = Vec::with_capacity(first.total as usize);
+    for c in chunks {
+        if c.capture_id != first.capture_id {
+            return Err(CaptureError::Mixed {
+                a: first.capture_id,
+                b: c.capture_id,
+            });
+        }
+        if c.offset as usize != codes.len() {
+            return Err(CaptureError::Gap {
+                id: c.capture_id,
+                offset: c.offset,
+                expected: codes.len() as u32,
+            });
+        }
+        codes.extend_from_slice(&c.samples);
+    }
+    if codes.len() != first.total as usize {
+        return Err(CaptureError::Incomplete {
+            id: first.capture_id,
+            got: codes.len() as u32,
+            total: first.total,
+        });
+    }
+    Ok(codes)
+}
+
+/// ADC codes and the device's calibration → a trace (physical units, gauge
+/// pressures) and its sidecar.
+pub fn to_trace(codes: &[[u16; 3]], cfg: &Config, supply_bar: Option<f64>) -> (Trace, Sidecar) {
+    let dt = 1.0 / cfg.sample_rate_hz as f64;
+    let val = |cal: &hammer_estimator::ChannelCal, c: u16| cal.value(c) as f64;
+    let trace = Trace {
+        dt_s: dt,
+        t_s: (0..codes.len()).map(|i| i as f64 * dt).collect(),
+        p_rear_pa: codes.iter().map(|c| val(&cfg.rear, c[0])).collect(),
+        p_front_pa: codes.iter().map(|c| val(&cfg.front, c[1])).collect(),
+        accel_mps2: codes.iter().map(|c| val(&cfg.accel, c[2])).collect(),
+        extra: Default::default(),
+    };
+    (trace, Sidecar::new(supply_bar, "device"))
+}

@@ -1,0 +1,307 @@
+//! The firmware under emulation: QEMU boots the emulated board (the same app
+//! as the reference board, samples arriving over its UART), the test streams
+//! the ADC codes of simulated traces into it, and the reports that come back
+//! must equal the host estimator's on the same samples, bit for bit.
+//!
+//! Needs `qemu-system-arm` and the emulated firmware built
+//! (`cargo xtask ci` does both; `.ci/run` installs QEMU).
+
+use std::time::Duration;
+
+use hammer_estimator::{Config, Estimator, RawSample};
+use hammer_host::emulator::{firmware_elf, Emulator};
+use hammer_host::estimate::{estimator_config, to_codes, EstimatorParams};
+use hammer_host::link::Link;
+use hammer_host::sim::SimConfig;
+use hammer_host::simulate::simulate;
+use hammer_wire::*;
+
+const T: Duration = Duration::from_secs(20);
+
+fn boot() -> (Emulator, Link<std::net::TcpStream>) {
+    let mut emu = Emulator::start(&firmware_elf(), false).expect("QEMU and the emulated firmware");
+    let stream = emu.connect(T).expect("connect to the board's UART");
+    let mut link = Link::new(stream);
+    hello(&mut link);
+    (emu, link)
+}
+
+fn hello(link: &mut Link<std::net::TcpStream>) -> DeviceInfo {
+    link.send(&HostMsg::Hello {
+        protocol_version: PROTOCOL_VERSION,
+    })
+    .unwrap();
+    let (info, _) = link
+        .recv_until(T, |m| {
+            if let DeviceMsg::Hello(i) = m {
+                Some(i.clone())
+            } else {
+                None
+            }
+        })
+        .unwrap();
+    let info = info.expect("Hello from the device");
+    assert_eq!(info.protocol_version, PROTOCOL_VERSION);
+    info
+}
+
+fn status(link: &mut Link<std::net::TcpStream>) -> Status {
+    link.send(&HostMsg::GetStatus).unwrap();
+    let (s, _) = link
+        .recv_until(T, |m| if let DeviceMsg::Status(s) = m { Some(*s) } else { None })
+        .unwrap();
+    s.expect("status")
+}
+
+/// Polls the status until the device has processed `n` samples.
+fn wait_samples(link: &mut Link<std::net::TcpStream>, n: u64) -> Status {
+    let deadline = std::time::Instant::now() + T;
+    loop {
+        let s = status(link);
+        if s.samples >= n || std::time::Instant::now() > deadline {
+            return s;
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+fn codes(bar: f64, seconds: f64, seed: u64) -> Vec<RawSample> {
+    let mut cfg = SimConfig::nominal(bar);
+    cfg.solver.duration_s = seconds;
+    cfg.seed = seed;
+    cfg.effects.apply_spec("coulomb_friction").unwrap();
+    let sim = simulate(&cfg).unwrap();
+    let est = estimator_config(&cfg.hammer, &cfg.sensors, &EstimatorParams::default(), 1e5, None).unwrap();
+    to_codes(&sim.trace(), &est)
+}
+
+/// Streams samples as numbered blocks; returns everything the device said.
+fn stream(link: &mut Link<std::net::TcpStream>, samples: &[RawSample], next_block: &mut u32) -> Vec<DeviceMsg> {
+    let mut got = vec![];
+    for (i, chunk) in samples.chunks(BLOCK_SAMPLES).enumerate() {
+        let block = SampleBlock {
+            seq: *next_block,
+            samples: chunk.iter().map(|s| [s.rear, s.front, s.accel]).collect(),
+        };
+        *next_block += 1;
+        link.send(&HostMsg::Samples(block)).unwrap();
+        if i % 64 == 0 {
+            while let Some(m) = link.recv(Duration::ZERO).unwrap() {
+                got.push(m);
+            }
+        }
+    }
+    got
+}
+
+fn reports(msgs: &[DeviceMsg]) -> Vec<Report> {
+    msgs.iter()
+        .filter_map(|m| if let DeviceMsg::Report(r) = m { Some(*r) } else { None })
+        .collect()
+}
+
+fn wire_bytes(r: &Report) -> Vec<u8> {
+    postcard::to_allocvec(r).unwrap()
+}
+
+#[test]
+fn reports_from_the_emulated_board_equal_the_host_estimator_bit_for_bit() {
+    let (_emu, mut link) = boot();
+    link.send(&HostMsg::GetConfig).unwrap();
+    let (cfg, _) = link
+        .recv_until(T, |m| if let DeviceMsg::Config(c) = m { Some(*c) } else { None })
+        .unwrap();
+    let device_cfg = cfg.expect("config").to_config(&Config::default());
+
+    let mut next_block = 0;
+    let mut total_samples = 0u64;
+    for (i, bar) in [4.0, 6.0, 7.0].into_iter().enumerate() {
+        // A fresh estimator and wear state on both sides for each operating point.
+        link.send(&HostMsg::ResetWear).unwrap();
+        link.send(&HostMsg::SetConfig(DeviceConfig::from(&device_cfg))).unwrap();
+        let (ack, _) = link
+            .recv_until(T, |m| (*m == DeviceMsg::Ack(CommandKind::SetConfig)).then_some(()))
+            .unwrap();
+        assert!(ack.is_some(), "SetConfig acknowledged");
+
+        let samples = codes(bar, 0.8, 20 + i as u64);
+        let mut host = Estimator::new(device_cfg).unwrap();
+        let mut expected = vec![];
+        host.push_block(&samples, |r| expected.push(Report::from(&r)));
+
+        let mut got = stream(&mut link, &samples, &mut next_block);
+        total_samples += samples.len() as u64;
+        // Wait for the last expected report.
+        let last_seq = expected.last().unwrap().seq;
+        let (done, more) = link
+            .recv_until(T, |m| {
+                matches!(m, DeviceMsg::Report(r) if r.seq == last_seq).then_some(())
+            })
+            .unwrap();
+        got.extend(more);
+        assert!(done.is_some(), "{bar} bar: last report arrived");
+        let device = reports(&got);
+        assert_eq!(device.len(), expected.len(), "{bar} bar: no report lost");
+        for (k, (d, h)) in device.iter().zip(&expected).enumerate() {
+            assert_eq!(d.seq, k as u32, "sequence numbers continuous");
+            assert_eq!(
+                wire_bytes(d),
+                wire_bytes(h),
+                "{bar} bar, cycle {k}: device {d:?} vs host {h:?}"
+            );
+        }
+        assert!(device.iter().skip(1).all(|r| r.is_valid()), "{bar} bar: valid reports");
+        println!("{bar} bar: {} reports identical to the host's", device.len());
+    }
+    let s = wait_samples(&mut link, total_samples);
+    assert_eq!(s.samples, total_samples);
+    assert_eq!(s.dropped_samples, 0);
+    assert_eq!(s.frames_dropped, 0);
+    assert_eq!(
+        s.rx_crc_errors + s.rx_cobs_errors + s.rx_decode_errors + s.rx_oversize,
+        0
+    );
+}
+
+#[test]
+fn the_firmware_survives_garbage_oversize_frames_bad_commands_and_reconnects() {
+    let (mut emu, mut link) = boot();
+    let before = status(&mut link);
+
+    // Garbage: random bytes ending in a delimiter.
+    let mut x = 0x1234_5678u32;
+    let garbage: Vec<u8> = (0..300)
+        .map(|_| {
+            x ^= x << 13;
+            x ^= x >> 17;
+            x ^= x << 5;
+            (x % 251 + 1) as u8
+        })
+        .chain([0])
+        .collect();
+    link.send_raw(&garbage).unwrap();
+    // A frame with one corrupted byte.
+    let mut frame = [0u8; MAX_FRAME];
+    let n = encode(&HostMsg::GetConfig, &mut frame).unwrap();
+    frame[2] ^= 0x10;
+    link.send_raw(&frame[..n]).unwrap();
+    // An oversized frame.
+    link.send_raw(&[0x42; 1000]).unwrap();
+    link.send_raw(&[0]).unwrap();
+    // A well-formed but invalid command.
+    let mut bad = DeviceConfig::from(&Config::default());
+    bad.sample_rate_hz = -5.0;
+    link.send(&HostMsg::SetConfig(bad)).unwrap();
+    let (rej, seen) = link
+        .recv_until(T, |m| {
+            matches!(
+                m,
+                DeviceMsg::Rejected {
+                    command: CommandKind::SetConfig,
+                    reason: RejectReason::InvalidConfig
+                }
+            )
+            .then_some(())
+        })
+        .unwrap();
+    assert!(rej.is_some(), "invalid config rejected");
+    let after = status(&mut link);
+    let corrupt = after.rx_crc_errors + after.rx_cobs_errors + after.rx_decode_errors
+        - (before.rx_crc_errors + before.rx_cobs_errors + before.rx_decode_errors);
+    assert_eq!(corrupt, 2, "garbage and the corrupted frame counted: {after:?}");
+    assert_eq!(after.rx_oversize - before.rx_oversize, 1);
+    assert!(after.rejected_commands > before.rejected_commands);
+    let rejections = seen
+        .iter()
+        .filter(|m| {
+            matches!(
+                m,
+                DeviceMsg::Rejected {
+                    command: CommandKind::Unknown,
+                    ..
+                }
+            )
+        })
+        .count();
+    assert!(rejections >= 2, "the device says what it rejected: {seen:?}");
+
+    // The host disconnects mid-stream and comes back: the firmware kept running.
+    let samples = codes(5.0, 0.3, 7);
+    let mut next = 0;
+    let half = samples.len() / 2;
+    stream(&mut link, &samples[..half], &mut next);
+    drop(link);
+    std::thread::sleep(Duration::from_millis(300));
+    assert!(emu.is_running());
+    let stream2 = emu.connect(T).unwrap();
+    let mut link = Link::new(stream2);
+    hello(&mut link);
+    let s1 = wait_samples(&mut link, half as u64);
+    assert!(s1.uptime_us > after.uptime_us, "no reboot");
+    assert_eq!(s1.samples, half as u64);
+    stream(&mut link, &samples[half..], &mut next);
+    let s2 = wait_samples(&mut link, samples.len() as u64);
+    assert_eq!(s2.samples, samples.len() as u64);
+    assert_eq!(s2.dropped_samples, 0);
+}
+
+#[test]
+fn a_raw_capture_of_one_cycle_round_trips_into_the_trace_format() {
+    let (_emu, mut link) = boot();
+    let samples = codes(5.0, 0.5, 9);
+    link.send(&HostMsg::StartCapture { cycles: 1 }).unwrap();
+    let (ack, _) = link
+        .recv_until(T, |m| (*m == DeviceMsg::Ack(CommandKind::StartCapture)).then_some(()))
+        .unwrap();
+    assert!(ack.is_some());
+    let mut next = 0;
+    let mut got = stream(&mut link, &samples, &mut next);
+    let (_, more) = link
+        .recv_until(T, |m| {
+            matches!(m, DeviceMsg::Capture(c) if c.offset as usize + c.samples.len() == c.total as usize).then_some(())
+        })
+        .unwrap();
+    got.extend(more);
+    let chunks: Vec<CaptureChunk> = got
+        .iter()
+        .filter_map(|m| {
+            if let DeviceMsg::Capture(c) = m {
+                Some(c.clone())
+            } else {
+                None
+            }
+        })
+        .collect();
+    let codes_back = hammer_host::capture::assemble(&chunks).expect("complete capture");
+    assert!(
+        codes_back.len() > 4000,
+        "one full cycle at 100 kS/s: {} sample-sets",
+        codes_back.len()
+    );
+    // It is a contiguous slice of what was streamed…
+    let sent: Vec<[u16; 3]> = samples.iter().map(|s| [s.rear, s.front, s.accel]).collect();
+    let start = sent
+        .windows(codes_back.len())
+        .position(|w| w == codes_back.as_slice())
+        .expect("slice of the input");
+    // …written as a trace and read back, it gives the same codes.
+    let cfg = Config::default();
+    let (trace, side) = hammer_host::capture::to_trace(&codes_back, &cfg, Some(5.0));
+    let dir = std::env::temp_dir().join(format!("hammer-capture-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("capture.csv");
+    hammer_host::trace::write_csv(&path, &trace).unwrap();
+    hammer_host::trace::write_sidecar(&path, &side).unwrap();
+    let back = hammer_host::trace::read_csv(&path).unwrap();
+    let recoded = to_codes(&back, &cfg);
+    assert_eq!(recoded.len(), codes_back.len());
+    assert!(recoded
+        .iter()
+        .zip(&codes_back)
+        .all(|(a, b)| [a.rear, a.front, a.accel] == *b));
+    assert_eq!(
+        hammer_host::trace::read_sidecar(&path).unwrap().unwrap().source,
+        "device"
+    );
+    println!("capture: {} sample-sets from sample {start}", codes_back.len());
+}
