@@ -105,13 +105,10 @@ pub struct CycleAcc {
     pub cur: Sums,
     since_cp: u32,
     prev_force: f32,
-    prev_f1: f32,
-    prev_f2: f32,
-    /// ∫A1·p1/m dt, its ∫, and the same for A2·p2: gain sensitivities.
-    pub v1: f32,
-    pub w1: f32,
-    pub v2: f32,
-    pub w2: f32,
+    /// Σ j·p1 and Σ j·p2 (j = sample index): with Σp1, Σp2 they give the
+    /// pressure integrals the gain sensitivities need, at two flops a channel.
+    pub jp1: f32,
+    pub jp2: f32,
     e: f32,
     pub last_force: f32,
     pub first_force: f32,
@@ -130,12 +127,8 @@ impl CycleAcc {
             cur: Sums::default(),
             since_cp: 0,
             prev_force: 0.0,
-            prev_f1: 0.0,
-            prev_f2: 0.0,
-            v1: 0.0,
-            w1: 0.0,
-            v2: 0.0,
-            w2: 0.0,
+            jp1: 0.0,
+            jp2: 0.0,
             e: 0.0,
             last_force: 0.0,
             first_force: 0.0,
@@ -174,16 +167,12 @@ impl CycleAcc {
             let v_new = s.v + (force + self.prev_force) * d.half_dt_over_m;
             s.w += (s.v + v_new) * d.half_dt;
             s.v = v_new;
-            let v1 = self.v1 + (f1 + self.prev_f1) * d.half_dt_over_m;
-            self.w1 += (self.v1 + v1) * d.half_dt;
-            self.v1 = v1;
-            let v2 = self.v2 + (f2 + self.prev_f2) * d.half_dt_over_m;
-            self.w2 += (self.v2 + v2) * d.half_dt;
-            self.v2 = v2;
         }
         if s.n == 0.0 {
             self.first_force = force;
         }
+        self.jp1 += s.n * p1;
+        self.jp2 += s.n * p2;
         s.n += 1.0;
         s.e += e;
         s.ee += e * e;
@@ -193,8 +182,6 @@ impl CycleAcc {
         s.p1 += p1;
         s.p2 += p2;
         self.prev_force = force;
-        self.prev_f1 = f1;
-        self.prev_f2 = f2;
         self.last_force = force;
         if p1 > self.peak_p1 {
             self.peak_p1 = p1;
@@ -202,34 +189,39 @@ impl CycleAcc {
         if p2 > self.peak_p2 {
             self.peak_p2 = p2;
         }
-        for ch in 0..3 {
-            let c = codes[ch];
-            if c == 0 || c >= full[ch] {
-                self.rail[ch] = self.rail[ch].saturating_add(1);
-                if ch == 2 || c >= full[ch] {
-                    // Pressure at the bottom rail is a vented chamber near 0 gauge;
-                    // any other rail sample is a clipped reading.
-                    self.flags
-                        .insert([Flags::REAR_SATURATED, Flags::FRONT_SATURATED, Flags::ACCEL_SATURATED][ch]);
-                }
-            }
-            if c == self.last_code[ch] {
-                self.run[ch] = self.run[ch].saturating_add(1);
-                if stuck_limit > 0 && self.run[ch] >= stuck_limit {
-                    self.flags
-                        .insert([Flags::REAR_STUCK, Flags::FRONT_STUCK, Flags::ACCEL_STUCK][ch]);
-                }
-            } else {
-                self.run[ch] = 0;
-                self.last_code[ch] = c;
-            }
-        }
+        self.watch(0, codes[0], full[0], stuck_limit, false);
+        self.watch(1, codes[1], full[1], stuck_limit, false);
+        self.watch(2, codes[2], full[2], stuck_limit, true);
         self.since_cp += 1;
         if self.since_cp == d.k {
             self.since_cp = 0;
             if self.cp.push(self.cur).is_err() {
                 self.flags.insert(Flags::OVERFLOW);
             }
+        }
+    }
+
+    /// Rail and stuck-code bookkeeping of one channel. A pressure at its bottom
+    /// rail is a vented chamber near 0 gauge, not a clipped reading.
+    #[inline(always)]
+    fn watch(&mut self, ch: usize, c: u16, full: u16, stuck_limit: u32, bottom_clips: bool) {
+        const SAT: [Flags; 3] = [Flags::REAR_SATURATED, Flags::FRONT_SATURATED, Flags::ACCEL_SATURATED];
+        const STUCK: [Flags; 3] = [Flags::REAR_STUCK, Flags::FRONT_STUCK, Flags::ACCEL_STUCK];
+        // One compare for both rails: code 0 wraps to the top.
+        if c.wrapping_sub(1) >= full.wrapping_sub(1) {
+            self.rail[ch] = self.rail[ch].saturating_add(1);
+            if bottom_clips || c != 0 {
+                self.flags.insert(SAT[ch]);
+            }
+        }
+        if c == self.last_code[ch] {
+            self.run[ch] = self.run[ch].saturating_add(1);
+            if self.run[ch] == stuck_limit {
+                self.flags.insert(STUCK[ch]);
+            }
+        } else {
+            self.run[ch] = 0;
+            self.last_code[ch] = c;
         }
     }
 
@@ -442,9 +434,19 @@ pub fn estimate(
     let as_ = (mean(sp.stroke.r, ns) + force_s) / m;
     // (source standard uncertainty, ∂F_b, ∂F_s, ∂V_T, ∂W_T)
     let t_end = tm.t_end;
+    // ∫A·p/m dt ≈ (A/m)·dt·Σp and ∫∫ ≈ (A/m)·dt²·(J·Σp − Σ j·p), J the last index.
+    let last = n - 1.0;
+    let (v1, w1) = (
+        d.a1 / m * d.dt * acc.cur.p1,
+        d.a1 / m * d.dt * d.dt * (last * acc.cur.p1 - acc.jp1),
+    );
+    let (v2, w2) = (
+        d.a2 / m * d.dt * acc.cur.p2,
+        d.a2 / m * d.dt * d.dt * (last * acc.cur.p2 - acc.jp2),
+    );
     let sources: [(f32, f32, f32, f32, f32); 6] = [
-        (c.rear_spec.gain_rel, -d.a1 * p1b, d.a1 * p1s, acc.v1, acc.w1),
-        (c.front_spec.gain_rel, d.a2 * p2b, -d.a2 * p2s, -acc.v2, -acc.w2),
+        (c.rear_spec.gain_rel, -d.a1 * p1b, d.a1 * p1s, v1, w1),
+        (c.front_spec.gain_rel, d.a2 * p2b, -d.a2 * p2s, -v2, -w2),
         (c.accel_spec.gain_rel, m * ab, -m * as_, 0.0, 0.0),
         (
             c.rear_spec.offset,

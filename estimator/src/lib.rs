@@ -17,8 +17,6 @@ pub mod report;
 pub mod tare;
 pub mod wear;
 
-use heapless::Deque;
-
 pub use config::{ChannelCal, ChannelSpec, Config, ConfigError, WearConfig};
 pub use geometry::Geometry;
 pub use report::{CycleReport, Flags};
@@ -36,6 +34,39 @@ pub struct RawSample {
 
 /// Longest pre-impact blanking in samples (the delay line's size).
 pub const MAX_PRE_BLANK: usize = 64;
+
+/// The highest accelerometer code that reads below −threshold, when the
+/// calibration has a positive scale (the usual case); then detecting an
+/// impact is one integer compare per sample.
+fn impact_code(cfg: &Config) -> Option<u16> {
+    let a = &cfg.accel;
+    if a.scale <= 0.0 {
+        return None;
+    }
+    let mut code: Option<u16> = None;
+    // value(c) < −thr ⇔ c < zero − thr/scale; scan down from the estimate to be exact in f32.
+    let est = a.zero_code - cfg.impact_threshold_mps2 / a.scale;
+    let start = if est < 0.0 {
+        0
+    } else if est > a.full_scale_code as f32 {
+        a.full_scale_code
+    } else {
+        est as u16
+    };
+    let mut c = start.saturating_add(2).min(a.full_scale_code);
+    loop {
+        if a.value(c) < -cfg.impact_threshold_mps2 {
+            code = Some(c);
+            break;
+        }
+        if c == 0 {
+            break;
+        }
+        c -= 1;
+    }
+    // Code 0 (the bottom rail) is always an impact.
+    Some(code.unwrap_or(0))
+}
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Phase {
@@ -64,7 +95,12 @@ pub struct Estimator {
     cfg: Config,
     d: Derived,
     phase: Phase,
-    delay: Deque<RawSample, MAX_PRE_BLANK>,
+    /// The newest `pre_samples` sample-sets, not yet processed (a ring).
+    delay: [RawSample; MAX_PRE_BLANK],
+    delay_head: usize,
+    delay_len: usize,
+    /// Accelerometer codes at or below this are an impact (positive scale).
+    impact_code: Option<u16>,
     acc: CycleAcc,
     pre_samples: usize,
     blank_samples: u32,
@@ -91,7 +127,10 @@ impl Estimator {
         Ok(Self {
             d: Derived::new(&cfg),
             phase: Phase::Searching,
-            delay: Deque::new(),
+            delay: [RawSample::default(); MAX_PRE_BLANK],
+            delay_head: 0,
+            delay_len: 0,
+            impact_code: impact_code(&cfg),
             acc: CycleAcc::new(),
             pre_samples: pre,
             blank_samples: math::round(cfg.blank_after_s * fs) as u32,
@@ -132,8 +171,12 @@ impl Estimator {
         self.wear.rebaseline();
     }
 
+    #[inline]
     fn is_impact(&self, s: &RawSample) -> bool {
-        s.accel == 0 || self.cfg.accel.value(s.accel) < -self.cfg.impact_threshold_mps2
+        match self.impact_code {
+            Some(max) => s.accel <= max,
+            None => s.accel == 0 || self.cfg.accel.value(s.accel) < -self.cfg.impact_threshold_mps2,
+        }
     }
 
     /// Feeds a block of samples; `on_report` is called for every closed cycle.
@@ -189,14 +232,16 @@ impl Estimator {
                 }
                 // The newest samples wait in the delay line: if the next one is
                 // an impact, they hold its leading edge and are discarded.
-                if self.delay.len() >= self.pre_samples {
-                    match self.delay.pop_front() {
-                        Some(old) => self.process(old),
-                        None => self.process(s),
-                    }
-                }
-                if self.pre_samples > 0 {
-                    let _ = self.delay.push_back(s); // pre_samples < capacity: never full
+                if self.pre_samples == 0 {
+                    self.process(s);
+                } else if self.delay_len == self.pre_samples {
+                    let old = self.delay[self.delay_head];
+                    self.delay[(self.delay_head + self.delay_len) % MAX_PRE_BLANK] = s;
+                    self.delay_head = (self.delay_head + 1) % MAX_PRE_BLANK;
+                    self.process(old);
+                } else {
+                    self.delay[(self.delay_head + self.delay_len) % MAX_PRE_BLANK] = s;
+                    self.delay_len += 1;
                 }
                 None
             }
@@ -228,7 +273,8 @@ impl Estimator {
     fn begin_cycle(&mut self, index: u64) {
         self.counters.impacts = self.counters.impacts.wrapping_add(1);
         self.last_impact = Some(index);
-        self.delay.clear();
+        self.delay_head = 0;
+        self.delay_len = 0;
         self.dropped_in_cycle = false;
         self.contact_samples = 1;
         self.phase = if self.blank_samples == 0 {
@@ -265,7 +311,7 @@ impl Estimator {
     fn close_cycle(&mut self, index: u64) -> CycleReport {
         let start = self.last_impact.unwrap_or(index);
         let period_s = index.wrapping_sub(start) as f32 * self.d.dt;
-        let tail = self.delay.len() as u32;
+        let tail = self.delay_len as u32;
         let mut e = cycle::estimate(
             &self.acc,
             &self.cfg,
@@ -341,5 +387,23 @@ impl Estimator {
         self.counters.cycles = self.counters.cycles.wrapping_add(1);
         self.seq = self.seq.wrapping_add(1);
         r
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn impact_code_matches_the_float_threshold() {
+        for thr in [100.0f32, 1500.0, 1999.0, 5000.0] {
+            let mut cfg = Config::default();
+            cfg.impact_threshold_mps2 = thr;
+            let max = impact_code(&cfg).unwrap();
+            for c in 0..=4095u16 {
+                let float = c == 0 || cfg.accel.value(c) < -thr;
+                assert_eq!(c <= max, float, "thr {thr}, code {c}, max {max}");
+            }
+        }
     }
 }
