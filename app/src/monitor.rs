@@ -50,6 +50,8 @@ pub struct Monitor {
     capture_id: u16,
     alarm_on: bool,
     pub counters: MonitorCounters,
+    /// Counters of estimators replaced by a new configuration: the status counts since boot.
+    carried: hammer_estimator::Counters,
     config_hash: u32,
 }
 
@@ -67,6 +69,7 @@ impl Monitor {
             capture_id: 0,
             alarm_on: false,
             counters: MonitorCounters::default(),
+            carried: Default::default(),
         })
     }
 
@@ -227,6 +230,14 @@ impl Monitor {
     fn replace_config(&mut self, cfg: Config) -> Result<(), hammer_estimator::ConfigError> {
         let mut est = Estimator::new(cfg)?;
         est.restore_wear(*self.est.wear_state());
+        let old = self.est.counters();
+        let c = &mut self.carried;
+        c.samples = c.samples.wrapping_add(old.samples);
+        c.dropped_samples = c.dropped_samples.wrapping_add(old.dropped_samples);
+        c.impacts = c.impacts.wrapping_add(old.impacts);
+        c.cycles = c.cycles.wrapping_add(old.cycles);
+        c.invalid_cycles = c.invalid_cycles.wrapping_add(old.invalid_cycles);
+        c.stalls = c.stalls.wrapping_add(old.stalls);
         self.est = est;
         self.config_hash = DeviceConfig::from(&cfg).hash();
         Ok(())
@@ -303,15 +314,15 @@ impl Monitor {
 
     /// The device's health. `cpu_load_permille` and the link counters come from the board's tasks.
     pub fn status(&self, now_us: u64, cpu_load_permille: u16, dsp_busy_us: u64, link: LinkCounters) -> Status {
-        let c = self.est.counters();
+        let (c, k) = (self.est.counters(), &self.carried);
         Status {
             uptime_us: now_us,
-            samples: c.samples,
-            dropped_samples: c.dropped_samples,
+            samples: c.samples.wrapping_add(k.samples),
+            dropped_samples: c.dropped_samples.wrapping_add(k.dropped_samples),
             adc_overruns: self.counters.adc_overruns,
-            cycles: c.cycles,
-            invalid_cycles: c.invalid_cycles,
-            stalls: c.stalls,
+            cycles: c.cycles.wrapping_add(k.cycles),
+            invalid_cycles: c.invalid_cycles.wrapping_add(k.invalid_cycles),
+            stalls: c.stalls.wrapping_add(k.stalls),
             frames_sent: link.frames_sent,
             frames_dropped: link.frames_dropped.wrapping_add(self.counters.messages_dropped),
             rx_frames: link.rx_frames,

@@ -84,6 +84,14 @@ fn firmware_elves() -> [(&'static str, PathBuf); 2] {
     ]
 }
 
+/// Both boards, one cargo run each: built together, cargo would unify the
+/// reference board's defmt features into the emulated board's dependencies.
+fn build_firmware() -> Result<(), String> {
+    firmware(&["build", "--release", "-p", "hammer-firmware"])?;
+    firmware(&["build", "--release", "-p", "hammer-firmware-emu"])?;
+    size()
+}
+
 fn size() -> Result<(), String> {
     for (name, path) in firmware_elves() {
         let s = elf::sizes(&path)?;
@@ -108,8 +116,7 @@ fn ci() -> Result<(), String> {
         "cargo",
         &["build", "--release", "-p", "hammer-estimator", "--target", TARGET],
     )?;
-    firmware(&["build", "--release", "--workspace"])?;
-    size()?;
+    build_firmware()?;
     let mut totals = (0, 0);
     let mut result = cargo_test(&root, &["test", "--workspace", "--release"], &mut totals);
     // Once more with overflow checks on (the test profile): arithmetic that
@@ -132,11 +139,11 @@ fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let result = match args.first().map(String::as_str) {
         Some("ci") => ci(),
-        Some("firmware") => firmware(&["build", "--release", "--workspace"]).and_then(|_| size()),
+        Some("firmware") => build_firmware(),
         Some("size") => size(),
-        Some("bench-firmware") => firmware(&["build", "--release", "--workspace"])
-            .and_then(|_| size())
-            .and_then(|_| run(&root(), "cargo", &["bench", "-p", "hammer-host", "--bench", "firmware"])),
+        Some("bench-firmware") => {
+            build_firmware().and_then(|_| run(&root(), "cargo", &["bench", "-p", "hammer-host", "--bench", "firmware"]))
+        }
         _ => Err(USAGE.into()),
     };
     match result {
