@@ -21,6 +21,10 @@ fn main() {
     fs::write(out_dir.join("memory.x"), contents).expect("cannot write memory.x into OUT_DIR");
 
     println!("cargo:rustc-link-search={}", out_dir.display());
+    // Linker scripts belong to this binary alone (see .cargo/config.toml):
+    // cortex-m-rt's layout, and the defmt section table this board logs with.
+    println!("cargo:rustc-link-arg-bins=-Tlink.x");
+    println!("cargo:rustc-link-arg-bins=-Tdefmt.x");
     println!("cargo:rerun-if-changed={}", memory_x.display());
     println!("cargo:rerun-if-changed=build.rs");
 }

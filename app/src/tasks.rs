@@ -7,9 +7,10 @@ use core::sync::atomic::{AtomicU32, Ordering};
 use embassy_futures::select::{select, Either};
 use embassy_sync::blocking_mutex::raw::RawMutex;
 use embassy_sync::channel::Channel;
+use embassy_sync::signal::Signal;
 use hammer_estimator::RawSample;
 use hammer_wire::{
-    encode, DecodeError, Decoder, DeviceMsg, HostMsg, RejectReason, SampleBlock, BLOCK_SAMPLES, MAX_FRAME,
+    encode, DecodeError, Decoder, DeviceMsg, HostMsg, RejectReason, SampleBlock, WearBlob, BLOCK_SAMPLES, MAX_FRAME,
 };
 
 use crate::board::{Clock, LinkRx, LinkTx, Overrun, SampleSource};
@@ -19,6 +20,9 @@ use crate::monitor::{LinkCounters, Monitor};
 pub const STATUS_PERIOD_US: u64 = 1_000_000;
 /// Outgoing messages waiting for the link.
 pub const OUTGOING: usize = 16;
+/// Valid cycles between two wear-state snapshots for non-volatile storage
+/// (about 5 minutes at 20 Hz: a power cut loses at most that much wear).
+pub const WEAR_SAVE_CYCLES: u32 = 6_000;
 
 #[derive(Default)]
 pub struct LinkAtomics {
@@ -65,6 +69,10 @@ pub struct Shared<M: RawMutex> {
     /// Sample blocks that arrive over the link (boards without an ADC).
     pub samples: Channel<M, SampleBlock, 4>,
     pub link: LinkAtomics,
+    /// The latest wear state to persist. A board with flash stores it from a
+    /// low-priority task (a page erase must never stall sampling); a board
+    /// without simply never waits on it.
+    pub wear_snapshot: Signal<M, WearBlob>,
 }
 
 impl<M: RawMutex> Shared<M> {
@@ -74,6 +82,7 @@ impl<M: RawMutex> Shared<M> {
             outgoing: Channel::new(),
             samples: Channel::new(),
             link: LinkAtomics::new(),
+            wear_snapshot: Signal::new(),
         }
     }
 
@@ -106,6 +115,7 @@ pub async fn sampling<S: SampleSource, M: RawMutex, C: Clock>(
     let mut busy_total_us = 0u64;
     let mut load_permille = 0u16;
     let mut next_status = window_start + STATUS_PERIOD_US;
+    let mut saved_at_cycle = 0u32;
     loop {
         // Commands are answered even when no samples flow.
         let first = select(source.read(&mut buf), shared.commands.receive()).await;
@@ -135,6 +145,11 @@ pub async fn sampling<S: SampleSource, M: RawMutex, C: Clock>(
                 Some(m) => emit(m),
                 None => break,
             }
+        }
+        let cycles = monitor.estimator().wear_state().cycles;
+        if cycles.wrapping_sub(saved_at_cycle) >= WEAR_SAVE_CYCLES {
+            saved_at_cycle = cycles;
+            shared.wear_snapshot.signal(monitor.wear_blob());
         }
         let t1 = clock.now_us();
         busy_us += t1.saturating_sub(t0);

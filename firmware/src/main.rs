@@ -1,42 +1,100 @@
 //! Board layer for the hammer monitor on the Nucleo-G474RE (STM32G474RE).
 //!
-//! This binary is meant to stay thin: it owns what is specific to this board
-//! (clock tree, pin assignment, which timer backs the time base) and nothing
-//! else. The monitoring application itself — impact detection, estimation,
-//! alarm logic — is hardware-independent and will live in its own `no_std`
-//! crate that this binary depends on, so it can be unit-tested on the host and
-//! reused on another board by writing only a new board layer (future work).
+//! This binary stays thin: it owns what is specific to this board — clock
+//! tree, pins, the sampling chain's timer/ADC/DMA, the link's USART, flash
+//! layout, watchdog and interrupt priorities — and runs the
+//! hardware-independent app (`hammer-app`) on top of it. Pin map, real-time
+//! budget and design notes: docs/firmware.md.
 //!
-//! For now the board layer proves the bring-up: the core runs at full speed
-//! and the executor, time driver and defmt logging over RTT all work.
+//! Two executors, so telemetry can never starve the DSP:
+//! - an interrupt executor on the otherwise unused UART4 vector, priority 6,
+//!   runs the app's `sampling` task (estimator, commands, reports);
+//! - the thread executor runs the link tasks, the watchdog and the LED.
+//!
+//! Hardware interrupt handlers (DMA, USART2, the time base) stay at priority
+//! 0 and only wake tasks, so they preempt the DSP only briefly.
 
 #![no_std]
 #![no_main]
 
-use defmt::info;
-use embassy_executor::Spawner;
+mod clock;
+mod link;
+mod persist;
+mod sampler;
+
+use defmt::{error, info, unwrap, warn};
+use embassy_executor::{InterruptExecutor, Spawner};
 use embassy_stm32::gpio::{Level, Output, Speed};
-use embassy_stm32::Config;
-use embassy_time::{Duration, Instant, Ticker};
+use embassy_stm32::interrupt;
+use embassy_stm32::interrupt::{InterruptExt, Priority};
+use embassy_stm32::peripherals::{self, IWDG};
+use embassy_stm32::wdg::IndependentWatchdog;
+use embassy_stm32::{bind_interrupts, dma, pac, usart, Config};
+use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+use embassy_time::{Duration, Instant, Ticker, Timer};
+use hammer_app::{Monitor, Shared};
+use hammer_estimator::wear::WEAR_STATE_BYTES;
+use hammer_wire::{DeviceMsg, HostMsg, WearBlob};
+use static_cell::StaticCell;
 use {defmt_rtt as _, panic_probe as _};
+
+use crate::clock::BoardClock;
+use crate::sampler::Sampler;
+
+/// Reported to the host in `Hello`.
+const BOARD_NAME: &str = "nucleo-g474re";
+/// Per-channel sample rate; `sampler` accepts 20 000 to 200 000.
+const SAMPLE_RATE_HZ: u32 = 100_000;
+const _: () = assert!(SAMPLE_RATE_HZ >= sampler::MIN_RATE_HZ && SAMPLE_RATE_HZ <= sampler::MAX_RATE_HZ);
+
+/// IWDG timeout. Long enough for a page erase (~22 ms) and boot, short
+/// enough that a hung board is back within about a second.
+const WATCHDOG_TIMEOUT_US: u32 = 1_000_000;
+/// How often the watchdog task checks liveness and pets.
+const WATCHDOG_CHECK: Duration = Duration::from_millis(250);
+/// No new sample block, or one link write, for this long counts as hung.
+const STALL_LIMIT: Duration = Duration::from_millis(500);
 
 /// Blink half-period; one full on/off cycle per second is easy to tell apart
 /// from a hung board (LED stuck) or a wrong clock (visibly fast or slow).
 const HEARTBEAT_HALF_PERIOD: Duration = Duration::from_millis(500);
+
+bind_interrupts!(struct Irqs {
+    DMA1_CHANNEL1 => dma::InterruptHandler<peripherals::DMA1_CH1>;
+    DMA1_CHANNEL2 => dma::InterruptHandler<peripherals::DMA1_CH2>;
+    DMA1_CHANNEL3 => dma::InterruptHandler<peripherals::DMA1_CH3>;
+    USART2 => usart::InterruptHandler<peripherals::USART2>;
+});
+
+static SHARED: Shared<CriticalSectionRawMutex> = Shared::new();
+/// ~40 KB with its capture buffer: far too big for a task's stack frame.
+static MONITOR: StaticCell<Monitor> = StaticCell::new();
+static ADC_RING: StaticCell<[u16; sampler::DMA_WORDS]> = StaticCell::new();
+static UART_RX_RING: StaticCell<[u8; link::RX_RING]> = StaticCell::new();
+
+static DSP_EXECUTOR: InterruptExecutor = InterruptExecutor::new();
+
+#[interrupt]
+unsafe fn UART4() {
+    // SAFETY: this vector is used by nothing else, and the executor was
+    // started before the interrupt was unmasked (`InterruptExecutor::start`).
+    unsafe { DSP_EXECUTOR.on_interrupt() }
+}
 
 /// Clock tree for 170 MHz SYSCLK, the G474's maximum, from the internal HSI16.
 ///
 /// HSI16 needs nothing fitted on the board, so the same bring-up works on the
 /// Nucleo and on a custom carrier; its ~1 % accuracy is plenty until something
 /// needs a precise clock (USB, CAN bit timing), at which point an HSE source
-/// belongs here.
+/// belongs here. The sample rate and the time base share this oscillator, so
+/// its error scales both alike and sample timing stays self-consistent.
 ///
 /// PLL: 16 MHz / 4 = 4 MHz input (inside the 2.66–16 MHz window),
 /// x85 = 340 MHz VCO (inside 96–344 MHz), / 2 = 170 MHz on PLLR.
 /// Above 150 MHz the core regulator must be in Range 1 boost mode, which
 /// embassy only switches on when asked.
 fn clock_config() -> Config {
-    use embassy_stm32::rcc::{AHBPrescaler, APBPrescaler, Pll, PllMul, PllPreDiv, PllRDiv, PllSource, Sysclk};
+    use embassy_stm32::rcc::{mux, AHBPrescaler, APBPrescaler, Pll, PllMul, PllPreDiv, PllRDiv, PllSource, Sysclk};
 
     let mut config = Config::default();
     config.rcc.hsi = true;
@@ -51,28 +109,109 @@ fn clock_config() -> Config {
     config.rcc.sys = Sysclk::PLL1_R;
     config.rcc.boost = true;
     // Buses at full speed: the timers then also run at 170 MHz, which the
-    // 1 MHz time base divides exactly.
+    // 1 MHz time base and the 100 kS/s sample clock both divide exactly.
     config.rcc.ahb_pre = AHBPrescaler::DIV1;
     config.rcc.apb1_pre = APBPrescaler::DIV1;
     config.rcc.apb2_pre = APBPrescaler::DIV1;
+    // The ADC kernel clock is off after reset. SYSCLK / 4 (the prescaler the
+    // driver picks to stay under 60 MHz) = 42.5 MHz.
+    config.rcc.mux.adc12sel = mux::Adcsel::SYS;
     config
 }
 
-/// Visible and logged proof of life.
-///
-/// A `Ticker` rather than repeated `Timer::after` keeps the period from
-/// drifting by however long the loop body takes, so the logged uptime stays on
-/// whole seconds and a slipping count points at a starved executor.
+/// The app's sample → estimator → report loop, at interrupt priority.
+#[embassy_executor::task]
+async fn sampling(mut source: Sampler, monitor: &'static mut Monitor) {
+    hammer_app::sampling(&mut source, monitor, &SHARED, &BoardClock).await
+}
+
+#[embassy_executor::task]
+async fn link_rx(mut rx: link::Rx) {
+    hammer_app::link_rx(&mut rx, &SHARED).await
+}
+
+#[embassy_executor::task]
+async fn link_tx(mut tx: link::Tx) {
+    hammer_app::link_tx(&mut tx, &SHARED).await
+}
+
+/// Pets the IWDG only while the board is demonstrably working: this task
+/// runs (the thread executor is not starved by a runaway DSP or a spinning
+/// link task), sample blocks keep arriving (the sampling chain has not
+/// stalled beyond its own recovery), and no link write is stuck. A board
+/// that fails any of these resets within STALL_LIMIT + WATCHDOG_TIMEOUT.
+#[embassy_executor::task]
+async fn watchdog(mut wdg: IndependentWatchdog<'static, IWDG>) {
+    let mut last_blocks = sampler::BLOCKS.load(core::sync::atomic::Ordering::Relaxed);
+    let mut last_progress = Instant::now();
+    let mut reported = false;
+    loop {
+        Timer::after(WATCHDOG_CHECK).await;
+        let now = Instant::now();
+        let blocks = sampler::BLOCKS.load(core::sync::atomic::Ordering::Relaxed);
+        if blocks != last_blocks {
+            last_blocks = blocks;
+            last_progress = now;
+        }
+        let dsp_ok = now - last_progress < STALL_LIMIT;
+        let link_ok = (link::tx_busy_ms(now) as u64) < STALL_LIMIT.as_millis();
+        if dsp_ok && link_ok {
+            wdg.pet();
+            reported = false;
+        } else if !reported {
+            error!(
+                "watchdog: sampling alive {}, link alive {}: letting the IWDG reset the board",
+                dsp_ok, link_ok
+            );
+            reported = true;
+        }
+    }
+}
+
+/// Visible proof of life, independent of the link.
 #[embassy_executor::task]
 async fn heartbeat(mut led: Output<'static>) {
     let mut ticker = Ticker::every(HEARTBEAT_HALF_PERIOD);
     loop {
-        led.set_high();
-        info!("heartbeat: uptime {} ms", Instant::now().as_millis());
+        led.toggle();
         ticker.next().await;
+    }
+}
 
-        led.set_low();
-        ticker.next().await;
+/// Hands the wear state saved before the last reset to the monitor, through
+/// the same command the host would use, so it is validated the same way.
+/// Returns the store for the task that keeps saving it.
+fn restore_wear(
+    monitor: &mut Monitor,
+    flash: embassy_stm32::Peri<'static, peripherals::FLASH>,
+) -> Option<persist::Persist> {
+    let mut store = persist::Persist::new(flash)?;
+    match store.load::<WEAR_STATE_BYTES>(&persist::WEAR) {
+        None => info!("persist: no stored wear state"),
+        Some(bytes) => {
+            if let Ok(bytes) = heapless::Vec::from_slice(&bytes) {
+                monitor.on_command(HostMsg::RestoreWear(WearBlob { bytes }), 0, &mut |reply| match reply {
+                    DeviceMsg::Ack(_) => info!("persist: wear state restored"),
+                    _ => warn!("persist: stored wear state rejected by the monitor"),
+                });
+            }
+        }
+    }
+    Some(store)
+}
+
+/// Saves the wear state the app hands over every few thousand cycles
+/// (`hammer_app::tasks::WEAR_SAVE_CYCLES`). Thread mode: a page erase stalls
+/// only this task, the sampling executor preempts it, and bank 2 is written
+/// while the code runs from bank 1.
+#[embassy_executor::task]
+async fn persist_wear(mut store: persist::Persist) {
+    loop {
+        let blob = SHARED.wear_snapshot.wait().await;
+        match store.store(&persist::WEAR, &blob.bytes) {
+            Ok(()) => info!("persist: wear state saved"),
+            Err(_) => warn!("persist: saving the wear state failed"),
+        }
     }
 }
 
@@ -81,7 +220,62 @@ async fn main(spawner: Spawner) {
     let p = embassy_stm32::init(clock_config());
     info!("hammer-firmware {} up, SYSCLK 170 MHz", env!("CARGO_PKG_VERSION"));
 
+    // First, so a hang anywhere below is caught too. Frozen while a debugger
+    // halts the core; without a debugger the freeze bit has no effect.
+    pac::DBGMCU.apb1lfzr().modify(|w| w.set_iwdg(true));
+    let mut wdg = IndependentWatchdog::new(p.IWDG, WATCHDOG_TIMEOUT_US);
+    wdg.unleash();
+
+    let pins = sampler::Pins {
+        rear: p.PA0,
+        front: p.PA1,
+        accel: p.PB0,
+    };
+    let source = Sampler::new(
+        p.ADC1,
+        p.TIM6,
+        p.DMA1_CH1,
+        pins,
+        ADC_RING.init([0; sampler::DMA_WORDS]),
+        SAMPLE_RATE_HZ,
+    );
+
+    let cfg = hammer_estimator::Config {
+        sample_rate_hz: source.rate_hz(),
+        ..Default::default()
+    };
+    let monitor = MONITOR.init_with(|| match Monitor::new(cfg, BOARD_NAME) {
+        Ok(m) => m,
+        // The configuration is a constant of this build, not data: a
+        // rejection is a programming error, caught on the first boot.
+        Err(e) => defmt::panic!(
+            "estimator rejects the board's default configuration: {}",
+            defmt::Debug2Format(&e)
+        ),
+    });
+    let store = restore_wear(monitor, p.FLASH);
+
+    let (tx, rx) = unwrap!(link::new(
+        p.USART2,
+        p.PA2,
+        p.PA3,
+        p.DMA1_CH2,
+        p.DMA1_CH3,
+        UART_RX_RING.init([0; link::RX_RING])
+    ));
+    info!("link: USART2 {} Bd on the ST-LINK VCP", link::BAUD);
+
+    // The priority must be set before `start`, which unmasks the interrupt.
+    interrupt::UART4.set_priority(Priority::P6);
+    let dsp = DSP_EXECUTOR.start(interrupt::UART4);
+    dsp.spawn(unwrap!(sampling(source, monitor)));
+
+    spawner.spawn(unwrap!(link_rx(rx)));
+    spawner.spawn(unwrap!(link_tx(tx)));
+    spawner.spawn(unwrap!(watchdog(wdg)));
+    if let Some(store) = store {
+        spawner.spawn(unwrap!(persist_wear(store)));
+    }
     // LD2, the Nucleo's green user LED, is on PA5 (driven high = on).
-    let led = Output::new(p.PA5, Level::Low, Speed::Low);
-    spawner.spawn(defmt::unwrap!(heartbeat(led)));
+    spawner.spawn(unwrap!(heartbeat(Output::new(p.PA5, Level::Low, Speed::Low))));
 }

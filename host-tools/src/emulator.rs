@@ -53,7 +53,7 @@ impl Emulator {
             .args(["-semihosting-config", "enable=on,target=native"])
             .args(["-serial", &format!("tcp:127.0.0.1:{port},server=on,wait=off")]);
         if count_instructions {
-            cmd.args(["-icount", "shift=0,align=off,sleep=off"]);
+            cmd.args(["-icount", "shift=0"]);
         }
         cmd.arg("-kernel")
             .arg(elf)

@@ -1,0 +1,122 @@
+//! Board layer for the hammer monitor on QEMU's mps2-an386 (Cortex-M4F).
+//!
+//! The board has no ADC worth modelling, so the host streams sample blocks
+//! over UART0 together with its commands, and the same UART carries the
+//! device's reports back. Everything else is the hardware-independent
+//! `hammer_app`, unchanged: this lets the complete firmware, executor and
+//! all, be tested without a board.
+//!
+//! Run it with `cargo run --release` from this directory (UART0 is then
+//! QEMU's stdin/stdout, binary-clean) or, for a test harness, with UART0 on a
+//! socket:
+//! `qemu-system-arm -M mps2-an386 -nographic -monitor none -semihosting-config enable=on,target=native
+//!  -serial tcp:127.0.0.1:PORT,server=on,wait=on -kernel hammer-firmware-emu`.
+//! A panic or fault exits QEMU with a failure status instead of hanging.
+//!
+//! QEMU hands this UART one byte per main-loop turn, which caps host-to-board
+//! traffic at roughly 40 KB/s (about 200 sample blocks, 7 kS/s): streamed
+//! samples run slower than real time, and nothing is lost.
+
+#![no_std]
+#![no_main]
+
+mod clock;
+mod executor;
+mod pacing;
+mod uart;
+mod vectors;
+
+use core::fmt::Write as _;
+
+use cortex_m_rt::{entry, exception, ExceptionFrame};
+use cortex_m_semihosting::debug;
+use embassy_executor::raw;
+use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+use hammer_app::{LinkSamples, Monitor, Shared};
+use static_cell::StaticCell;
+
+use crate::clock::SysTickClock;
+use crate::pacing::Paced;
+use crate::uart::{PanicWriter, UartRx, UartTx};
+
+/// Reported in `Hello`, so a host can tell the emulator from real hardware.
+const BOARD_NAME: &str = "qemu-mps2-an386";
+
+type Mutex = CriticalSectionRawMutex;
+
+static SHARED: Shared<Mutex> = Shared::new();
+/// The monitor holds a ~40 KB capture buffer: a static, not a task's stack.
+static MONITOR: StaticCell<Monitor> = StaticCell::new();
+static CLOCK: StaticCell<SysTickClock> = StaticCell::new();
+static EXECUTOR: StaticCell<raw::Executor> = StaticCell::new();
+
+#[embassy_executor::task]
+async fn sampling(monitor: &'static mut Monitor, clock: &'static SysTickClock) -> ! {
+    let mut source = Paced::new(LinkSamples::new(&SHARED), &SHARED);
+    hammer_app::sampling(&mut source, monitor, &SHARED, clock).await
+}
+
+#[embassy_executor::task]
+async fn link_rx(mut rx: UartRx) -> ! {
+    hammer_app::link_rx(&mut rx, &SHARED).await
+}
+
+#[embassy_executor::task]
+async fn link_tx(mut tx: UartTx) -> ! {
+    hammer_app::link_tx(&mut tx, &SHARED).await
+}
+
+#[entry]
+fn main() -> ! {
+    let Some(core) = cortex_m::Peripherals::take() else {
+        panic!("core peripherals taken twice");
+    };
+    let clock: &'static SysTickClock = CLOCK.init(SysTickClock::start(core.SYST));
+    let (tx, rx) = uart::init();
+
+    // `init_with` lets the compiler build the monitor in place (checked: no
+    // stack frame of its size); the default configuration is valid, so the
+    // error arm is a programming error.
+    let monitor = MONITOR.init_with(|| match Monitor::new(hammer_estimator::Config::default(), BOARD_NAME) {
+        Ok(m) => m,
+        Err(_) => panic!("default estimator configuration rejected"),
+    });
+
+    // The pender ignores the context; the executor is the only one.
+    let executor: &'static raw::Executor = EXECUTOR.init(raw::Executor::new(core::ptr::null_mut()));
+    let spawner = executor.spawner();
+    // Each task has a pool of one and is spawned once, so spawning cannot fail.
+    spawner.spawn(sampling(monitor, clock).expect("sampling task spawned once"));
+    spawner.spawn(link_rx(rx).expect("link_rx task spawned once"));
+    spawner.spawn(link_tx(tx).expect("link_tx task spawned once"));
+    executor::run(executor)
+}
+
+/// Reports on UART0 (after a frame delimiter, so a host's decoder drops any
+/// half-sent frame and sees the text as one bad frame) and on semihosting
+/// stderr, then ends QEMU with a failure status: a test sees a panic as an
+/// exit code, never as a hang.
+#[panic_handler]
+fn panic(info: &core::panic::PanicInfo) -> ! {
+    cortex_m::interrupt::disable();
+    let _ = write!(PanicWriter, "\0panic: {info}\r\n\0");
+    cortex_m_semihosting::heprintln!("panic: {}", info);
+    exit_failure()
+}
+
+/// Faults (a bad pointer, an undefined instruction) end QEMU like a panic.
+#[exception]
+unsafe fn HardFault(frame: &ExceptionFrame) -> ! {
+    let _ = write!(PanicWriter, "\0hard fault at pc {:#010x}\r\n\0", frame.pc());
+    cortex_m_semihosting::heprintln!("hard fault: {:?}", frame);
+    exit_failure()
+}
+
+fn exit_failure() -> ! {
+    debug::exit(debug::EXIT_FAILURE);
+    // Returns only if a debugger took the semihosting request and let the
+    // core run on; then stop here.
+    loop {
+        cortex_m::asm::wfi();
+    }
+}
