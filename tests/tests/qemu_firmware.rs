@@ -20,29 +20,44 @@ const T: Duration = Duration::from_secs(20);
 
 fn boot() -> (Emulator, Link<std::net::TcpStream>) {
     let mut emu = Emulator::start(&firmware_elf(), false).expect("QEMU and the emulated firmware");
-    let stream = emu.connect(T).expect("connect to the board's UART");
-    let mut link = Link::new(stream);
-    hello(&mut link);
+    let link = connect(&mut emu);
     (emu, link)
 }
 
-fn hello(link: &mut Link<std::net::TcpStream>) -> DeviceInfo {
-    link.send(&HostMsg::Hello {
-        protocol_version: PROTOCOL_VERSION,
-    })
-    .unwrap();
-    let (info, _) = link
-        .recv_until(T, |m| {
+/// Connects to the board's UART and shakes hands. Like a host tool, it retries:
+/// a fresh connection can be reset while QEMU starts, or wait in its listen
+/// queue until the previous connection is fully closed.
+fn connect(emu: &mut Emulator) -> Link<std::net::TcpStream> {
+    for _ in 0..10 {
+        let stream = emu.connect(T).expect("connect to the board's UART");
+        let mut link = Link::new(stream);
+        match hello(&mut link) {
+            Ok(_) => return link,
+            Err(e) => eprintln!("handshake failed ({e}); reconnecting"),
+        }
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    panic!("no handshake with the emulated board");
+}
+
+fn hello(link: &mut Link<std::net::TcpStream>) -> std::io::Result<DeviceInfo> {
+    for _ in 0..5 {
+        link.send(&HostMsg::Hello {
+            protocol_version: PROTOCOL_VERSION,
+        })?;
+        let (info, _) = link.recv_until(Duration::from_secs(2), |m| {
             if let DeviceMsg::Hello(i) = m {
                 Some(i.clone())
             } else {
                 None
             }
-        })
-        .unwrap();
-    let info = info.expect("Hello from the device");
-    assert_eq!(info.protocol_version, PROTOCOL_VERSION);
-    info
+        })?;
+        if let Some(info) = info {
+            assert_eq!(info.protocol_version, PROTOCOL_VERSION);
+            return Ok(info);
+        }
+    }
+    Err(std::io::Error::new(std::io::ErrorKind::TimedOut, "no Hello in 10 s"))
 }
 
 fn status(link: &mut Link<std::net::TcpStream>) -> Status {
@@ -235,9 +250,7 @@ fn the_firmware_survives_garbage_oversize_frames_bad_commands_and_reconnects() {
     drop(link);
     std::thread::sleep(Duration::from_millis(300));
     assert!(emu.is_running());
-    let stream2 = emu.connect(T).unwrap();
-    let mut link = Link::new(stream2);
-    hello(&mut link);
+    let mut link = connect(&mut emu);
     let s1 = status(&mut link);
     assert!(s1.uptime_us > s0.uptime_us, "no reboot");
     assert_eq!(s1.samples, half as u64, "the device kept its state over the reconnect");
