@@ -77,6 +77,11 @@ impl Monitor {
         self.est.config()
     }
 
+    /// CRC of the configuration's wire bytes: changes whenever the configuration does.
+    pub fn config_hash(&self) -> u32 {
+        self.config_hash
+    }
+
     pub fn estimator(&self) -> &Estimator {
         &self.est
     }

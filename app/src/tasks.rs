@@ -10,7 +10,8 @@ use embassy_sync::channel::Channel;
 use embassy_sync::signal::Signal;
 use hammer_estimator::RawSample;
 use hammer_wire::{
-    encode, DecodeError, Decoder, DeviceMsg, HostMsg, RejectReason, SampleBlock, WearBlob, BLOCK_SAMPLES, MAX_FRAME,
+    encode, DecodeError, Decoder, DeviceConfig, DeviceMsg, HostMsg, RejectReason, SampleBlock, WearBlob, BLOCK_SAMPLES,
+    MAX_FRAME,
 };
 
 use crate::board::{Clock, LinkRx, LinkTx, Overrun, SampleSource};
@@ -73,6 +74,8 @@ pub struct Shared<M: RawMutex> {
     /// low-priority task (a page erase must never stall sampling); a board
     /// without simply never waits on it.
     pub wear_snapshot: Signal<M, WearBlob>,
+    /// The configuration after a change (set by the host, or by a tare), to persist likewise.
+    pub config_snapshot: Signal<M, DeviceConfig>,
 }
 
 impl<M: RawMutex> Shared<M> {
@@ -83,6 +86,7 @@ impl<M: RawMutex> Shared<M> {
             samples: Channel::new(),
             link: LinkAtomics::new(),
             wear_snapshot: Signal::new(),
+            config_snapshot: Signal::new(),
         }
     }
 
@@ -116,6 +120,7 @@ pub async fn sampling<S: SampleSource, M: RawMutex, C: Clock>(
     let mut load_permille = 0u16;
     let mut next_status = window_start + STATUS_PERIOD_US;
     let mut saved_at_cycle = 0u32;
+    let mut config_hash = monitor.config_hash();
     loop {
         // Commands are answered even when no samples flow.
         let first = select(source.read(&mut buf), shared.commands.receive()).await;
@@ -145,6 +150,10 @@ pub async fn sampling<S: SampleSource, M: RawMutex, C: Clock>(
                 Some(m) => emit(m),
                 None => break,
             }
+        }
+        if monitor.config_hash() != config_hash {
+            config_hash = monitor.config_hash();
+            shared.config_snapshot.signal(DeviceConfig::from(monitor.config()));
         }
         let cycles = monitor.estimator().wear_state().cycles;
         if cycles.wrapping_sub(saved_at_cycle) >= WEAR_SAVE_CYCLES {

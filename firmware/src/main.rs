@@ -24,6 +24,7 @@ mod sampler;
 
 use defmt::{error, info, unwrap, warn};
 use embassy_executor::{InterruptExecutor, Spawner};
+use embassy_futures::select::{select, Either};
 use embassy_stm32::gpio::{Level, Output, Speed};
 use embassy_stm32::interrupt;
 use embassy_stm32::interrupt::{InterruptExt, Priority};
@@ -34,7 +35,7 @@ use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_time::{Duration, Instant, Ticker, Timer};
 use hammer_app::{Monitor, Shared};
 use hammer_estimator::wear::WEAR_STATE_BYTES;
-use hammer_wire::{DeviceMsg, HostMsg, WearBlob};
+use hammer_wire::{DeviceConfig, DeviceMsg, HostMsg, WearBlob};
 use static_cell::StaticCell;
 use {defmt_rtt as _, panic_probe as _};
 
@@ -181,11 +182,8 @@ async fn heartbeat(mut led: Output<'static>) {
 /// Hands the wear state saved before the last reset to the monitor, through
 /// the same command the host would use, so it is validated the same way.
 /// Returns the store for the task that keeps saving it.
-fn restore_wear(
-    monitor: &mut Monitor,
-    flash: embassy_stm32::Peri<'static, peripherals::FLASH>,
-) -> Option<persist::Persist> {
-    let mut store = persist::Persist::new(flash)?;
+fn restore_wear(monitor: &mut Monitor, store: Option<persist::Persist>) -> Option<persist::Persist> {
+    let mut store = store?;
     match store.load::<WEAR_STATE_BYTES>(&persist::WEAR) {
         None => info!("persist: no stored wear state"),
         Some(bytes) => {
@@ -200,17 +198,51 @@ fn restore_wear(
     Some(store)
 }
 
-/// Saves the wear state the app hands over every few thousand cycles
-/// (`hammer_app::tasks::WEAR_SAVE_CYCLES`). Thread mode: a page erase stalls
-/// only this task, the sampling executor preempts it, and bank 2 is written
-/// while the code runs from bank 1.
+/// Bytes of a stored configuration record: a length and postcard bytes, padded.
+const CONFIG_RECORD: usize = 200;
+
+/// The configuration saved before the last reset (calibration, tare, thresholds),
+/// if there is one the estimator accepts. The sample rate stays the board's:
+/// TIM6 is set at build time.
+fn stored_config(store: &mut persist::Persist, rate_hz: f32) -> Option<hammer_estimator::Config> {
+    let rec = store.load::<CONFIG_RECORD>(&persist::CONFIG)?;
+    let len = u16::from_le_bytes([rec[0], rec[1]]) as usize;
+    let wire: DeviceConfig = postcard::from_bytes(rec.get(2..2 + len)?).ok()?;
+    let mut cfg = wire.to_config(&hammer_estimator::Config::default());
+    cfg.sample_rate_hz = rate_hz;
+    match cfg.validate() {
+        Ok(()) => Some(cfg),
+        Err(_) => {
+            warn!("persist: stored configuration rejected, using defaults");
+            None
+        }
+    }
+}
+
+/// Saves what the app hands over: the wear state every few thousand cycles
+/// (`hammer_app::tasks::WEAR_SAVE_CYCLES`) and the configuration when it
+/// changes. Thread mode: a page erase stalls only this task, the sampling
+/// executor preempts it, and bank 2 is written while the code runs from bank 1.
 #[embassy_executor::task]
-async fn persist_wear(mut store: persist::Persist) {
+async fn persist_state(mut store: persist::Persist) {
     loop {
-        let blob = SHARED.wear_snapshot.wait().await;
-        match store.store(&persist::WEAR, &blob.bytes) {
-            Ok(()) => info!("persist: wear state saved"),
-            Err(_) => warn!("persist: saving the wear state failed"),
+        match select(SHARED.wear_snapshot.wait(), SHARED.config_snapshot.wait()).await {
+            Either::First(blob) => match store.store(&persist::WEAR, &blob.bytes) {
+                Ok(()) => info!("persist: wear state saved"),
+                Err(_) => warn!("persist: saving the wear state failed"),
+            },
+            Either::Second(cfg) => {
+                let mut rec = [0u8; CONFIG_RECORD];
+                let Ok(used) = postcard::to_slice(&cfg, &mut rec[2..]).map(|b| b.len()) else {
+                    warn!("persist: configuration does not fit a record");
+                    continue;
+                };
+                rec[..2].copy_from_slice(&(used as u16).to_le_bytes());
+                match store.store(&persist::CONFIG, &rec) {
+                    Ok(()) => info!("persist: configuration saved"),
+                    Err(_) => warn!("persist: saving the configuration failed"),
+                }
+            }
         }
     }
 }
@@ -240,10 +272,14 @@ async fn main(spawner: Spawner) {
         SAMPLE_RATE_HZ,
     );
 
-    let cfg = hammer_estimator::Config {
-        sample_rate_hz: source.rate_hz(),
-        ..Default::default()
-    };
+    let mut store = persist::Persist::new(p.FLASH);
+    let cfg = store
+        .as_mut()
+        .and_then(|s| stored_config(s, source.rate_hz()))
+        .unwrap_or(hammer_estimator::Config {
+            sample_rate_hz: source.rate_hz(),
+            ..Default::default()
+        });
     let monitor = MONITOR.init_with(|| match Monitor::new(cfg, BOARD_NAME) {
         Ok(m) => m,
         // The configuration is a constant of this build, not data: a
@@ -253,7 +289,7 @@ async fn main(spawner: Spawner) {
             defmt::Debug2Format(&e)
         ),
     });
-    let store = restore_wear(monitor, p.FLASH);
+    let store = restore_wear(monitor, store);
 
     let (tx, rx) = unwrap!(link::new(
         p.USART2,
@@ -274,7 +310,7 @@ async fn main(spawner: Spawner) {
     spawner.spawn(unwrap!(link_tx(tx)));
     spawner.spawn(unwrap!(watchdog(wdg)));
     if let Some(store) = store {
-        spawner.spawn(unwrap!(persist_wear(store)));
+        spawner.spawn(unwrap!(persist_state(store)));
     }
     // LD2, the Nucleo's green user LED, is on PA5 (driven high = on).
     spawner.spawn(unwrap!(heartbeat(Output::new(p.PA5, Level::Low, Speed::Low))));

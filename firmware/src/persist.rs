@@ -40,8 +40,6 @@ pub struct Area {
     first_page: u32,
 }
 
-/// Kept for when the app can report configuration changes (docs/firmware.md).
-#[allow(dead_code)]
 pub const CONFIG: Area = Area {
     first_page: AREA_OFFSET,
 };
@@ -201,8 +199,6 @@ impl Persist {
     /// Stores a new payload in the next blank slot after the newest record;
     /// when its page is full, erases the other page (~22 ms, blocking the
     /// calling task) and starts there. Reads the record back to verify it.
-    // Called once the app exposes a wear-state snapshot (see the doc).
-    #[allow(dead_code)]
     pub fn store(&mut self, area: &Area, payload: &[u8]) -> Result<(), Error> {
         if payload.len() > MAX_PAYLOAD {
             return Err(Error::TooLarge);
