@@ -3,8 +3,8 @@
 //!
 //! | flash offset | address     | use                                |
 //! |--------------|-------------|------------------------------------|
-//! | 0x7_E000     | 0x0807_E000 | configuration, page A (reserved)   |
-//! | 0x7_E800     | 0x0807_E800 | configuration, page B (reserved)   |
+//! | 0x7_E000     | 0x0807_E000 | configuration, page A              |
+//! | 0x7_E800     | 0x0807_E800 | configuration, page B              |
 //! | 0x7_F000     | 0x0807_F000 | wear state, page A                 |
 //! | 0x7_F800     | 0x0807_F800 | wear state, page B                 |
 //!
