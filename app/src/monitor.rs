@@ -13,6 +13,10 @@ use hammer_wire::{
 /// (≤ 50 ms at 4 bar) at 100 kS/s, with margin. 6 bytes each.
 pub const CAPTURE_SAMPLES: usize = 5_600;
 
+/// Samples kept after the impact that closes a capture: its shock and the
+/// few samples before it make the capture a complete cycle for the estimator.
+pub const CAPTURE_TAIL: u16 = 200;
+
 /// The firmware's own version, reported in `Hello` and `Status`.
 pub const FIRMWARE_VERSION: [u8; 3] = [0, 1, 0];
 
@@ -25,6 +29,10 @@ enum CaptureState {
     },
     Recording {
         cycles_left: u8,
+    },
+    /// The last cycle closed; `left` more samples so the closing impact is in the capture.
+    Tail {
+        left: u16,
     },
     /// Recorded; `sent` sample-sets streamed so far.
     Streaming {
@@ -128,13 +136,20 @@ impl Monitor {
                 out(DeviceMsg::Report(Report::from(r)));
                 self.alarms(r, out);
             }
-            if matches!(self.capture, CaptureState::Recording { .. }) {
+            if matches!(self.capture, CaptureState::Recording { .. } | CaptureState::Tail { .. }) {
                 if self.capture_len < CAPTURE_SAMPLES {
                     self.capture_buf[self.capture_len] = s;
                     self.capture_len += 1;
                 } else {
                     // Longer than the buffer: stream what there is.
                     self.capture = CaptureState::Streaming { sent: 0 };
+                }
+                if let CaptureState::Tail { left } = self.capture {
+                    self.capture = if left <= 1 {
+                        CaptureState::Streaming { sent: 0 }
+                    } else {
+                        CaptureState::Tail { left: left - 1 }
+                    };
                 }
             }
         }
@@ -147,7 +162,7 @@ impl Monitor {
                 self.capture_id = self.capture_id.wrapping_add(1);
                 CaptureState::Recording { cycles_left: cycles }
             }
-            CaptureState::Recording { cycles_left } if cycles_left <= 1 => CaptureState::Streaming { sent: 0 },
+            CaptureState::Recording { cycles_left } if cycles_left <= 1 => CaptureState::Tail { left: CAPTURE_TAIL },
             CaptureState::Recording { cycles_left } => CaptureState::Recording {
                 cycles_left: cycles_left - 1,
             },

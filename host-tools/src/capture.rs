@@ -62,3 +62,55 @@ pub fn to_trace(codes: &[[u16; 3]], cfg: &Config, supply_bar: Option<f64>) -> (T
     };
     (trace, Sidecar::new(supply_bar, "device"))
 }
+
+/// Records `cycles` raw cycles from a device: asks for its configuration (the
+/// calibration that turns codes into units), starts the capture and collects
+/// the chunks until the capture is complete.
+pub fn record<S: std::io::Read + std::io::Write>(
+    link: &mut crate::link::Link<S>,
+    cycles: u8,
+    timeout: std::time::Duration,
+) -> anyhow::Result<(Vec<[u16; 3]>, Config)> {
+    use hammer_wire::{CommandKind, DeviceMsg, HostMsg};
+    link.send(&HostMsg::GetConfig)?;
+    let (cfg, _) = link.recv_until(timeout, |m| if let DeviceMsg::Config(c) = m { Some(*c) } else { None })?;
+    let cfg = cfg.ok_or_else(|| anyhow::anyhow!("the device did not send its configuration"))?;
+    let cfg = cfg.to_config(&Config::default());
+    link.send(&HostMsg::StartCapture { cycles })?;
+    let mut chunks: Vec<CaptureChunk> = Vec::new();
+    let deadline = std::time::Instant::now() + timeout;
+    let mut acked = false;
+    loop {
+        let left = deadline
+            .checked_duration_since(std::time::Instant::now())
+            .unwrap_or_default();
+        if left.is_zero() {
+            anyhow::bail!(
+                "capture timed out after {} s ({} chunks; is the hammer running?)",
+                timeout.as_secs(),
+                chunks.len()
+            );
+        }
+        match link.recv(left)? {
+            Some(DeviceMsg::Ack(CommandKind::StartCapture)) => acked = true,
+            Some(DeviceMsg::Rejected {
+                command: CommandKind::StartCapture,
+                reason,
+            }) => {
+                anyhow::bail!("the device refused the capture: {reason:?}")
+            }
+            Some(DeviceMsg::Capture(c)) => {
+                let done = c.offset as usize + c.samples.len() >= c.total as usize;
+                chunks.push(c);
+                if done {
+                    break;
+                }
+            }
+            _ => {}
+        }
+    }
+    if !acked {
+        anyhow::bail!("capture data arrived without the device acknowledging the request");
+    }
+    Ok((assemble(&chunks)?, cfg))
+}

@@ -29,11 +29,56 @@ pub enum Command {
     Simulate(SimulateArgs),
     /// Draw one PNG per catalogued effect: nominal vs with-effect over one steady cycle.
     Figures(FiguresArgs),
+    /// Live dashboard of a device: current cycle, rolling charts, alarms, link
+    /// health; auto-reconnects; optional logs (decoded CSV, raw frames).
+    Monitor(crate::monitor::MonitorArgs),
+    /// Feed a raw-frame log (`frames.bin` from `monitor --log`) back through the dashboard.
+    Replay(crate::monitor::ReplayArgs),
+    /// Ask a device for the raw samples of the next N cycles and write them in
+    /// the project's trace format (CSV + sidecar).
+    Capture(CaptureArgs),
+    /// Plots (PNG) and an HTML page for a trace: one cycle, the run, and for a
+    /// simulated trace the estimate against the truth.
+    Report(crate::report::ReportArgs),
+    /// Configuration files: `hammer config check FILE`.
+    #[command(subcommand)]
+    Config(ConfigCommand),
+    /// The whole chain with no hardware: a simulated hammer streamed into the
+    /// firmware (emulated board under QEMU, or the app natively if QEMU is
+    /// missing), its reports on the dashboard or, with --headless, as lines.
+    Demo(crate::demo::DemoArgs),
     /// Run the estimator (the firmware's no_std crate) over a trace and print
     /// one record per impact cycle: friction (N), impact energy (J) with and
     /// without friction, frequency (Hz), wear index (J), each with its
     /// expanded uncertainty, and quality flags.
     Estimate(EstimateArgs),
+}
+
+#[derive(Args, Debug)]
+pub struct CaptureArgs {
+    /// Device: a serial port path, `auto`, or `tcp:HOST:PORT` (the emulated board).
+    #[arg(long, default_value = "auto")]
+    pub port: String,
+    /// Capture a demo board instead of a device: the firmware (QEMU or native)
+    /// fed with a simulated hammer at this gauge supply pressure, bar.
+    #[arg(long, value_name = "SUPPLY_BAR", conflicts_with = "port")]
+    pub demo: Option<f64>,
+    /// Impact cycles to record (the device holds one full cycle at 100 kS/s).
+    #[arg(long, default_value_t = 1)]
+    pub cycles: u8,
+    /// Gauge supply pressure to write in the sidecar, bar (unknown if omitted).
+    #[arg(long)]
+    pub supply_bar: Option<f64>,
+    /// Trace to write (CSV); its sidecar goes beside it with extension .json.
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum ConfigCommand {
+    /// Validate a hammer/sensor/estimator TOML file: every error names the
+    /// field and its allowed range; prints the resolved configuration.
+    Check { file: PathBuf },
 }
 
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
@@ -153,6 +198,17 @@ pub fn run(cli: Cli) -> Result<()> {
             Ok(())
         }
         Command::Estimate(args) => estimate_cmd(&args),
+        Command::Demo(args) => crate::demo::run(&args),
+        Command::Config(ConfigCommand::Check { file }) => config_check(&file),
+        Command::Monitor(args) => crate::monitor::run(&args),
+        Command::Replay(args) => crate::monitor::replay(&args),
+        Command::Capture(args) => capture_cmd(&args),
+        Command::Report(args) => {
+            for f in crate::report::run(&args)? {
+                println!("wrote {}", f.display());
+            }
+            Ok(())
+        }
         Command::Figures(args) => {
             let files = crate::plot::effect_figures(&args.out, args.supply_bar)?;
             for f in files {
@@ -161,6 +217,97 @@ pub fn run(cli: Cli) -> Result<()> {
             Ok(())
         }
     }
+}
+
+fn capture_cmd(args: &CaptureArgs) -> Result<()> {
+    use crate::link::Link;
+    let timeout = std::time::Duration::from_secs(120);
+    let (codes, cfg, supply) = match args.demo {
+        Some(bar) => {
+            let demo = crate::demo::DemoArgs::for_capture(bar);
+            let codes = crate::demo::hammer_codes(&demo, 0.25 + 0.06 * args.cycles as f64)?;
+            let (board, read, write) = crate::demo::start_board(false)?;
+            let writer = std::sync::Arc::new(std::sync::Mutex::new(write));
+            let mut link = Link::new(crate::demo::SharedPort::new(read, writer.clone()));
+            crate::demo::handshake(&mut link, timeout)?;
+            // Arm the capture before the hammer starts, then feed it.
+            let feeder = std::thread::spawn({
+                let writer = writer.clone();
+                move || {
+                    std::thread::sleep(std::time::Duration::from_millis(200));
+                    crate::demo::feed(codes, writer, false, 1e5)
+                }
+            });
+            let (codes, cfg) = crate::capture::record(&mut link, args.cycles, timeout)?;
+            drop(board);
+            let _ = feeder.join();
+            (codes, cfg, Some(bar))
+        }
+        None => {
+            let mut connector = crate::monitor::connector_for(&args.port)?;
+            let port = connector
+                .connect()
+                .with_context(|| format!("opening {}", connector.describe()))?;
+            let mut link = Link::new(port);
+            crate::demo::handshake(&mut link, std::time::Duration::from_secs(10))?;
+            let (codes, cfg) = crate::capture::record(&mut link, args.cycles, timeout)?;
+            (codes, cfg, args.supply_bar)
+        }
+    };
+    let (trace, sidecar) = crate::capture::to_trace(&codes, &cfg, args.supply_bar.or(supply));
+    write_csv(&args.out, &trace)?;
+    write_sidecar(&args.out, &sidecar)?;
+    println!(
+        "captured {} sample-sets ({:.1} ms) into {} and {}",
+        codes.len(),
+        codes.len() as f64 / cfg.sample_rate_hz as f64 * 1e3,
+        args.out.display(),
+        crate::trace::sidecar_path(&args.out).display()
+    );
+    Ok(())
+}
+
+/// The file must parse (unknown keys are errors), the simulator's parameters
+/// must be in range, and the estimator must accept the sensors and thresholds.
+fn config_check(file: &std::path::Path) -> Result<()> {
+    let cfg: SimConfig = load_toml(file)?;
+    cfg.validate()?;
+    let est = crate::estimate::estimator_config(
+        &cfg.hammer,
+        &cfg.sensors,
+        &cfg.estimator,
+        1.0 / cfg.solver.output_step_s,
+        Some(cfg.supply.pressure_bar),
+    )?;
+    println!("{}: ok", file.display());
+    println!(
+        "  hammer: {} kg piston, bore {} mm, rod {} mm, supply {} bar, inclination {}°",
+        cfg.hammer.piston_mass_kg,
+        cfg.hammer.bore_diameter_m * 1e3,
+        cfg.hammer.rod_diameter_m * 1e3,
+        cfg.supply.pressure_bar,
+        cfg.hammer.inclination_deg
+    );
+    let (r0, r1) = est.rear.range();
+    let (a0, a1) = est.accel.range();
+    println!(
+        "  sensors: pressure {:.2} … {:.2} bar, acceleration {:.0} … {:.0} m/s², {} kS/s",
+        r0 / 1e5,
+        r1 / 1e5,
+        a0,
+        a1,
+        est.sample_rate_hz / 1e3
+    );
+    let active = cfg.effects.active();
+    println!(
+        "  simulator effects: {}",
+        if active.is_empty() {
+            "none".to_string()
+        } else {
+            active.join(", ")
+        }
+    );
+    Ok(())
 }
 
 fn estimate_cmd(args: &EstimateArgs) -> Result<()> {

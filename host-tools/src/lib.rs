@@ -1,13 +1,17 @@
 //! Host side of hammer-monitor: the hammer simulator, trace files and the
 //! `hammer` command line.
 
+pub mod board;
 pub mod capture;
 pub mod cli;
 pub mod config;
+pub mod demo;
 pub mod emulator;
 pub mod estimate;
 pub mod link;
+pub mod monitor;
 pub mod plot;
+pub mod report;
 pub mod sim;
 pub mod simulate;
 pub mod trace;

@@ -21,11 +21,9 @@ fn tmp_dir(name: &str) -> PathBuf {
     dir
 }
 
-#[test]
-fn simulate_prints_a_cycle_summary_and_writes_trace_and_sidecar() {
-    let dir = tmp_dir("sim");
-    let out = dir.join("run.csv");
-    let (code, stdout, stderr) = hammer(&[
+/// `hammer simulate` of a short friction run with a fixed seed.
+fn simulate_to(out: &std::path::Path) -> (i32, String, String) {
+    hammer(&[
         "simulate",
         "--supply-bar",
         "4",
@@ -37,7 +35,14 @@ fn simulate_prints_a_cycle_summary_and_writes_trace_and_sidecar() {
         "3",
         "--out",
         out.to_str().unwrap(),
-    ]);
+    ])
+}
+
+#[test]
+fn simulate_prints_a_cycle_summary_and_writes_trace_and_sidecar() {
+    let dir = tmp_dir("sim");
+    let out = dir.join("run.csv");
+    let (code, stdout, stderr) = simulate_to(&out);
     assert_eq!(code, 0, "{stderr}");
     assert!(stdout.contains("effects: coulomb_friction"), "{stdout}");
     assert!(stdout.contains("steady mean over"), "{stdout}");
@@ -55,19 +60,7 @@ fn simulate_prints_a_cycle_summary_and_writes_trace_and_sidecar() {
     assert!(side["simulation"]["cycles"].as_array().unwrap().len() >= 4);
     // Same seed, same trace.
     let out2 = dir.join("again.csv");
-    hammer(&[
-        "simulate",
-        "--supply-bar",
-        "4",
-        "--duration",
-        "0.3",
-        "--effect",
-        "coulomb_friction:f0_n=1.7,k_n_per_bar=2.14",
-        "--seed",
-        "3",
-        "--out",
-        out2.to_str().unwrap(),
-    ]);
+    simulate_to(&out2);
     assert_eq!(std::fs::read(&out).unwrap(), std::fs::read(&out2).unwrap());
 }
 
@@ -201,4 +194,102 @@ fn estimate_prints_one_record_per_cycle_in_each_format() {
     let (code, _, err) = hammer(&["estimate", bad.to_str().unwrap()]);
     assert_eq!(code, 2);
     assert!(err.contains(":3:") && err.contains("oops"), "{err}");
+}
+
+fn report_lines(out: &str) -> Vec<&str> {
+    out.lines().filter(|l| l.starts_with('#')).collect()
+}
+
+/// The friction figure of a `hammer demo --headless` line.
+fn friction_of(line: &str) -> f64 {
+    let rest = line.split("friction").nth(1).unwrap();
+    rest.split_whitespace().next().unwrap().parse().unwrap()
+}
+
+#[test]
+fn demo_headless_runs_the_firmware_app_natively() {
+    let (code, out, err) = hammer(&["demo", "--headless", "--native", "--cycles", "6"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("natively"), "{err}");
+    let lines = report_lines(&out);
+    assert_eq!(lines.len(), 6, "{out}");
+    // The paper's friction at 4 bar.
+    for l in &lines[1..] {
+        assert!((friction_of(l) - 10.27).abs() < 0.3, "{l}");
+    }
+    assert!(out.contains("0 dropped samples"), "{out}");
+}
+
+#[test]
+fn demo_headless_uses_the_emulated_board_when_qemu_is_there() {
+    let emulated = hammer_host::emulator::qemu_available() && hammer_host::emulator::firmware_elf().exists();
+    assert!(
+        emulated,
+        "CI installs qemu-system-arm and builds the firmware before the tests (cargo xtask ci)"
+    );
+    let (code, out, err) = hammer(&["demo", "--headless", "--cycles", "3", "--supply-bar", "6"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("emulated board"), "{err}");
+    assert!(out.contains("device: qemu-mps2-an386"), "{out}");
+    let lines = report_lines(&out);
+    assert_eq!(lines.len(), 3);
+    assert!((friction_of(lines[2]) - 14.55).abs() < 0.4, "{}", lines[2]);
+}
+
+#[test]
+fn capture_from_a_demo_board_writes_a_trace_the_estimator_reads() {
+    let dir = tmp_dir("capture");
+    let out = dir.join("cap.csv");
+    let (code, stdout, err) = hammer(&[
+        "capture",
+        "--demo",
+        "5",
+        "--cycles",
+        "2",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert!(stdout.contains("captured"), "{stdout}");
+    let trace = hammer_host::trace::read_csv(&out).unwrap();
+    assert!(trace.len() > 4000, "one full cycle at 100 kS/s: {}", trace.len());
+    let side = hammer_host::trace::read_sidecar(&out).unwrap().unwrap();
+    assert_eq!(side.source, "device");
+    assert_eq!(side.supply_pressure_bar, Some(5.0));
+    // The capture runs from one impact past the next: one complete cycle.
+    let (code, jsonl, _) = hammer(&["estimate", out.to_str().unwrap(), "--format", "jsonl"]);
+    assert_eq!(code, 0);
+    let recs: Vec<serde_json::Value> = jsonl.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    assert_eq!(recs.len(), 1, "{jsonl}");
+    assert!(
+        (recs[0]["friction_n"].as_f64().unwrap() - 12.41).abs() < 0.3,
+        "{}",
+        recs[0]
+    );
+}
+
+#[test]
+fn config_check_names_the_field_and_range_or_prints_the_resolved_config() {
+    let dir = tmp_dir("check");
+    let good = dir.join("good.toml");
+    std::fs::write(
+        &good,
+        "[supply]\npressure_bar = 6.0\n[estimator]\ncoverage_factor = 3.0\n",
+    )
+    .unwrap();
+    let (code, out, err) = hammer(&["config", "check", good.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.contains(": ok") && out.contains("supply 6 bar"), "{out}");
+    let bad = dir.join("bad.toml");
+    std::fs::write(&bad, "[estimator]\ncoverage_factor = 9.0\n").unwrap();
+    let (code, _, err) = hammer(&["config", "check", bad.to_str().unwrap()]);
+    assert_eq!(code, 2);
+    assert!(
+        err.contains("estimator.coverage_factor") && err.contains("1 ..= 5"),
+        "{err}"
+    );
+    std::fs::write(&bad, "[sensors.rear]\nrange_min = 0.0\n").unwrap();
+    let (code, _, err) = hammer(&["config", "check", bad.to_str().unwrap()]);
+    assert_eq!(code, 2);
+    assert!(err.contains("missing field"), "{err}");
 }

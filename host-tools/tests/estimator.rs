@@ -70,6 +70,22 @@ fn coverage(m: &[Matched], err: impl Fn(&Matched) -> f64, u: impl Fn(&Matched) -
     m.iter().filter(|x| err(x).abs() <= u(x)).count() as f64 / m.len() as f64
 }
 
+/// Shares of cycles whose stated friction and energy uncertainties cover the actual error.
+fn coverages(m: &[Matched]) -> (f64, f64) {
+    (
+        coverage(
+            m,
+            |x| x.report.friction_n as f64 - x.truth.friction_cycle_n,
+            |x| x.report.friction_uncertainty_n as f64,
+        ),
+        coverage(
+            m,
+            |x| x.report.impact_energy_j as f64 - x.truth.impact_energy_j,
+            |x| x.report.impact_energy_uncertainty_j as f64,
+        ),
+    )
+}
+
 #[test]
 fn friction_energy_and_frequency_match_truth_from_4_to_7_bar() {
     let params = EstimatorParams::default();
@@ -123,31 +139,13 @@ fn friction_energy_and_frequency_match_truth_from_4_to_7_bar() {
         );
 
         // Stated uncertainty covers the actual error in at least 90 % of cycles.
-        let cov_f = coverage(
-            &m,
-            |x| x.report.friction_n as f64 - x.truth.friction_cycle_n,
-            |x| x.report.friction_uncertainty_n as f64,
-        );
-        let cov_e = coverage(
-            &m,
-            |x| x.report.impact_energy_j as f64 - x.truth.impact_energy_j,
-            |x| x.report.impact_energy_uncertainty_j as f64,
-        );
+        let (cov_f, cov_e) = coverages(&m);
         assert!(
             cov_f >= 0.9 && cov_e >= 0.9,
             "{bar} bar: coverage friction {cov_f}, energy {cov_e}"
         );
         let r = matched(&s, &estimate(&s, &random_only));
-        let cov_f = coverage(
-            &r,
-            |x| x.report.friction_n as f64 - x.truth.friction_cycle_n,
-            |x| x.report.friction_uncertainty_n as f64,
-        );
-        let cov_e = coverage(
-            &r,
-            |x| x.report.impact_energy_j as f64 - x.truth.impact_energy_j,
-            |x| x.report.impact_energy_uncertainty_j as f64,
-        );
+        let (cov_f, cov_e) = coverages(&r);
         println!(
             "{bar} bar: random-only uncertainty covers friction in {:.0} %, energy in {:.0} % of cycles",
             cov_f * 100.0,

@@ -1,0 +1,367 @@
+//! `hammer demo`: the whole chain with no hardware. A simulated hammer is
+//! turned into ADC codes and streamed into the firmware — the emulated board
+//! under QEMU, or the same app natively when QEMU is missing — and the
+//! dashboard (or, headless, a line per cycle) shows what the firmware reports.
+
+use std::io::{self, Read, Write};
+use std::net::TcpStream;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use hammer_estimator::RawSample;
+use hammer_wire::{encode, DeviceMsg, HostMsg, Report, SampleBlock, BLOCK_SAMPLES, MAX_FRAME, PROTOCOL_VERSION};
+
+use crate::emulator::{firmware_elf, qemu_available, Emulator};
+use crate::estimate::{estimator_config, to_codes};
+use crate::link::Link;
+use crate::sim::SimConfig;
+use crate::simulate::simulate;
+
+#[derive(Args, Debug, Clone)]
+pub struct DemoArgs {
+    /// Gauge supply pressure, bar.
+    #[arg(long, default_value_t = 4.0)]
+    pub supply_bar: f64,
+    /// Extra simulator effect: NAME or NAME:key=value,... (repeatable). The
+    /// paper's pressure-dependent friction is always on.
+    #[arg(long = "effect", value_name = "SPEC")]
+    pub effects: Vec<String>,
+    /// Friction rise per minute of running, relative (0.05 = +5 %/min): wear,
+    /// so the wear index climbs and the drift alarm fires.
+    #[arg(long, default_value_t = 0.0)]
+    pub wear_rate: f64,
+    /// Simulated hammer time to stream, s (default: 60, or enough for --cycles when headless).
+    #[arg(long)]
+    pub seconds: Option<f64>,
+    /// Print the reports instead of opening the dashboard; for tests and scripts.
+    #[arg(long)]
+    pub headless: bool,
+    /// Headless: stop after this many reports.
+    #[arg(long, default_value_t = 30)]
+    pub cycles: usize,
+    /// Run the firmware's app natively even if QEMU is installed.
+    #[arg(long)]
+    pub native: bool,
+    /// Seed of the sensor noise.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+}
+
+/// Where the firmware runs.
+pub enum Board {
+    Qemu(Emulator),
+    Native,
+}
+
+/// A byte link shared by the sample feeder and the dashboard: reads go to
+/// the dashboard, writes from both are serialised frame by frame.
+pub struct SharedPort {
+    read: Box<dyn Read + Send>,
+    write: Arc<Mutex<Box<dyn Write + Send>>>,
+}
+
+impl SharedPort {
+    pub fn new(read: Box<dyn Read + Send>, write: Arc<Mutex<Box<dyn Write + Send>>>) -> Self {
+        Self { read, write }
+    }
+}
+
+impl DemoArgs {
+    /// A demo hammer at `supply_bar` with the defaults, for `hammer capture --demo`.
+    pub fn for_capture(supply_bar: f64) -> Self {
+        Self {
+            supply_bar,
+            effects: vec![],
+            wear_rate: 0.0,
+            seconds: None,
+            headless: true,
+            cycles: 1,
+            native: false,
+            seed: 1,
+        }
+    }
+}
+
+impl Read for SharedPort {
+    fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+        self.read.read(buf)
+    }
+}
+
+impl Write for SharedPort {
+    fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
+        let mut w = self.write.lock().map_err(|_| io::Error::other("writer poisoned"))?;
+        w.write_all(buf)?;
+        Ok(buf.len())
+    }
+    fn flush(&mut self) -> io::Result<()> {
+        Ok(())
+    }
+}
+
+/// The simulated hammer as the ADC codes the board would sample.
+pub fn hammer_codes(args: &DemoArgs, seconds: f64) -> Result<Vec<RawSample>> {
+    let mut cfg = SimConfig::nominal(args.supply_bar);
+    cfg.solver.duration_s = seconds;
+    cfg.seed = args.seed;
+    cfg.effects
+        .apply_spec(&format!("coulomb_friction:growth_per_s={}", args.wear_rate / 60.0))?;
+    for e in &args.effects {
+        cfg.effects.apply_spec(e)?;
+    }
+    cfg.validate()?;
+    let sim = simulate(&cfg).context("simulation failed")?;
+    let est = estimator_config(
+        &cfg.hammer,
+        &cfg.sensors,
+        &cfg.estimator,
+        1.0 / cfg.solver.output_step_s,
+        None,
+    )?;
+    Ok(to_codes(&sim.trace(), &est))
+}
+
+/// Starts the board and returns it with its link's read and write halves.
+pub fn start_board(native: bool) -> Result<(Board, Box<dyn Read + Send>, Box<dyn Write + Send>)> {
+    let elf = firmware_elf();
+    if !native && qemu_available() && elf.exists() {
+        let mut emu = Emulator::start(&elf, false)?;
+        let s: TcpStream = emu.connect(Duration::from_secs(20))?;
+        s.set_read_timeout(Some(Duration::from_millis(50)))?;
+        let r = s.try_clone()?;
+        eprintln!(
+            "demo: firmware on the emulated board (QEMU mps2-an386, {})",
+            elf.display()
+        );
+        return Ok((Board::Qemu(emu), Box::new(r), Box::new(s)));
+    }
+    if !native {
+        if !qemu_available() {
+            eprintln!("demo: qemu-system-arm not found: running the firmware's app natively on this machine instead");
+        } else {
+            eprintln!(
+                "demo: {} not built (cargo xtask firmware): running the firmware's app natively instead",
+                elf.display()
+            );
+        }
+    } else {
+        eprintln!("demo: firmware app running natively (--native)");
+    }
+    let s = crate::board::start_native_board(hammer_estimator::Config::default())?;
+    s.set_read_timeout(Some(Duration::from_millis(50)))?;
+    let r = s.try_clone()?;
+    Ok((Board::Native, Box::new(r), Box::new(s)))
+}
+
+/// Streams `codes` as numbered sample blocks; paced to real time when `paced`.
+pub fn feed(codes: Vec<RawSample>, writer: Arc<Mutex<Box<dyn Write + Send>>>, paced: bool, sample_rate_hz: f64) {
+    let start = Instant::now();
+    let mut frame = [0u8; MAX_FRAME];
+    for (i, chunk) in codes.chunks(BLOCK_SAMPLES).enumerate() {
+        if paced {
+            let due = Duration::from_secs_f64((i * BLOCK_SAMPLES) as f64 / sample_rate_hz);
+            if let Some(wait) = due.checked_sub(start.elapsed()) {
+                std::thread::sleep(wait);
+            }
+        }
+        let block = SampleBlock {
+            seq: i as u32,
+            samples: chunk.iter().map(|s| [s.rear, s.front, s.accel]).collect(),
+        };
+        let Ok(n) = encode(&HostMsg::Samples(block), &mut frame) else {
+            continue;
+        };
+        let Ok(mut w) = writer.lock() else { return };
+        if w.write_all(&frame[..n]).is_err() {
+            return; // the board went away
+        }
+    }
+}
+
+/// One line per report, for headless runs.
+pub fn report_line(r: &Report) -> String {
+    let flags: Vec<&str> = r.flags().names().collect();
+    format!(
+        "#{:>4} t={:>8.4} s  friction {:>6.2} ± {:<4.2} N (stroke {:>6.2}, backhaul {:>6.2})  energy {:>6.3} ± {:<5.3} J (friction-blind {:>6.3})  {:>6.2} Hz  wear {:>7.1} J  drift {:>5.2}{}",
+        r.seq,
+        r.t_impact_s,
+        r.friction_n,
+        r.friction_uncertainty_n,
+        r.friction_stroke_n,
+        r.friction_backhaul_n,
+        r.impact_energy_j,
+        r.impact_energy_uncertainty_j,
+        r.impact_energy_frictionless_j,
+        r.frequency_hz,
+        r.wear_index_j,
+        r.drift_score,
+        if flags.is_empty() { String::new() } else { format!("  [{}]", flags.join(",")) }
+    )
+}
+
+pub fn run(args: &DemoArgs) -> Result<()> {
+    use std::io::IsTerminal;
+    let headless = args.headless || !std::io::stdout().is_terminal();
+    let seconds = args.seconds.unwrap_or(if headless {
+        0.15 + 0.05 * args.cycles as f64
+    } else {
+        60.0
+    });
+    eprintln!(
+        "demo: simulating {seconds} s of the paper's hammer at {} bar (friction{}{})",
+        args.supply_bar,
+        if args.wear_rate > 0.0 {
+            format!(", rising {:.1} %/min", args.wear_rate * 100.0)
+        } else {
+            String::new()
+        },
+        if args.effects.is_empty() {
+            String::new()
+        } else {
+            format!(", {}", args.effects.join(", "))
+        }
+    );
+    let codes = hammer_codes(args, seconds)?;
+    let (board, read, write) = start_board(args.native)?;
+    let writer = Arc::new(Mutex::new(write));
+    let port = SharedPort {
+        read,
+        write: writer.clone(),
+    };
+    let feeder_writer = writer.clone();
+    let paced = !headless;
+    let feeder = std::thread::spawn(move || feed(codes, feeder_writer, paced, 1e5));
+    let result = if headless {
+        headless_loop(port, args.cycles)
+    } else {
+        dashboard(port, &board)
+    };
+    drop(board); // stops QEMU
+    let _ = feeder.join();
+    result
+}
+
+fn headless_loop(port: SharedPort, cycles: usize) -> Result<()> {
+    let mut link = Link::new(port);
+    let deadline = Duration::from_secs(30);
+    let (info, _) = handshake(&mut link, deadline)?;
+    println!(
+        "device: {} firmware {}.{}.{} protocol {} config {:08x}",
+        String::from_utf8_lossy(&info.board),
+        info.firmware_version[0],
+        info.firmware_version[1],
+        info.firmware_version[2],
+        info.protocol_version,
+        info.config_hash
+    );
+    let mut seen = 0;
+    let mut last = Instant::now();
+    while seen < cycles {
+        match link.recv(Duration::from_millis(200))? {
+            Some(DeviceMsg::Report(r)) => {
+                println!("{}", report_line(&r));
+                seen += 1;
+                last = Instant::now();
+            }
+            Some(DeviceMsg::Alarm(a)) => println!(
+                "ALARM {:?} at cycle {} (drift score {:.1})",
+                a.kind, a.cycle_seq, a.drift_score
+            ),
+            Some(DeviceMsg::Rejected { command, reason }) => println!("device rejected {command:?}: {reason:?}"),
+            Some(_) => {}
+            None if last.elapsed() > Duration::from_secs(60) => bail!("no report from the board for 60 s"),
+            None => {}
+        }
+    }
+    link.send(&HostMsg::GetStatus)?;
+    let (status, _) = link.recv_until(deadline, |m| if let DeviceMsg::Status(s) = m { Some(*s) } else { None })?;
+    if let Some(s) = status {
+        println!(
+            "status: {} samples, {} cycles ({} invalid), {} dropped samples, {} frames sent, {} dropped, rx errors {}",
+            s.samples,
+            s.cycles,
+            s.invalid_cycles,
+            s.dropped_samples,
+            s.frames_sent,
+            s.frames_dropped,
+            s.rx_crc_errors + s.rx_cobs_errors + s.rx_decode_errors + s.rx_oversize
+        );
+    }
+    Ok(())
+}
+
+/// The handshake, retried: the board may still be booting.
+pub fn handshake<S: Read + Write>(
+    link: &mut Link<S>,
+    timeout: Duration,
+) -> Result<(hammer_wire::DeviceInfo, Vec<DeviceMsg>)> {
+    let deadline = Instant::now() + timeout;
+    while Instant::now() < deadline {
+        link.send(&HostMsg::Hello {
+            protocol_version: PROTOCOL_VERSION,
+        })?;
+        let (info, seen) = link.recv_until(Duration::from_secs(2), |m| {
+            if let DeviceMsg::Hello(i) = m {
+                Some(i.clone())
+            } else {
+                None
+            }
+        })?;
+        if let Some(info) = info {
+            if info.protocol_version != PROTOCOL_VERSION {
+                bail!(
+                    "device speaks protocol {}, this tool {}: update one of them",
+                    info.protocol_version,
+                    PROTOCOL_VERSION
+                );
+            }
+            return Ok((info, seen));
+        }
+    }
+    bail!("no answer to the handshake in {} s", timeout.as_secs())
+}
+
+/// Hands the dashboard the demo board's one link; there is nothing to
+/// reconnect to once it closes.
+struct DemoConnector {
+    port: Option<SharedPort>,
+    describe: String,
+}
+
+impl crate::monitor::Connector for DemoConnector {
+    fn connect(&mut self) -> io::Result<Box<dyn crate::monitor::Port>> {
+        match self.port.take() {
+            Some(p) => Ok(Box::new(p)),
+            None => Err(io::Error::new(
+                io::ErrorKind::NotConnected,
+                "the demo board's link has closed",
+            )),
+        }
+    }
+
+    fn describe(&self) -> String {
+        self.describe.clone()
+    }
+}
+
+fn dashboard(port: SharedPort, board: &Board) -> Result<()> {
+    #[derive(clap::Parser)]
+    struct Defaults {
+        #[command(flatten)]
+        monitor: crate::monitor::MonitorArgs,
+    }
+    let args = <Defaults as clap::Parser>::parse_from(["hammer-demo"]).monitor;
+    let describe = match board {
+        Board::Qemu(e) => format!("demo: emulated board (QEMU) on tcp:127.0.0.1:{}", e.port),
+        Board::Native => "demo: firmware app running natively".to_string(),
+    };
+    crate::monitor::run_with(
+        Box::new(DemoConnector {
+            port: Some(port),
+            describe,
+        }),
+        &args,
+    )
+}

@@ -1,0 +1,351 @@
+//! `--log DIR`: what a bench run leaves behind.
+//!
+//! - `cycles.csv`: one row per report the dashboard interpreted, every field
+//!   of [`Report`] at full precision, with the host's arrival time (RFC 3339
+//!   and Unix seconds) beside the device's `t_impact_s`.
+//! - `link.log`: one line per link event (connects, disconnects with the
+//!   outage's start and end, handshake, protocol mismatch, sequence gaps,
+//!   frame errors, rejections, alarms), each starting with an RFC 3339 time.
+//! - `frames.bin`: every byte received, as it arrived, for `hammer replay`.
+//!   An 8-byte magic `HMFRAMES`, then records, all little-endian:
+//!   `[u64 host_time_us][u32 len][len bytes]`, host time in microseconds
+//!   since the Unix epoch. `len` = [`OPENED`] marks a (re)connect and
+//!   [`LOST`] a disconnect; no bytes follow a marker. Chunks are at most
+//!   [`MAX_CHUNK`] bytes, so anything longer is corruption.
+//!
+//! Existing files are appended to (a second run adds a new connection to
+//! frames.bin). Everything is flushed every [`FLUSH_EVERY`] and on each
+//! disconnect, so a crash loses at most that much.
+
+use std::fs::{File, OpenOptions};
+use std::io::{self, BufWriter, Read, Write};
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use hammer_wire::{DeviceMsg, Report};
+
+use super::event::{describe, flag_list, rfc3339, Event, Limiter, Stamped};
+
+pub const MAGIC: &[u8; 8] = b"HMFRAMES";
+pub const OPENED: u32 = 0xFFFF_FFFF;
+pub const LOST: u32 = 0xFFFF_FFFE;
+pub const MAX_CHUNK: u32 = 1 << 20;
+pub const FLUSH_EVERY: Duration = Duration::from_millis(500);
+
+pub const CYCLES_HEADER: &str = "host_time,host_unix_s,seq,t_impact_s,period_s,frequency_hz,friction_n,\
+friction_stroke_n,friction_backhaul_n,friction_uncertainty_n,friction_stroke_uncertainty_n,\
+friction_backhaul_uncertainty_n,impact_velocity_mps,impact_velocity_frictionless_mps,impact_energy_j,\
+impact_energy_frictionless_j,impact_energy_uncertainty_j,impact_energy_frictionless_uncertainty_j,\
+friction_work_j,friction_work_ratio,stroke_m,peak_rear_pa,peak_front_pa,accel_zero_shift_mps2,wear_index_j,\
+wear_remaining_fraction,remaining_life_cycles,drift_score,valid,flags";
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Marker {
+    Opened,
+    Lost,
+}
+
+/// One record of frames.bin.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Record {
+    Bytes { t_us: u64, bytes: Vec<u8> },
+    Marker { t_us: u64, marker: Marker },
+}
+
+pub struct Logger {
+    dir: PathBuf,
+    cycles: BufWriter<File>,
+    link: BufWriter<File>,
+    frames: BufWriter<File>,
+    last_flush: Instant,
+    frame_errors: Limiter,
+}
+
+fn append(path: &Path) -> io::Result<(File, bool)> {
+    let f = OpenOptions::new().create(true).append(true).open(path)?;
+    let fresh = f.metadata()?.len() == 0;
+    Ok((f, fresh))
+}
+
+impl Logger {
+    pub fn open(dir: &Path) -> io::Result<Self> {
+        std::fs::create_dir_all(dir)?;
+        let (cycles, fresh) = append(&dir.join("cycles.csv"))?;
+        let mut cycles = BufWriter::new(cycles);
+        if fresh {
+            writeln!(cycles, "{CYCLES_HEADER}")?;
+        }
+        let (frames, fresh) = append(&dir.join("frames.bin"))?;
+        let mut frames = BufWriter::with_capacity(64 * 1024, frames);
+        if fresh {
+            frames.write_all(MAGIC)?;
+        }
+        let (link, _) = append(&dir.join("link.log"))?;
+        let mut l = Self {
+            dir: dir.to_path_buf(),
+            cycles,
+            link: BufWriter::new(link),
+            frames,
+            last_flush: Instant::now(),
+            frame_errors: Limiter::new(20),
+        };
+        l.line(
+            super::event::now_us(),
+            &format!("monitor started, hammer {}", env!("CARGO_PKG_VERSION")),
+        )?;
+        l.flush()?;
+        Ok(l)
+    }
+
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    pub fn raw(&mut self, t_us: u64, bytes: &[u8]) -> io::Result<()> {
+        for chunk in bytes.chunks(MAX_CHUNK as usize) {
+            self.frames.write_all(&t_us.to_le_bytes())?;
+            self.frames.write_all(&(chunk.len() as u32).to_le_bytes())?;
+            self.frames.write_all(chunk)?;
+        }
+        Ok(())
+    }
+
+    pub fn marker(&mut self, t_us: u64, m: Marker) -> io::Result<()> {
+        self.frames.write_all(&t_us.to_le_bytes())?;
+        let code = match m {
+            Marker::Opened => OPENED,
+            Marker::Lost => LOST,
+        };
+        self.frames.write_all(&code.to_le_bytes())
+    }
+
+    fn line(&mut self, t_us: u64, text: &str) -> io::Result<()> {
+        writeln!(self.link, "{} {text}", rfc3339(t_us))
+    }
+
+    /// Reports go to cycles.csv, news to link.log.
+    pub fn event(&mut self, ev: &Stamped) -> io::Result<()> {
+        match &ev.event {
+            Event::Msg(DeviceMsg::Report(r)) => writeln!(self.cycles, "{}", csv_row(ev.t_us, r)),
+            Event::FrameError { .. } => match self.frame_errors.allow(ev.t_us) {
+                Some(held) => {
+                    if held > 0 {
+                        self.line(ev.t_us, &format!("({held} more frame errors not listed)"))?;
+                    }
+                    match describe(&ev.event) {
+                        Some((_, text)) => self.line(ev.t_us, &text),
+                        None => Ok(()),
+                    }
+                }
+                None => Ok(()),
+            },
+            Event::Stats(_) => Ok(()),
+            Event::Disconnected { .. } => {
+                if let Some((_, text)) = describe(&ev.event) {
+                    self.line(ev.t_us, &text)?;
+                }
+                self.flush()
+            }
+            e => match describe(e) {
+                Some((_, text)) => self.line(ev.t_us, &text),
+                None => Ok(()),
+            },
+        }
+    }
+
+    pub fn flush_if_due(&mut self) -> io::Result<()> {
+        if self.last_flush.elapsed() >= FLUSH_EVERY {
+            self.flush()?;
+        }
+        Ok(())
+    }
+
+    pub fn flush(&mut self) -> io::Result<()> {
+        self.last_flush = Instant::now();
+        self.frames.flush()?;
+        self.cycles.flush()?;
+        self.link.flush()
+    }
+}
+
+impl Drop for Logger {
+    fn drop(&mut self) {
+        let t = super::event::now_us();
+        let _ = self.line(t, "monitor stopped");
+        let _ = self.flush();
+    }
+}
+
+/// One cycles.csv row; `{}` prints the shortest text that reads back to the same f32.
+pub fn csv_row(t_us: u64, r: &Report) -> String {
+    format!(
+        "{},{}.{:06},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+        rfc3339(t_us),
+        t_us / 1_000_000,
+        t_us % 1_000_000,
+        r.seq,
+        r.t_impact_s,
+        r.period_s,
+        r.frequency_hz,
+        r.friction_n,
+        r.friction_stroke_n,
+        r.friction_backhaul_n,
+        r.friction_uncertainty_n,
+        r.friction_stroke_uncertainty_n,
+        r.friction_backhaul_uncertainty_n,
+        r.impact_velocity_mps,
+        r.impact_velocity_frictionless_mps,
+        r.impact_energy_j,
+        r.impact_energy_frictionless_j,
+        r.impact_energy_uncertainty_j,
+        r.impact_energy_frictionless_uncertainty_j,
+        r.friction_work_j,
+        r.friction_work_ratio,
+        r.stroke_m,
+        r.peak_rear_pa,
+        r.peak_front_pa,
+        r.accel_zero_shift_mps2,
+        r.wear_index_j,
+        r.wear_remaining_fraction,
+        r.remaining_life_cycles,
+        r.drift_score,
+        r.is_valid(),
+        flag_list(r.flags)
+    )
+}
+
+/// Reads frames.bin record by record; bounded memory whatever the file holds.
+pub struct FrameReader<R> {
+    r: R,
+    offset: u64,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum FrameFileError {
+    #[error("not a frames.bin (no HMFRAMES header)")]
+    NotFrames,
+    #[error("corrupt record at byte {offset}: length {len} (longest chunk is {MAX_CHUNK})")]
+    Corrupt { offset: u64, len: u32 },
+    #[error("the last record is cut short at byte {offset} (recording interrupted?)")]
+    Truncated { offset: u64 },
+    #[error(transparent)]
+    Io(#[from] io::Error),
+}
+
+impl<R: Read> FrameReader<R> {
+    pub fn new(mut r: R) -> Result<Self, FrameFileError> {
+        let mut magic = [0u8; 8];
+        match read_full(&mut r, &mut magic)? {
+            8 if &magic == MAGIC => Ok(Self { r, offset: 8 }),
+            _ => Err(FrameFileError::NotFrames),
+        }
+    }
+
+    /// The next record, `Ok(None)` at a clean end of file.
+    pub fn next_record(&mut self) -> Result<Option<Record>, FrameFileError> {
+        let start = self.offset;
+        let mut head = [0u8; 12];
+        match read_full(&mut self.r, &mut head)? {
+            0 => return Ok(None),
+            12 => {}
+            _ => return Err(FrameFileError::Truncated { offset: start }),
+        }
+        let t_us = u64::from_le_bytes(head[..8].try_into().unwrap_or_default());
+        let len = u32::from_le_bytes(head[8..].try_into().unwrap_or_default());
+        self.offset += 12;
+        let marker = match len {
+            OPENED => Some(Marker::Opened),
+            LOST => Some(Marker::Lost),
+            _ => None,
+        };
+        if let Some(marker) = marker {
+            return Ok(Some(Record::Marker { t_us, marker }));
+        }
+        if len > MAX_CHUNK {
+            return Err(FrameFileError::Corrupt { offset: start, len });
+        }
+        let mut bytes = vec![0u8; len as usize];
+        if read_full(&mut self.r, &mut bytes)? != bytes.len() {
+            return Err(FrameFileError::Truncated { offset: start });
+        }
+        self.offset += u64::from(len);
+        Ok(Some(Record::Bytes { t_us, bytes }))
+    }
+}
+
+fn read_full(r: &mut impl Read, buf: &mut [u8]) -> io::Result<usize> {
+    let mut n = 0;
+    while n < buf.len() {
+        match r.read(&mut buf[n..]) {
+            Ok(0) => break,
+            Ok(k) => n += k,
+            Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(e),
+        }
+    }
+    Ok(n)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn frames_bin_round_trips_and_reports_damage() {
+        let dir = std::env::temp_dir().join(format!("hammer-monitor-log-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        {
+            let mut l = Logger::open(&dir).unwrap();
+            l.marker(5, Marker::Opened).unwrap();
+            l.raw(6, b"abc").unwrap();
+            l.marker(7, Marker::Lost).unwrap();
+        }
+        let bytes = std::fs::read(dir.join("frames.bin")).unwrap();
+        let mut r = FrameReader::new(&bytes[..]).unwrap();
+        assert_eq!(
+            r.next_record().unwrap(),
+            Some(Record::Marker {
+                t_us: 5,
+                marker: Marker::Opened
+            })
+        );
+        assert_eq!(
+            r.next_record().unwrap(),
+            Some(Record::Bytes {
+                t_us: 6,
+                bytes: b"abc".to_vec()
+            })
+        );
+        assert!(matches!(r.next_record().unwrap(), Some(Record::Marker { t_us: 7, .. })));
+        assert_eq!(r.next_record().unwrap(), None);
+
+        let mut r = FrameReader::new(&bytes[..bytes.len() - 14]).unwrap();
+        r.next_record().unwrap();
+        assert!(matches!(r.next_record(), Err(FrameFileError::Truncated { offset: 20 })));
+        let mut bad = bytes.clone();
+        bad[28..32].copy_from_slice(&(MAX_CHUNK + 1).to_le_bytes());
+        let mut r = FrameReader::new(&bad[..]).unwrap();
+        r.next_record().unwrap();
+        assert!(matches!(
+            r.next_record(),
+            Err(FrameFileError::Corrupt { offset: 20, .. })
+        ));
+        assert!(matches!(
+            FrameReader::new(&b"nonsense"[..]),
+            Err(FrameFileError::NotFrames)
+        ));
+        let header = std::fs::read_to_string(dir.join("cycles.csv")).unwrap();
+        assert_eq!(header.trim_end(), CYCLES_HEADER);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn csv_rows_have_a_value_per_column() {
+        let row = csv_row(1_700_000_000_123_456, &Report::default());
+        assert_eq!(row.split(',').count(), CYCLES_HEADER.split(',').count());
+        assert!(
+            row.starts_with("2023-11-14T22:13:20.123456Z,1700000000.123456,0,"),
+            "{row}"
+        );
+    }
+}

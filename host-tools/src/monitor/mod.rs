@@ -1,0 +1,159 @@
+//! `hammer monitor`: the live dashboard of a device's per-cycle reports, and
+//! `hammer replay`: the same dashboard fed from a recorded `frames.bin`.
+//!
+//! One reader thread owns the port ([`reader`]): it decodes frames, checks
+//! report sequence numbers, shakes hands on every (re)connect, reconnects
+//! when the port goes away and writes the logs ([`log`]), so logging never
+//! waits for the screen. The screen side ([`app`] state, [`ui`] drawing, or
+//! one line per report in headless mode) only consumes [`event::Stamped`]
+//! events from a channel. Replay ([`replay`]) produces the same events from
+//! the recorded bytes through the same decoding core ([`reader::Ingest`]), so
+//! what a replay shows is what the live dashboard showed.
+
+pub mod app;
+pub mod connect;
+pub mod event;
+pub mod headless;
+pub mod log;
+pub mod reader;
+pub mod replay;
+pub mod ui;
+
+use std::io::IsTerminal;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{mpsc, Arc};
+
+use anyhow::{bail, Context, Result};
+
+pub use connect::connector_for;
+
+/// A way to (re)open the link to a device: a serial port path, `auto`, or
+/// `tcp:HOST:PORT` (the emulated board).
+pub trait Connector: Send {
+    fn connect(&mut self) -> std::io::Result<Box<dyn Port>>;
+    fn describe(&self) -> String;
+}
+
+/// A byte stream to a device. Reads must time out (short read timeout) so the
+/// reader thread can resend a handshake and notice a stop request.
+pub trait Port: std::io::Read + std::io::Write + Send {}
+impl<T: std::io::Read + std::io::Write + Send> Port for T {}
+
+/// Events buffered between the reader and the screen. The reader never waits
+/// for the screen (logging goes on); beyond this the screen skips events and
+/// says so, and catches up from the next counter snapshot.
+const EVENT_QUEUE: usize = 16_384;
+
+#[derive(clap::Args, Debug, Clone)]
+pub struct MonitorArgs {
+    /// The device: a serial port (/dev/ttyACM0, /dev/serial/by-id/...), `auto`
+    /// (the first of /dev/serial/by-id/*, /dev/ttyACM*, /dev/ttyUSB*), or
+    /// tcp:HOST:PORT (the emulated board's UART).
+    #[arg(long, default_value = "auto")]
+    pub port: String,
+    /// Directory for cycles.csv (decoded reports), link.log (connects,
+    /// disconnects, gaps, errors) and frames.bin (every received byte, for
+    /// `hammer replay`). Created if missing; existing files are appended to.
+    #[arg(long, value_name = "DIR")]
+    pub log: Option<PathBuf>,
+    /// Seconds of history in the charts.
+    #[arg(long, default_value_t = 300.0)]
+    pub history_s: f64,
+    /// One line per report and per link event instead of the dashboard
+    /// (also used when stdout is not a terminal).
+    #[arg(long)]
+    pub headless: bool,
+    /// Stop after this many reports (for scripts and tests).
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
+    pub exit_after_reports: Option<u64>,
+}
+
+impl Default for MonitorArgs {
+    fn default() -> Self {
+        Self {
+            port: "auto".into(),
+            log: None,
+            history_s: 300.0,
+            headless: false,
+            exit_after_reports: None,
+        }
+    }
+}
+
+#[derive(clap::Args, Debug, Clone)]
+pub struct ReplayArgs {
+    /// A frames.bin written by `hammer monitor --log DIR` (or the DIR itself).
+    /// Format: 8 bytes "HMFRAMES", then records [u64 host_time_us LE][u32 len
+    /// LE][len bytes]; len 0xFFFF_FFFF marks a (re)connect, 0xFFFF_FFFE a
+    /// disconnect (no bytes follow a marker).
+    pub log: PathBuf,
+    /// One line per report and per link event instead of the dashboard
+    /// (also used when stdout is not a terminal).
+    #[arg(long)]
+    pub headless: bool,
+    /// Playback speed relative to the recording (2 = twice as fast; 0 = as fast as possible).
+    #[arg(long, default_value_t = 1.0)]
+    pub speed: f64,
+}
+
+/// How the screen side runs and when it stops on its own.
+#[derive(Debug, Clone, Copy)]
+pub struct UiOptions {
+    pub headless: bool,
+    pub exit_after_reports: Option<u64>,
+    /// Live: stop on a protocol mismatch in headless mode (nothing to show).
+    pub live: bool,
+}
+
+/// Runs the monitor on the port named by `--port`.
+pub fn run(args: &MonitorArgs) -> Result<()> {
+    let connector = connector_for(&args.port)?;
+    run_with(connector, args)
+}
+
+/// Runs the monitor on any connector (the demo passes its own).
+pub fn run_with(connector: Box<dyn Connector>, args: &MonitorArgs) -> Result<()> {
+    if !(args.history_s.is_finite() && args.history_s > 0.0) {
+        bail!(
+            "--history-s must be a positive number of seconds, not {}",
+            args.history_s
+        );
+    }
+    let logger = match &args.log {
+        Some(dir) => Some(log::Logger::open(dir).with_context(|| format!("cannot log to {}", dir.display()))?),
+        None => None,
+    };
+    let headless = args.headless || !std::io::stdout().is_terminal();
+    let title = connector.describe();
+    let (tx, rx) = mpsc::sync_channel(EVENT_QUEUE);
+    let stop = Arc::new(AtomicBool::new(false));
+    let reader = reader::spawn(connector, logger, tx, stop.clone())?;
+    let mut app = app::App::new(title, true, args.history_s);
+    let opts = UiOptions {
+        headless,
+        exit_after_reports: args.exit_after_reports,
+        live: true,
+    };
+    let result = show(&mut app, &rx, opts);
+    stop.store(true, Ordering::Relaxed);
+    drop(rx);
+    // The reader notices within one read timeout or retry pause, then flushes the logs.
+    if reader.join().is_err() {
+        eprintln!("the reader thread panicked; the logs may be incomplete");
+    }
+    result
+}
+
+/// Replays a recorded `frames.bin` through the decoder and the dashboard.
+pub fn replay(args: &ReplayArgs) -> Result<()> {
+    replay::run(args)
+}
+
+pub(crate) fn show(app: &mut app::App, rx: &mpsc::Receiver<event::Stamped>, opts: UiOptions) -> Result<()> {
+    if opts.headless {
+        headless::run(app, rx, opts)
+    } else {
+        ui::run(app, rx, opts)
+    }
+}

@@ -1,0 +1,506 @@
+//! The reader thread, which owns the port, and [`Ingest`], the decoding core
+//! it shares with `hammer replay`.
+
+use std::collections::VecDeque;
+use std::io::{self, Read, Write as _};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{SyncSender, TrySendError};
+use std::sync::Arc;
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use hammer_wire::{
+    encode, CommandKind, DecodeError, Decoder, DeviceMsg, HostMsg, RejectReason, MAX_FRAME, PROTOCOL_VERSION,
+};
+
+use super::event::{now_us, Event, LinkStats, Stamped};
+use super::log::{Logger, Marker};
+use super::{Connector, Port};
+
+/// Pause between attempts to reopen a lost port.
+pub const RETRY: Duration = Duration::from_millis(500);
+/// Pause between unanswered `Hello`s: a board that was just plugged in (or a
+/// QEMU that just accepted) may miss the first.
+pub const HELLO_RETRY: Duration = Duration::from_secs(1);
+/// Messages kept while the handshake has not said whether they can be read.
+const HELD_CAP: usize = 256;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Handshake {
+    Pending,
+    Done,
+    /// The device speaks this other protocol version.
+    Mismatch(u16),
+}
+
+/// Bytes in, events out: framing, the handshake's verdict, report sequence
+/// checks and the link counters. Knows nothing of ports or clocks, so a
+/// replay of the recorded bytes yields the same events as the live link.
+pub struct Ingest {
+    dec: Decoder<MAX_FRAME>,
+    stats: LinkStats,
+    handshake: Handshake,
+    held: VecDeque<DeviceMsg>,
+    last_seq: Option<u32>,
+    lost_at_us: Option<u64>,
+    opened_before: bool,
+}
+
+impl Default for Ingest {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Ingest {
+    pub fn new() -> Self {
+        Self {
+            dec: Decoder::new(),
+            stats: LinkStats::default(),
+            handshake: Handshake::Pending,
+            held: VecDeque::new(),
+            last_seq: None,
+            lost_at_us: None,
+            opened_before: false,
+        }
+    }
+
+    pub fn stats(&self) -> &LinkStats {
+        &self.stats
+    }
+
+    pub fn handshake(&self) -> Handshake {
+        self.handshake
+    }
+
+    /// A new connection: a fresh decoder (a frame cut by the disconnect must
+    /// not swallow the first new one) and a new handshake; counters go on.
+    pub fn opened(&mut self, t_us: u64, port: String, emit: &mut dyn FnMut(Stamped)) {
+        self.dec = Decoder::new();
+        self.handshake = Handshake::Pending;
+        self.held.clear();
+        if self.opened_before {
+            self.stats.reconnects = self.stats.reconnects.saturating_add(1);
+        }
+        self.opened_before = true;
+        self.stats.connected = true;
+        let lost_at_us = self.lost_at_us.take();
+        emit(Stamped {
+            t_us,
+            event: Event::Connected {
+                port,
+                reconnects: self.stats.reconnects,
+                lost_at_us,
+                outage_us: lost_at_us.map(|l| t_us.saturating_sub(l)),
+            },
+        });
+        emit(Stamped {
+            t_us,
+            event: Event::Stats(self.stats),
+        });
+    }
+
+    pub fn lost(&mut self, t_us: u64, port: String, reason: String, emit: &mut dyn FnMut(Stamped)) {
+        self.stats.connected = false;
+        self.lost_at_us = Some(t_us);
+        emit(Stamped {
+            t_us,
+            event: Event::Disconnected { port, reason },
+        });
+        emit(Stamped {
+            t_us,
+            event: Event::Stats(self.stats),
+        });
+    }
+
+    /// Bytes as they arrived at `t_us`.
+    pub fn feed(&mut self, t_us: u64, bytes: &[u8], emit: &mut dyn FnMut(Stamped)) {
+        self.stats.bytes += bytes.len() as u64;
+        for &b in bytes {
+            match self.dec.push::<DeviceMsg>(b) {
+                None => {}
+                Some(Ok(m)) => {
+                    self.stats.frames += 1;
+                    self.stats.last_frame_us = Some(t_us);
+                    self.message(t_us, m, emit);
+                }
+                Some(Err(kind)) => {
+                    let c = match kind {
+                        DecodeError::Crc => &mut self.stats.crc_errors,
+                        DecodeError::Cobs => &mut self.stats.cobs_errors,
+                        DecodeError::Message => &mut self.stats.decode_errors,
+                        DecodeError::Oversize => &mut self.stats.oversize,
+                    };
+                    *c += 1;
+                    let total = self.stats.frame_errors();
+                    emit(Stamped {
+                        t_us,
+                        event: Event::FrameError { kind, total },
+                    });
+                }
+            }
+        }
+        emit(Stamped {
+            t_us,
+            event: Event::Stats(self.stats),
+        });
+    }
+
+    fn message(&mut self, t_us: u64, m: DeviceMsg, emit: &mut dyn FnMut(Stamped)) {
+        let mismatch = match &m {
+            DeviceMsg::Hello(info) if info.protocol_version != PROTOCOL_VERSION => Some(info.protocol_version),
+            DeviceMsg::Rejected {
+                command: CommandKind::Hello,
+                reason: RejectReason::ProtocolMismatch { device },
+            } => Some(*device),
+            _ => None,
+        };
+        if let Some(device) = mismatch {
+            self.held.clear();
+            if self.handshake != Handshake::Mismatch(device) {
+                self.handshake = Handshake::Mismatch(device);
+                emit(Stamped {
+                    t_us,
+                    event: Event::VersionMismatch { device },
+                });
+            }
+            return;
+        }
+        if let DeviceMsg::Hello(info) = m {
+            let first = self.handshake != Handshake::Done;
+            self.handshake = Handshake::Done;
+            emit(Stamped {
+                t_us,
+                event: Event::Device(info),
+            });
+            if first {
+                while let Some(h) = self.held.pop_front() {
+                    self.interpret(t_us, h, emit);
+                }
+            }
+            return;
+        }
+        match self.handshake {
+            Handshake::Done => self.interpret(t_us, m, emit),
+            Handshake::Pending => {
+                if self.held.len() >= HELD_CAP {
+                    self.held.pop_front();
+                    self.stats.unhandshaken_dropped += 1;
+                }
+                self.held.push_back(m);
+            }
+            Handshake::Mismatch(_) => {}
+        }
+    }
+
+    fn interpret(&mut self, t_us: u64, m: DeviceMsg, emit: &mut dyn FnMut(Stamped)) {
+        if let DeviceMsg::Report(r) = &m {
+            if let Some(prev) = self.last_seq {
+                let expected = prev.wrapping_add(1);
+                if r.seq != expected {
+                    self.stats.seq_gaps += 1;
+                    if r.seq > expected {
+                        self.stats.lost_reports += u64::from(r.seq - expected);
+                    }
+                    emit(Stamped {
+                        t_us,
+                        event: Event::SeqGap { expected, got: r.seq },
+                    });
+                }
+            }
+            self.last_seq = Some(r.seq);
+            self.stats.reports += 1;
+        }
+        emit(Stamped {
+            t_us,
+            event: Event::Msg(m),
+        });
+    }
+}
+
+/// Starts the thread that owns the port until `stop` is set.
+pub fn spawn(
+    connector: Box<dyn Connector>,
+    logger: Option<Logger>,
+    tx: SyncSender<Stamped>,
+    stop: Arc<AtomicBool>,
+) -> io::Result<JoinHandle<()>> {
+    let mut r = Reader {
+        connector,
+        logger,
+        tx,
+        stop,
+        ingest: Ingest::new(),
+        ui_dropped: 0,
+    };
+    std::thread::Builder::new()
+        .name("monitor-reader".into())
+        .spawn(move || r.run())
+}
+
+struct Reader {
+    connector: Box<dyn Connector>,
+    logger: Option<Logger>,
+    tx: SyncSender<Stamped>,
+    stop: Arc<AtomicBool>,
+    ingest: Ingest,
+    ui_dropped: u64,
+}
+
+/// The logs first (they must not miss anything), then the screen, which may
+/// lag: it is never waited for, and what it missed is counted.
+fn deliver(logger: &mut Option<Logger>, tx: &SyncSender<Stamped>, ui_dropped: &mut u64, ev: Stamped) {
+    if let Some(l) = logger {
+        if let Err(e) = l.event(&ev) {
+            give_up_logging(logger, tx, e);
+        }
+    }
+    match tx.try_send(ev) {
+        Ok(()) => {}
+        Err(TrySendError::Full(_)) => *ui_dropped += 1,
+        Err(TrySendError::Disconnected(_)) => {}
+    }
+}
+
+fn give_up_logging(logger: &mut Option<Logger>, tx: &SyncSender<Stamped>, e: io::Error) {
+    *logger = None;
+    let _ = tx.try_send(Stamped::now(Event::Note(format!("logging stopped: {e}"))));
+}
+
+impl Reader {
+    fn stopped(&self) -> bool {
+        self.stop.load(Ordering::Relaxed)
+    }
+
+    fn emit(&mut self, ev: Stamped) {
+        deliver(&mut self.logger, &self.tx, &mut self.ui_dropped, ev);
+    }
+
+    fn marker(&mut self, t_us: u64, m: Marker) {
+        if let Some(l) = &mut self.logger {
+            if let Err(e) = l.marker(t_us, m) {
+                give_up_logging(&mut self.logger, &self.tx, e);
+            }
+        }
+    }
+
+    fn sleep(&mut self, d: Duration) {
+        let until = Instant::now() + d;
+        while !self.stopped() {
+            let Some(left) = until.checked_duration_since(Instant::now()) else {
+                break;
+            };
+            std::thread::sleep(left.min(Duration::from_millis(50)));
+            self.flush_due();
+        }
+    }
+
+    fn flush_due(&mut self) {
+        if let Some(l) = &mut self.logger {
+            if let Err(e) = l.flush_if_due() {
+                give_up_logging(&mut self.logger, &self.tx, e);
+            }
+        }
+    }
+
+    fn run(&mut self) {
+        let mut outage_reported = false;
+        while !self.stopped() {
+            match self.connector.connect() {
+                Ok(port) => {
+                    outage_reported = false;
+                    let name = self.connector.describe();
+                    let t = now_us();
+                    self.marker(t, Marker::Opened);
+                    let (logger, tx, dropped) = (&mut self.logger, &self.tx, &mut self.ui_dropped);
+                    self.ingest
+                        .opened(t, name.clone(), &mut |ev| deliver(logger, tx, dropped, ev));
+                    let reason = self.session(port);
+                    let t = now_us();
+                    self.marker(t, Marker::Lost);
+                    let (logger, tx, dropped) = (&mut self.logger, &self.tx, &mut self.ui_dropped);
+                    self.ingest
+                        .lost(t, name, reason, &mut |ev| deliver(logger, tx, dropped, ev));
+                    if let Some(l) = &mut self.logger {
+                        let _ = l.flush();
+                    }
+                }
+                Err(e) => {
+                    if !outage_reported {
+                        outage_reported = true;
+                        let ev = Stamped::now(Event::ConnectFailed {
+                            port: self.connector.describe(),
+                            error: e.to_string(),
+                        });
+                        self.emit(ev);
+                    }
+                }
+            }
+            self.sleep(RETRY);
+        }
+        if let Some(l) = &mut self.logger {
+            let _ = l.flush();
+        }
+    }
+
+    /// Reads until the port goes away; returns why it ended.
+    fn session(&mut self, mut port: Box<dyn Port>) -> String {
+        let mut buf = vec![0u8; 4096];
+        let mut hello_at: Option<Instant> = None;
+        let mut hellos = 0u32;
+        let mut config_asked = false;
+        let mut reported_drops = 0u64;
+        loop {
+            if self.stopped() {
+                return "monitor stopped".into();
+            }
+            match self.ingest.handshake() {
+                Handshake::Pending if hello_at.is_none_or(|t| t.elapsed() >= HELLO_RETRY) => {
+                    if hellos == 3 {
+                        self.emit(Stamped::now(Event::Note(format!(
+                            "no answer to Hello after {hellos} tries; still asking every {} s",
+                            HELLO_RETRY.as_secs()
+                        ))));
+                    }
+                    let hello = HostMsg::Hello {
+                        protocol_version: PROTOCOL_VERSION,
+                    };
+                    match send(&mut port, &hello) {
+                        Ok(()) => {}
+                        // A device that does not read yet: ask again next time.
+                        Err(e) if matches!(e.kind(), io::ErrorKind::TimedOut | io::ErrorKind::WouldBlock) => {}
+                        Err(e) => return format!("cannot send Hello: {e}"),
+                    }
+                    hellos += 1;
+                    hello_at = Some(Instant::now());
+                }
+                Handshake::Done if !config_asked => {
+                    config_asked = true;
+                    match send(&mut port, &HostMsg::GetConfig) {
+                        Ok(()) => {}
+                        Err(e) if matches!(e.kind(), io::ErrorKind::TimedOut | io::ErrorKind::WouldBlock) => {
+                            config_asked = false;
+                        }
+                        Err(e) => return format!("cannot send GetConfig: {e}"),
+                    }
+                }
+                _ => {}
+            }
+            match port.read(&mut buf) {
+                Ok(0) => return "end of stream (the device closed the link)".into(),
+                Ok(n) => {
+                    let t = now_us();
+                    if let Some(l) = &mut self.logger {
+                        if let Err(e) = l.raw(t, &buf[..n]) {
+                            give_up_logging(&mut self.logger, &self.tx, e);
+                        }
+                    }
+                    let (logger, tx, dropped) = (&mut self.logger, &self.tx, &mut self.ui_dropped);
+                    self.ingest
+                        .feed(t, &buf[..n], &mut |ev| deliver(logger, tx, dropped, ev));
+                }
+                Err(e) if matches!(e.kind(), io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut) => {}
+                Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
+                Err(e) => return format!("read error: {e}"),
+            }
+            if self.ui_dropped > reported_drops {
+                // Once the queue has room again: say how much the screen skipped.
+                let n = self.ui_dropped - reported_drops;
+                let note = Stamped::now(Event::Note(format!(
+                    "the screen fell behind and skipped {n} events (logs are complete)"
+                )));
+                if self.tx.try_send(note).is_ok() {
+                    reported_drops = self.ui_dropped;
+                }
+            }
+            self.flush_due();
+        }
+    }
+}
+
+/// One frame out. No `flush`: on a serial port that is `tcdrain`, waiting
+/// for the device to take the bytes, which a stalled board never does.
+fn send(port: &mut Box<dyn Port>, msg: &HostMsg) -> io::Result<()> {
+    let mut buf = [0u8; MAX_FRAME];
+    let n = encode(msg, &mut buf).map_err(|_| io::Error::new(io::ErrorKind::InvalidInput, "message too large"))?;
+    port.write_all(&buf[..n])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use hammer_wire::{DeviceInfo, Report};
+
+    fn frame(m: &DeviceMsg) -> Vec<u8> {
+        let mut buf = [0u8; MAX_FRAME];
+        let n = encode(m, &mut buf).unwrap();
+        buf[..n].to_vec()
+    }
+
+    fn hello(v: u16) -> DeviceMsg {
+        DeviceMsg::Hello(DeviceInfo {
+            protocol_version: v,
+            firmware_version: [1, 2, 3],
+            board: b"test".iter().copied().collect(),
+            config_hash: 7,
+        })
+    }
+
+    fn report(seq: u32) -> DeviceMsg {
+        DeviceMsg::Report(Report {
+            seq,
+            ..Default::default()
+        })
+    }
+
+    fn run(ingest: &mut Ingest, msgs: &[DeviceMsg]) -> Vec<Event> {
+        let mut out = vec![];
+        for m in msgs {
+            ingest.feed(1, &frame(m), &mut |e| out.push(e.event));
+        }
+        out.into_iter().filter(|e| !matches!(e, Event::Stats(_))).collect()
+    }
+
+    #[test]
+    fn reports_before_the_handshake_wait_for_its_verdict() {
+        let mut i = Ingest::new();
+        let ev = run(&mut i, &[report(0), report(1)]);
+        assert!(ev.is_empty(), "{ev:?}");
+        let ev = run(&mut i, &[hello(PROTOCOL_VERSION), report(3)]);
+        assert!(matches!(ev[0], Event::Device(_)));
+        assert_eq!(ev[1], Event::Msg(report(0)));
+        assert_eq!(ev[2], Event::Msg(report(1)));
+        assert_eq!(ev[3], Event::SeqGap { expected: 2, got: 3 });
+        assert_eq!(i.stats().seq_gaps, 1);
+        assert_eq!(i.stats().lost_reports, 1);
+    }
+
+    #[test]
+    fn another_protocol_stops_interpretation() {
+        let mut i = Ingest::new();
+        let ev = run(&mut i, &[report(0), hello(PROTOCOL_VERSION + 1), report(1)]);
+        assert_eq!(
+            ev,
+            vec![Event::VersionMismatch {
+                device: PROTOCOL_VERSION + 1
+            }]
+        );
+        assert_eq!(i.stats().frames, 3);
+    }
+
+    #[test]
+    fn errors_are_counted_by_kind() {
+        let mut i = Ingest::new();
+        let mut f = frame(&hello(PROTOCOL_VERSION));
+        let mid = f.len() / 2;
+        f[mid] ^= 0x01;
+        let mut out = vec![];
+        i.feed(1, &f, &mut |e| out.push(e.event));
+        i.feed(1, &[0x42; 1000], &mut |e| out.push(e.event));
+        i.feed(1, &[0], &mut |e| out.push(e.event));
+        let s = *i.stats();
+        assert_eq!(s.frames, 0);
+        assert_eq!(s.crc_errors + s.cobs_errors, 1);
+        assert_eq!(s.oversize, 1);
+    }
+}

@@ -1,0 +1,810 @@
+//! The terminal dashboard: [`run`] is the event loop (keys, a redraw tick,
+//! events from the reader), [`ui`] draws one frame from the [`App`].
+
+use std::sync::mpsc::{Receiver, TryRecvError};
+use std::time::{Duration, Instant};
+
+use anyhow::Result;
+use hammer_estimator::Flags;
+use hammer_wire::PROTOCOL_VERSION;
+use ratatui::crossterm::event::{self, Event as TermEvent, KeyCode, KeyEventKind, KeyModifiers};
+use ratatui::layout::{Alignment, Constraint, Layout, Rect};
+use ratatui::style::{Color, Modifier, Style, Stylize};
+use ratatui::symbols::Marker;
+use ratatui::text::{Line, Span};
+use ratatui::widgets::{Axis, Block, Chart, Clear, Dataset, GraphType, Paragraph, Wrap};
+use ratatui::Frame;
+
+use super::app::{App, View};
+use super::event::{board_name, clock, firmware_version, flag_list, Event, Severity, Stamped};
+use super::UiOptions;
+
+/// Redraw at least this often (clocks, "ago" times, scrolling charts).
+const TICK: Duration = Duration::from_millis(250);
+/// ... and at most this often while data pours in.
+const MIN_FRAME: Duration = Duration::from_millis(50);
+/// Events taken from the queue between two looks at the keyboard.
+const DRAIN_MAX: usize = 5_000;
+
+/// `v ± u` with `d` decimals; `n/a` for what the device could not estimate.
+pub fn pm(v: f32, u: f32, d: usize) -> String {
+    if !v.is_finite() {
+        return "n/a".into();
+    }
+    if !u.is_finite() {
+        return format!("{v:.d$} ± n/a");
+    }
+    format!("{v:.d$} ± {u:.d$}")
+}
+
+pub fn num(v: f64, d: usize) -> String {
+    if v.is_finite() {
+        format!("{v:.d$}")
+    } else {
+        "n/a".into()
+    }
+}
+
+fn si_count(v: f64) -> String {
+    if !v.is_finite() {
+        return "n/a".into();
+    }
+    let a = v.abs();
+    if a >= 1e9 {
+        format!("{:.2} G", v / 1e9)
+    } else if a >= 1e6 {
+        format!("{:.2} M", v / 1e6)
+    } else if a >= 1e4 {
+        format!("{:.1} k", v / 1e3)
+    } else {
+        format!("{v:.0} ")
+    }
+}
+
+fn bytes(n: u64) -> String {
+    match n {
+        n if n >= 1 << 30 => format!("{:.2} GiB", n as f64 / (1u64 << 30) as f64),
+        n if n >= 1 << 20 => format!("{:.2} MiB", n as f64 / (1u64 << 20) as f64),
+        n if n >= 1 << 10 => format!("{:.1} KiB", n as f64 / 1024.0),
+        n => format!("{n} B"),
+    }
+}
+
+fn duration(s: f64) -> String {
+    if !s.is_finite() || s < 0.0 {
+        return "n/a".into();
+    }
+    let s = s as u64;
+    match s {
+        s if s >= 86_400 => format!("{}d{:02}h{:02}m", s / 86_400, s / 3600 % 24, s / 60 % 60),
+        s if s >= 3600 => format!("{}h{:02}m{:02}s", s / 3600, s / 60 % 60, s % 60),
+        s if s >= 60 => format!("{}m{:02}s", s / 60, s % 60),
+        s => format!("{s}s"),
+    }
+}
+
+/// A long time to one decimal in its largest unit.
+fn coarse(s: f64) -> String {
+    match s {
+        s if s >= 86_400.0 => format!("{:.1} d", s / 86_400.0),
+        s if s >= 3600.0 => format!("{:.1} h", s / 3600.0),
+        s if s >= 60.0 => format!("{:.1} min", s / 60.0),
+        s => format!("{s:.0} s"),
+    }
+}
+
+fn ago(now_us: u64, t_us: u64) -> String {
+    format!("{:.1} s ago", now_us.saturating_sub(t_us) as f64 * 1e-6)
+}
+
+/// Puts the terminal in raw mode on the alternate screen (restored on exit,
+/// on error and, through ratatui's panic hook, on panic) and runs until `q`.
+pub fn run(app: &mut App, rx: &Receiver<Stamped>, opts: UiOptions) -> Result<()> {
+    struct Restore;
+    impl Drop for Restore {
+        fn drop(&mut self) {
+            ratatui::restore();
+        }
+    }
+    let mut terminal = ratatui::try_init()?;
+    let _restore = Restore;
+    let mut last_draw: Option<Instant> = None;
+    let mut dirty = true;
+    let mut source_gone = false;
+    loop {
+        for _ in 0..DRAIN_MAX {
+            match rx.try_recv() {
+                Ok(ev) => {
+                    app.on_event(&ev);
+                    dirty = true;
+                    if opts.exit_after_reports.is_some_and(|n| app.reports >= n) {
+                        app.quit = true;
+                        break;
+                    }
+                }
+                Err(TryRecvError::Empty) => break,
+                Err(TryRecvError::Disconnected) => {
+                    if !source_gone && opts.live {
+                        app.on_event(&Stamped::now(Event::Note(
+                            "the reader thread stopped unexpectedly; restart the monitor".into(),
+                        )));
+                    }
+                    source_gone = true;
+                    break;
+                }
+            }
+        }
+        let due = last_draw.is_none_or(|t| t.elapsed() >= TICK || (dirty && t.elapsed() >= MIN_FRAME));
+        if due || app.quit {
+            app.tick();
+            terminal.draw(|f| ui(f, app))?;
+            last_draw = Some(Instant::now());
+            dirty = false;
+        }
+        if app.quit {
+            return Ok(());
+        }
+        if event::poll(Duration::from_millis(20))? {
+            match event::read()? {
+                TermEvent::Key(k) if k.kind != KeyEventKind::Release => {
+                    dirty = true;
+                    match k.code {
+                        KeyCode::Char('c') if k.modifiers.contains(KeyModifiers::CONTROL) => app.quit = true,
+                        KeyCode::Char('q') | KeyCode::Char('Q') => app.quit = true,
+                        KeyCode::Esc if app.show_help => app.show_help = false,
+                        KeyCode::Esc => app.quit = true,
+                        KeyCode::Char('p') | KeyCode::Char(' ') => app.toggle_pause(),
+                        KeyCode::Char('c') => app.clear_alarm(),
+                        KeyCode::Char('?') | KeyCode::Char('h') | KeyCode::F(1) => app.show_help = !app.show_help,
+                        _ => {}
+                    }
+                }
+                TermEvent::Resize(..) => dirty = true,
+                _ => {}
+            }
+        }
+    }
+}
+
+/// Draws the whole dashboard.
+pub fn ui(f: &mut Frame, app: &App) {
+    let v = app.shown();
+    let banners = banners(app, v);
+    let area = f.area();
+    let events_h = if area.height >= 40 { 8 } else { 5 };
+    let [header, banner_area, main, events, footer] = Layout::vertical([
+        Constraint::Length(1),
+        Constraint::Length(banners.len() as u16),
+        Constraint::Min(10),
+        Constraint::Length(events_h),
+        Constraint::Length(1),
+    ])
+    .areas(area);
+    f.render_widget(header_line(app, v), header);
+    f.render_widget(Paragraph::new(banners), banner_area);
+
+    let [left, right] = Layout::horizontal([Constraint::Length(50), Constraint::Min(30)]).areas(main);
+    let [cycle, link, device] =
+        Layout::vertical([Constraint::Length(14), Constraint::Length(11), Constraint::Min(4)]).areas(left);
+    f.render_widget(cycle_panel(app, v), cycle);
+    f.render_widget(link_panel(app, v), link);
+    f.render_widget(device_panel(v), device);
+    charts(f, app, v, right);
+    f.render_widget(events_panel(v, events.height.saturating_sub(2) as usize), events);
+    f.render_widget(footer_line(app), footer);
+    if app.show_help {
+        help(f, area);
+    }
+}
+
+fn header_line(app: &App, v: &View) -> Paragraph<'static> {
+    let title = if app.live {
+        " hammer monitor "
+    } else {
+        " hammer replay "
+    };
+    let state = if !app.live {
+        if app.ended {
+            Span::styled(" ■ end of recording ", Style::new().fg(Color::Cyan))
+        } else {
+            Span::styled(" ▶ replaying ", Style::new().fg(Color::Cyan))
+        }
+    } else if v.mismatch.is_some() {
+        Span::styled(" ✖ protocol mismatch ", Style::new().fg(Color::Red).bold())
+    } else if !v.connected {
+        Span::styled(" ○ disconnected ", Style::new().fg(Color::Yellow).bold())
+    } else if !v.handshaken {
+        Span::styled(" ◌ handshaking ", Style::new().fg(Color::Yellow))
+    } else {
+        Span::styled(" ● connected ", Style::new().fg(Color::Green).bold())
+    };
+    let port = v.port.clone().unwrap_or_else(|| app.source.clone());
+    let src = if app.live { port } else { app.source.clone() };
+    Paragraph::new(Line::from(vec![
+        Span::styled(title, Style::new().bg(Color::Blue).fg(Color::White).bold()),
+        Span::raw(" "),
+        Span::styled(src, Style::new().bold()),
+        Span::raw(" "),
+        state,
+        Span::styled(format!(" {}Z", clock(app.now_us)), Style::new().dim()),
+    ]))
+}
+
+fn banners(app: &App, v: &View) -> Vec<Line<'static>> {
+    let mut out = vec![];
+    if let Some(device) = v.mismatch {
+        out.push(
+            Line::from(format!(
+                " ✖ PROTOCOL MISMATCH: the device speaks protocol {device}, this host {PROTOCOL_VERSION}. \
+             Its data is not interpreted: update the firmware or the host tools."
+            ))
+            .style(Style::new().bg(Color::Red).fg(Color::White).bold()),
+        );
+    }
+    if let Some(a) = &v.alarm {
+        out.push(
+            Line::from(format!(" ⚠ {}  ({} UTC; c clears)", a.text, clock(a.t_us)))
+                .style(Style::new().bg(Color::Red).fg(Color::White).bold()),
+        );
+    }
+    if app.live && !v.connected && !v.ever_connected {
+        if let Some(since) = v.lost_at_us {
+            let why = v.connect_error.as_deref().unwrap_or("not there");
+            out.push(
+                Line::from(format!(
+                    " NO DEVICE YET ({:.0} s): {why}; trying every 0.5 s",
+                    app.now_us.saturating_sub(since) as f64 * 1e-6
+                ))
+                .style(Style::new().bg(Color::Yellow).fg(Color::Black).bold()),
+            );
+        }
+    } else if app.live && !v.connected {
+        if let Some(lost) = v.lost_at_us {
+            out.push(
+                Line::from(format!(
+                    " LINK DOWN since {}Z ({:.1} s): retrying every 0.5 s; reconnects so far {}",
+                    clock(lost),
+                    app.now_us.saturating_sub(lost) as f64 * 1e-6,
+                    v.stats.reconnects
+                ))
+                .style(Style::new().bg(Color::Yellow).fg(Color::Black).bold()),
+            );
+        }
+    }
+    out
+}
+
+fn label(s: &str) -> Span<'static> {
+    Span::styled(format!("{s:<16}"), Style::new().fg(Color::Gray))
+}
+
+fn row(l: &str, value: String, unit: &str) -> Line<'static> {
+    Line::from(vec![
+        label(l),
+        Span::styled(value, Style::new().bold()),
+        Span::raw(format!(" {unit}")),
+    ])
+}
+
+fn cycle_panel(app: &App, v: &View) -> Paragraph<'static> {
+    let block = Block::bordered().title(" Current cycle ");
+    let Some((t, r)) = v.last else {
+        let msg = if v.mismatch.is_some() {
+            "not interpreting: protocol mismatch"
+        } else {
+            "waiting for the first report…"
+        };
+        return Paragraph::new(Line::from(msg).dim()).block(block);
+    };
+    let valid = r.is_valid();
+    let value_style = if valid { Style::new().bold() } else { Style::new().dim() };
+    let mut lines = vec![Line::from(vec![
+        Span::styled(format!("Cycle {}", r.seq), Style::new().bold().fg(Color::Cyan)),
+        Span::raw(format!("  t {} s  ", num(r.t_impact_s, 4))),
+        Span::styled(ago(app.now_us, t), Style::new().dim()),
+    ])];
+    if !valid {
+        lines.push(
+            Line::from(" INVALID: these numbers are not estimates ")
+                .style(Style::new().bg(Color::Red).fg(Color::White)),
+        );
+    }
+    let mut add = |l: &str, value: String, unit: &str| {
+        lines.push(Line::from(vec![
+            label(l),
+            Span::styled(value, value_style),
+            Span::raw(format!(" {unit}")),
+        ]));
+    };
+    add("Friction", pm(r.friction_n, r.friction_uncertainty_n, 2), "N");
+    add(
+        "  stroke",
+        pm(r.friction_stroke_n, r.friction_stroke_uncertainty_n, 2),
+        "N",
+    );
+    add(
+        "  backhaul",
+        pm(r.friction_backhaul_n, r.friction_backhaul_uncertainty_n, 2),
+        "N",
+    );
+    add(
+        "Impact energy",
+        pm(r.impact_energy_j, r.impact_energy_uncertainty_j, 3),
+        "J",
+    );
+    add(
+        "  w/o friction",
+        pm(
+            r.impact_energy_frictionless_j,
+            r.impact_energy_frictionless_uncertainty_j,
+            3,
+        ),
+        "J",
+    );
+    add(
+        "Frequency",
+        num(r.frequency_hz as f64, 2),
+        &format!("Hz  (period {} ms)", num(r.period_s as f64 * 1e3, 2)),
+    );
+    add(
+        "Wear index",
+        num(r.wear_index_j as f64, 1),
+        &format!("J  ({} % left)", num(r.wear_remaining_fraction as f64 * 100.0, 1)),
+    );
+    let life_s = r.remaining_life_cycles as f64 / r.frequency_hz as f64;
+    let life = if life_s.is_finite() && life_s >= 0.0 {
+        format!("cycles  (≈ {})", coarse(life_s))
+    } else {
+        "cycles".into()
+    };
+    add(
+        "Remaining life",
+        si_count(r.remaining_life_cycles as f64).trim_end().to_string(),
+        &life,
+    );
+    add("Drift score", num(r.drift_score as f64, 2), "");
+    let flags = r.flags();
+    let flag_style = if !valid || flags.intersects(super::app::SENSOR_FAULTS) {
+        Style::new().fg(Color::Red).bold()
+    } else if flags.is_empty() {
+        Style::new().fg(Color::Green)
+    } else {
+        Style::new().fg(Color::Yellow)
+    };
+    lines.push(Line::from(vec![
+        label("Flags"),
+        Span::styled(flag_list(r.flags), flag_style),
+    ]));
+    Paragraph::new(lines).block(block).wrap(Wrap { trim: false })
+}
+
+fn count(l: &str, n: u64, bad: bool) -> Vec<Span<'static>> {
+    let style = if bad && n > 0 {
+        Style::new().fg(Color::Red).bold()
+    } else {
+        Style::new().bold()
+    };
+    vec![
+        Span::styled(format!("{l:<14}"), Style::new().fg(Color::Gray)),
+        Span::styled(format!("{n:>8}"), style),
+        Span::raw("   "),
+    ]
+}
+
+fn pair(a: Vec<Span<'static>>, b: Vec<Span<'static>>) -> Line<'static> {
+    Line::from([a, b].concat())
+}
+
+fn link_panel(app: &App, v: &View) -> Paragraph<'static> {
+    let s = &v.stats;
+    let last = s.last_frame_us.map_or("never".into(), |t| ago(app.now_us, t));
+    let mut lines = vec![
+        pair(
+            count("Frames", s.frames, false),
+            vec![
+                Span::styled("Bytes ", Style::new().fg(Color::Gray)),
+                Span::styled(bytes(s.bytes), Style::new().bold()),
+            ],
+        ),
+        pair(
+            count("CRC errors", s.crc_errors, true),
+            count("COBS errors", s.cobs_errors, true),
+        ),
+        pair(
+            count("Decode errors", s.decode_errors, true),
+            count("Oversize", s.oversize, true),
+        ),
+        pair(
+            count("Seq gaps", s.seq_gaps, true),
+            count("Lost reports", s.lost_reports, true),
+        ),
+        pair(
+            count("Reconnects", s.reconnects as u64, true),
+            vec![
+                Span::styled("Last frame ", Style::new().fg(Color::Gray)),
+                Span::raw(last),
+            ],
+        ),
+    ];
+    match v.status {
+        Some((t, st)) => {
+            let load = st.cpu_load_permille as f64 / 10.0;
+            let load_style = if load > 80.0 {
+                Style::new().fg(Color::Red).bold()
+            } else {
+                Style::new().bold()
+            };
+            lines.push(Line::from(vec![Span::styled(
+                format!("Device status ({})", ago(app.now_us, t)),
+                Style::new().fg(Color::Cyan),
+            )]));
+            lines.push(Line::from(vec![
+                Span::styled(format!("{:<14}", "CPU load"), Style::new().fg(Color::Gray)),
+                Span::styled(format!("{load:>6.1} %"), load_style),
+                Span::raw("   "),
+                count("Dropped samp.", st.dropped_samples, true)[0].clone(),
+                count("Dropped samp.", st.dropped_samples, true)[1].clone(),
+            ]));
+            lines.push(pair(
+                count("ADC overruns", st.adc_overruns as u64, true),
+                count("TX dropped", st.frames_dropped as u64, true),
+            ));
+            let rx_err =
+                st.rx_crc_errors as u64 + st.rx_cobs_errors as u64 + st.rx_decode_errors as u64 + st.rx_oversize as u64;
+            lines.push(pair(
+                count("Device RX err", rx_err, true),
+                count("Rejected cmds", st.rejected_commands as u64, false),
+            ));
+        }
+        None => lines.push(Line::from("no device status yet").dim()),
+    }
+    Paragraph::new(lines).block(Block::bordered().title(" Link health "))
+}
+
+fn device_panel(v: &View) -> Paragraph<'static> {
+    let mut lines = vec![];
+    match &v.device {
+        Some(d) => {
+            lines.push(row("Board", board_name(d), ""));
+            lines.push(row(
+                "Firmware",
+                firmware_version(d.firmware_version),
+                &format!(" protocol {}", d.protocol_version),
+            ));
+            let cfg = match &v.config {
+                Some(c) if c.hash() == d.config_hash => format!(" {:.0} S/s", c.sample_rate_hz),
+                Some(c) => format!(" now {:08x}", c.hash()),
+                None => String::new(),
+            };
+            lines.push(row("Config", format!("{:08x}", d.config_hash), &cfg));
+            if !v.handshaken {
+                lines.push(Line::from("(as last seen; no handshake on this link yet)").dim());
+            }
+        }
+        None => lines.push(
+            Line::from(if v.connected {
+                "waiting for the device's Hello…"
+            } else {
+                "no device"
+            })
+            .dim(),
+        ),
+    }
+    if let Some((_, st)) = v.status {
+        lines.push(row(
+            "Uptime",
+            duration(st.uptime_us as f64 * 1e-6),
+            &format!(" {} samples", si_count(st.samples as f64).trim_end()),
+        ));
+        lines.push(row(
+            "Cycles",
+            st.cycles.to_string(),
+            &format!(" ({} invalid)", st.invalid_cycles),
+        ));
+    }
+    if v.captures > 0 {
+        lines.push(row("Capture chunks", v.captures.to_string(), ""));
+    }
+    Paragraph::new(lines).block(Block::bordered().title(" Device "))
+}
+
+/// (min, max) of the values, padded so a flat line sits mid-chart.
+fn bounds(values: impl Iterator<Item = f64>) -> [f64; 2] {
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for x in values.filter(|x| x.is_finite()) {
+        lo = lo.min(x);
+        hi = hi.max(x);
+    }
+    if lo > hi {
+        return [0.0, 1.0];
+    }
+    let pad = ((hi - lo) * 0.1).max(hi.abs().max(lo.abs()) * 0.01).max(1e-3);
+    [lo - pad, hi + pad]
+}
+
+/// The charts' time span: `--history-s` once there is that much history,
+/// before that the next round span that holds it, so a fresh run is not a
+/// sliver at the right edge.
+fn chart_span(app: &App, v: &View) -> f64 {
+    let have = v
+        .history
+        .points
+        .front()
+        .map_or(0.0, |p| app.now_us.saturating_sub(p.t_us) as f64 * 1e-6);
+    [10.0, 30.0, 60.0, 120.0, 300.0, 600.0, 1800.0, 3600.0]
+        .into_iter()
+        .find(|&s| s >= have * 1.05)
+        .unwrap_or(f64::INFINITY)
+        .min(app.history_s)
+}
+
+fn charts(f: &mut Frame, app: &App, v: &View, area: Rect) {
+    let [a, b, c] = Layout::vertical([Constraint::Ratio(1, 3); 3]).areas(area);
+    let now = app.now_us;
+    let x = |t: u64| -(now.saturating_sub(t) as f64) * 1e-6;
+    let pts = &v.history.points;
+    let series = |g: fn(&super::app::Point) -> f32| -> Vec<(f64, f64)> {
+        pts.iter()
+            .map(|p| (x(p.t_us), g(p) as f64))
+            .filter(|(_, y)| y.is_finite())
+            .collect()
+    };
+    let friction = series(|p| p.friction_n);
+    let energy = series(|p| p.energy_j);
+    let energy_nf = series(|p| p.energy_frictionless_j);
+    let freq = series(|p| p.frequency_hz);
+    let span = chart_span(app, v);
+    chart(f, a, "Friction (N)", span, 2, vec![("", Color::Cyan, &friction)]);
+    chart(
+        f,
+        b,
+        "Impact energy (J)",
+        span,
+        3,
+        vec![
+            ("with friction", Color::Yellow, &energy),
+            ("without friction", Color::Magenta, &energy_nf),
+        ],
+    );
+    chart(f, c, "Frequency (Hz)", span, 2, vec![("", Color::Green, &freq)]);
+}
+
+/// A line chart over the last `span` seconds; named series are keyed in the title.
+fn chart(
+    f: &mut Frame,
+    area: Rect,
+    title: &str,
+    span: f64,
+    decimals: usize,
+    sets: Vec<(&str, Color, &Vec<(f64, f64)>)>,
+) {
+    let y = bounds(sets.iter().flat_map(|(_, _, d)| d.iter().map(|p| p.1)));
+    let mut head = vec![Span::raw(format!(" {title}"))];
+    for (name, color, _) in &sets {
+        if !name.is_empty() {
+            head.push(Span::styled(format!("  ━ {name}"), Style::new().fg(*color)));
+        }
+    }
+    let empty = sets.iter().all(|(_, _, d)| d.is_empty());
+    head.push(Span::raw(if empty {
+        format!(", last {span:.0} s: no valid cycle yet ")
+    } else {
+        format!(", last {span:.0} s ")
+    }));
+    let datasets: Vec<Dataset> = sets
+        .into_iter()
+        .map(|(_, color, data)| {
+            Dataset::default()
+                .marker(Marker::Braille)
+                .graph_type(GraphType::Line)
+                .style(Style::new().fg(color))
+                .data(data)
+        })
+        .collect();
+    let ylabels = [y[0], (y[0] + y[1]) / 2.0, y[1]].map(|v| Span::raw(format!("{v:.decimals$}")));
+    let chart = Chart::new(datasets)
+        .block(Block::bordered().title(Line::from(head)))
+        .legend_position(None)
+        .x_axis(
+            Axis::default()
+                .bounds([-span, 0.0])
+                .labels([format!("-{span:.0} s"), format!("-{:.0} s", span / 2.0), "now".into()])
+                .style(Style::new().fg(Color::Gray)),
+        )
+        .y_axis(
+            Axis::default()
+                .bounds(y)
+                .labels(ylabels)
+                .style(Style::new().fg(Color::Gray)),
+        );
+    f.render_widget(chart, area);
+}
+
+fn events_panel(v: &View, rows: usize) -> Paragraph<'static> {
+    let skip = v.events.len().saturating_sub(rows);
+    let lines: Vec<Line> = v
+        .events
+        .iter()
+        .skip(skip)
+        .map(|e| {
+            let style = match e.severity {
+                Severity::Info => Style::new(),
+                Severity::Warn => Style::new().fg(Color::Yellow),
+                Severity::Error => Style::new().fg(Color::Red).bold(),
+            };
+            Line::from(vec![
+                Span::styled(format!("{} ", clock(e.t_us)), Style::new().dim()),
+                Span::styled(e.text.clone(), style),
+            ])
+        })
+        .collect();
+    Paragraph::new(lines).block(Block::bordered().title(" Link events (UTC) "))
+}
+
+fn footer_line(app: &App) -> Paragraph<'static> {
+    let key = |k: &str| {
+        Span::styled(
+            format!(" {k} "),
+            Style::new().bg(Color::DarkGray).fg(Color::White).bold(),
+        )
+    };
+    let mut spans = vec![
+        key("q"),
+        Span::raw(" quit "),
+        key("p"),
+        Span::raw(" pause "),
+        key("c"),
+        Span::raw(" clear alarm "),
+        key("?"),
+        Span::raw(" help "),
+    ];
+    if app.paused() {
+        spans.push(Span::raw("  "));
+        spans.push(Span::styled(
+            format!(" PAUSED ({} new reports; logging goes on) ", app.reports_since_pause),
+            Style::new()
+                .bg(Color::Yellow)
+                .fg(Color::Black)
+                .add_modifier(Modifier::BOLD),
+        ));
+    }
+    if app.ended {
+        spans.push(Span::raw("  "));
+        spans.push(Span::styled(
+            " END OF RECORDING ",
+            Style::new().bg(Color::Cyan).fg(Color::Black).bold(),
+        ));
+    }
+    spans.push(Span::styled(format!("  {} reports", app.reports), Style::new().dim()));
+    Paragraph::new(Line::from(spans))
+}
+
+fn help(f: &mut Frame, area: Rect) {
+    let w = area.width.min(72);
+    let h = area.height.min(18);
+    let popup = Rect::new(area.x + (area.width - w) / 2, area.y + (area.height - h) / 2, w, h);
+    let text = vec![
+        Line::from("Keys").bold(),
+        Line::from("  q, Esc, Ctrl-C   quit (the terminal is restored)"),
+        Line::from("  p, space         pause the view; reading and logging go on"),
+        Line::from("  c                clear the alarm banner (a new alarm shows again)"),
+        Line::from("  ?, h, F1         this help"),
+        Line::from(""),
+        Line::from("Numbers").bold(),
+        Line::from("  ± is the expanded uncertainty the device states for the cycle."),
+        Line::from("  Charts show valid cycles only; INVALID cycles keep their flags."),
+        Line::from("  Seq gaps: reports lost on the way (numbers not consecutive)."),
+        Line::from("  CRC/COBS errors: corrupted or cut frames, counted, never shown."),
+        Line::from("  The link is reopened every 0.5 s after it drops."),
+        Line::from(""),
+        Line::from(format!(
+            "  Flags: {}",
+            Flags::NAMES.iter().map(|(_, n)| *n).collect::<Vec<_>>().join(" ")
+        )),
+    ];
+    f.render_widget(Clear, popup);
+    f.render_widget(
+        Paragraph::new(text)
+            .wrap(Wrap { trim: false })
+            .alignment(Alignment::Left)
+            .block(
+                Block::bordered()
+                    .title(" Help (? closes) ")
+                    .style(Style::new().bg(Color::Black)),
+            ),
+        popup,
+    );
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::monitor::event::LinkStats;
+    use hammer_wire::{DeviceMsg, Report};
+    use ratatui::backend::TestBackend;
+    use ratatui::Terminal;
+
+    fn screen(app: &App, w: u16, h: u16) -> String {
+        let mut t = Terminal::new(TestBackend::new(w, h)).unwrap();
+        t.draw(|f| ui(f, app)).unwrap();
+        let buf = t.backend().buffer().clone();
+        let mut s = String::new();
+        for y in 0..h {
+            for x in 0..w {
+                s.push_str(buf[(x, y)].symbol());
+            }
+            s.push('\n');
+        }
+        s
+    }
+
+    #[test]
+    fn draws_numbers_counters_and_survives_tiny_terminals() {
+        let mut app = App::new("tcp:127.0.0.1:1".into(), true, 300.0);
+        let t = app.now_us;
+        for seq in 0..5 {
+            app.on_event(&Stamped {
+                t_us: t + seq * 40_000,
+                event: Event::Msg(DeviceMsg::Report(Report {
+                    seq: seq as u32,
+                    friction_n: 12.345,
+                    friction_uncertainty_n: 1.118,
+                    impact_energy_j: 4.6161,
+                    impact_energy_uncertainty_j: 0.1661,
+                    frequency_hz: 21.79,
+                    remaining_life_cycles: 1.5e6,
+                    ..Default::default()
+                })),
+            });
+        }
+        app.on_event(&Stamped {
+            t_us: t,
+            event: Event::Stats(LinkStats {
+                reconnects: 3,
+                crc_errors: 2,
+                ..Default::default()
+            }),
+        });
+        app.toggle_pause();
+        app.show_help = true;
+        let s = screen(&app, 160, 50);
+        assert!(s.contains("12.35 ± 1.12"), "{s}");
+        assert!(s.contains("4.616 ± 0.166"), "{s}");
+        assert!(s.contains("PAUSED"), "{s}");
+        assert!(s.contains("Help"), "{s}");
+        let reconnects = s.lines().find(|l| l.contains("Reconnects")).unwrap();
+        assert!(
+            reconnects
+                .split("Reconnects")
+                .nth(1)
+                .unwrap()
+                .trim_start()
+                .starts_with('3'),
+            "{reconnects}"
+        );
+        for (w, h) in [(80, 24), (40, 10), (10, 5), (1, 1)] {
+            screen(&app, w, h);
+        }
+        // A full history draws in well under a frame's time.
+        let mut app = App::new("x".into(), false, 1e9);
+        for seq in 0..crate::monitor::app::HISTORY_CAP as u64 {
+            app.on_event(&Stamped {
+                t_us: seq * 40_000,
+                event: Event::Msg(DeviceMsg::Report(Report {
+                    seq: seq as u32,
+                    friction_n: (seq % 17) as f32,
+                    impact_energy_j: 4.0,
+                    ..Default::default()
+                })),
+            });
+        }
+        let t = std::time::Instant::now();
+        let s = screen(&app, 160, 50);
+        let took = t.elapsed();
+        assert!(s.contains("last 1800 s"), "{s}");
+        assert!(
+            took < Duration::from_millis(200),
+            "a frame with a full history took {took:?}"
+        );
+    }
+}
