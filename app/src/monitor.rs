@@ -120,6 +120,25 @@ impl Monitor {
 
     /// Feeds samples; reports, alarms and tare results go to `out`.
     pub fn on_samples(&mut self, block: &[RawSample], out: &mut impl FnMut(DeviceMsg)) {
+        // The common case: neither a tare nor a capture needs each sample, so
+        // the estimator takes whole stretches through its hot loop.
+        if self.tare.is_none() && matches!(self.capture, CaptureState::Idle | CaptureState::Streaming { .. }) {
+            // After an impact the estimator blanks `blank_after` samples, so a
+            // piece one longer than that holds at most one report: none is lost.
+            let c = self.est.config();
+            let piece = hammer_estimator::math::round(c.blank_after_s * c.sample_rate_hz) as usize + 1;
+            for chunk in block.chunks(piece) {
+                let mut reports = heapless::Vec::<hammer_estimator::CycleReport, 2>::new();
+                self.est.push_block(chunk, |r| {
+                    let _ = reports.push(r);
+                });
+                for r in &reports {
+                    out(DeviceMsg::Report(Report::from(r)));
+                    self.alarms(r, out);
+                }
+            }
+            return;
+        }
         for &s in block {
             if let Some((tare, left)) = &mut self.tare {
                 tare.push(s);

@@ -98,6 +98,58 @@ impl Derived {
     }
 }
 
+/// The ADC calibration in the form the hot loop wants.
+#[derive(Debug, Clone, Copy)]
+pub struct Calibration {
+    pub zero: [f32; 3],
+    pub scale: [f32; 3],
+    pub full: [u16; 3],
+}
+
+impl Calibration {
+    pub fn new(c: &Config) -> Self {
+        Self {
+            zero: [c.rear.zero_code, c.front.zero_code, c.accel.zero_code],
+            scale: [c.rear.scale, c.front.scale, c.accel.scale],
+            full: [c.rear.full_scale_code, c.front.full_scale_code, c.accel.full_scale_code],
+        }
+    }
+}
+
+/// Rail and stuck-code bookkeeping of the three channels.
+struct Watch {
+    rail: [u32; 3],
+    run: [u32; 3],
+    last: [u16; 3],
+    flags: Flags,
+}
+
+impl Watch {
+    /// A pressure at its bottom rail is a vented chamber near 0 gauge, not a
+    /// clipped reading; every other rail sample is.
+    #[inline(always)]
+    fn check(&mut self, ch: usize, c: u16, full: u16, stuck_limit: u32, bottom_clips: bool) {
+        const SAT: [Flags; 3] = [Flags::REAR_SATURATED, Flags::FRONT_SATURATED, Flags::ACCEL_SATURATED];
+        const STUCK: [Flags; 3] = [Flags::REAR_STUCK, Flags::FRONT_STUCK, Flags::ACCEL_STUCK];
+        // One compare for both rails: code 0 wraps to the top.
+        if c.wrapping_sub(1) >= full.wrapping_sub(1) {
+            self.rail[ch] = self.rail[ch].saturating_add(1);
+            if bottom_clips || c != 0 {
+                self.flags.insert(SAT[ch]);
+            }
+        }
+        if c == self.last[ch] {
+            self.run[ch] = self.run[ch].saturating_add(1);
+            if self.run[ch] == stuck_limit {
+                self.flags.insert(STUCK[ch]);
+            }
+        } else {
+            self.run[ch] = 0;
+            self.last[ch] = c;
+        }
+    }
+}
+
 /// The running state of the cycle under way.
 #[derive(Debug, Clone)]
 pub struct CycleAcc {
@@ -152,77 +204,74 @@ impl CycleAcc {
         };
     }
 
-    /// Adds one calibrated sample. Cost: a few dozen flops, no branches on data
-    /// beyond the rail and stuck bookkeeping.
+    /// Adds a run of consecutive samples. The hot loop of the estimator: the
+    /// running sums live in locals (registers) for the whole run and go back
+    /// to memory at checkpoints and at the end.
     #[inline]
-    pub fn push(&mut self, d: &Derived, p1: f32, p2: f32, a: f32, codes: [u16; 3], full: [u16; 3], stuck_limit: u32) {
-        let f1 = d.a1 * p1;
-        let f2 = d.a2 * p2;
-        let force = f1 - f2 + d.fg;
-        let r = d.m * a - force;
-        self.e *= d.q;
-        let e = self.e;
-        let s = &mut self.cur;
-        if s.n > 0.0 {
-            let v_new = s.v + (force + self.prev_force) * d.half_dt_over_m;
-            s.w += (s.v + v_new) * d.half_dt;
-            s.v = v_new;
-        }
-        if s.n == 0.0 {
-            self.first_force = force;
-        }
-        self.jp1 += s.n * p1;
-        self.jp2 += s.n * p2;
-        s.n += 1.0;
-        s.e += e;
-        s.ee += e * e;
-        s.r += r;
-        s.re += r * e;
-        s.rr += r * r;
-        s.p1 += p1;
-        s.p2 += p2;
-        self.prev_force = force;
-        self.last_force = force;
-        if p1 > self.peak_p1 {
-            self.peak_p1 = p1;
-        }
-        if p2 > self.peak_p2 {
-            self.peak_p2 = p2;
-        }
-        self.watch(0, codes[0], full[0], stuck_limit, false);
-        self.watch(1, codes[1], full[1], stuck_limit, false);
-        self.watch(2, codes[2], full[2], stuck_limit, true);
-        self.since_cp += 1;
-        if self.since_cp == d.k {
-            self.since_cp = 0;
-            if self.cp.push(self.cur).is_err() {
-                self.flags.insert(Flags::OVERFLOW);
+    pub fn push_run(&mut self, d: &Derived, cal: &Calibration, samples: &[crate::RawSample], stuck_limit: u32) {
+        let mut s = self.cur;
+        let mut e = self.e;
+        let mut prev_force = self.prev_force;
+        let (mut jp1, mut jp2) = (self.jp1, self.jp2);
+        let (mut peak_p1, mut peak_p2) = (self.peak_p1, self.peak_p2);
+        let mut since_cp = self.since_cp;
+        let mut w = Watch {
+            rail: self.rail,
+            run: self.run,
+            last: self.last_code,
+            flags: self.flags,
+        };
+        for smp in samples {
+            let p1 = (smp.rear as f32 - cal.zero[0]) * cal.scale[0];
+            let p2 = (smp.front as f32 - cal.zero[1]) * cal.scale[1];
+            let a = (smp.accel as f32 - cal.zero[2]) * cal.scale[2];
+            let force = d.a1 * p1 - d.a2 * p2 + d.fg;
+            let r = d.m * a - force;
+            e *= d.q;
+            if s.n > 0.0 {
+                let v_new = s.v + (force + prev_force) * d.half_dt_over_m;
+                s.w += (s.v + v_new) * d.half_dt;
+                s.v = v_new;
+            } else {
+                self.first_force = force;
+            }
+            jp1 += s.n * p1;
+            jp2 += s.n * p2;
+            s.n += 1.0;
+            s.e += e;
+            s.ee += e * e;
+            s.r += r;
+            s.re += r * e;
+            s.rr += r * r;
+            s.p1 += p1;
+            s.p2 += p2;
+            prev_force = force;
+            peak_p1 = if p1 > peak_p1 { p1 } else { peak_p1 };
+            peak_p2 = if p2 > peak_p2 { p2 } else { peak_p2 };
+            w.check(0, smp.rear, cal.full[0], stuck_limit, false);
+            w.check(1, smp.front, cal.full[1], stuck_limit, false);
+            w.check(2, smp.accel, cal.full[2], stuck_limit, true);
+            since_cp += 1;
+            if since_cp == d.k {
+                since_cp = 0;
+                if self.cp.push(s).is_err() {
+                    w.flags.insert(Flags::OVERFLOW);
+                }
             }
         }
-    }
-
-    /// Rail and stuck-code bookkeeping of one channel. A pressure at its bottom
-    /// rail is a vented chamber near 0 gauge, not a clipped reading.
-    #[inline(always)]
-    fn watch(&mut self, ch: usize, c: u16, full: u16, stuck_limit: u32, bottom_clips: bool) {
-        const SAT: [Flags; 3] = [Flags::REAR_SATURATED, Flags::FRONT_SATURATED, Flags::ACCEL_SATURATED];
-        const STUCK: [Flags; 3] = [Flags::REAR_STUCK, Flags::FRONT_STUCK, Flags::ACCEL_STUCK];
-        // One compare for both rails: code 0 wraps to the top.
-        if c.wrapping_sub(1) >= full.wrapping_sub(1) {
-            self.rail[ch] = self.rail[ch].saturating_add(1);
-            if bottom_clips || c != 0 {
-                self.flags.insert(SAT[ch]);
-            }
-        }
-        if c == self.last_code[ch] {
-            self.run[ch] = self.run[ch].saturating_add(1);
-            if self.run[ch] == stuck_limit {
-                self.flags.insert(STUCK[ch]);
-            }
-        } else {
-            self.run[ch] = 0;
-            self.last_code[ch] = c;
-        }
+        self.cur = s;
+        self.e = e;
+        self.prev_force = prev_force;
+        self.last_force = prev_force;
+        self.jp1 = jp1;
+        self.jp2 = jp2;
+        self.peak_p1 = peak_p1;
+        self.peak_p2 = peak_p2;
+        self.since_cp = since_cp;
+        self.rail = w.rail;
+        self.run = w.run;
+        self.last_code = w.last;
+        self.flags = w.flags;
     }
 
     /// Time of checkpoint `i` from the first kept sample.

@@ -111,3 +111,40 @@ fn the_estimator_state_fits_its_memory_budget() {
     println!("estimator state: {size} bytes");
     assert!(size <= 8 * 1024, "{size} bytes");
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 100, ..ProptestConfig::default() })]
+
+    /// The block path and the one-sample path are the same estimator.
+    #[test]
+    fn push_block_equals_push_sample_by_sample(
+        cfg in config(),
+        segments in prop::collection::vec(segment(), 1..30),
+        split in 1usize..700,
+    ) {
+        let mut samples = vec![];
+        let mut x = 12345u32;
+        for s in &segments {
+            for i in 0..s.len {
+                x ^= x << 13; x ^= x >> 17; x ^= x << 5;
+                let n = if s.noise == 0 { 0 } else { (x % (2 * s.noise as u32 + 1)) as i32 - s.noise as i32 };
+                let j = |b: u16| (b as i32 + n).clamp(0, 4095) as u16;
+                let accel = if s.impact && i < 5 { 0 } else { j(s.base[2]) };
+                samples.push(RawSample { rear: j(s.base[0]), front: j(s.base[1]), accel });
+            }
+        }
+        let mut one = Estimator::new(cfg).unwrap();
+        let a: Vec<_> = samples.iter().filter_map(|s| one.push(*s)).collect();
+        let mut blocks = Estimator::new(cfg).unwrap();
+        let mut b = vec![];
+        for chunk in samples.chunks(split) {
+            blocks.push_block(chunk, |r| b.push(r));
+        }
+        prop_assert_eq!(a.len(), b.len());
+        for (x, y) in a.iter().zip(&b) {
+            // Bit for bit (NaN-safe): the debug forms are equal.
+            prop_assert_eq!(format!("{x:?}"), format!("{y:?}"));
+        }
+        prop_assert_eq!(one.counters(), blocks.counters());
+    }
+}

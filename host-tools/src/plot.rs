@@ -60,6 +60,13 @@ pub fn stacked_png(path: &Path, title: &str, x_label: &str, panels: &[Panel], wi
             y0 = y0.max(lo);
             y1 = y1.min(hi);
         }
+        // A panel with no finite point gets a unit range instead of an infinite one.
+        if !(x0.is_finite() && x1.is_finite()) {
+            (x0, x1) = (0.0, 1.0);
+        }
+        if !(y0.is_finite() && y1.is_finite()) {
+            (y0, y1) = (0.0, 1.0);
+        }
         if !(x1 > x0) {
             x1 = x0 + 1.0;
         }

@@ -49,6 +49,9 @@ const MAX_DOTTED_CYCLES: usize = 60;
 /// Margin around the cycle window so both blanked shocks are visible, s.
 const CYCLE_MARGIN_S: f64 = 2e-3;
 
+/// Write an HTML report with PNG figures of a trace: one cycle with its
+/// stroke/backhaul split, the run's per-cycle estimates, and for a simulated
+/// trace the estimate against the simulator's truth.
 #[derive(clap::Args, Debug)]
 pub struct ReportArgs {
     /// Trace in the project's format (CSV, SI units, gauge pressures). Its sidecar
@@ -219,8 +222,10 @@ fn analyse(args: &ReportArgs, pb: &ProgressBar) -> Result<Analysis> {
         Some(p) => load_toml(p)?,
         None => SimConfig::default(),
     };
-    let trace = read_csv(&args.input)?;
-    let sidecar = read_sidecar(&args.input)?;
+    // The reader's message already names the path and the OS error; as an anyhow
+    // chain it would print the OS error twice.
+    let trace = read_csv(&args.input).map_err(|e| anyhow!("{e}"))?;
+    let sidecar = read_sidecar(&args.input).map_err(|e| anyhow!("{e}"))?;
     let supply = match (args.supply_bar, sidecar.as_ref().and_then(|s| s.supply_pressure_bar)) {
         (Some(b), _) => Supply::Flag(b),
         (None, Some(b)) => Supply::Sidecar(b),
@@ -270,8 +275,11 @@ fn mean(xs: impl Iterator<Item = f64>) -> f64 {
     }
 }
 
-/// Sample standard deviation (n − 1); 0 for a single value.
+/// Sample standard deviation (n − 1); 0 for a single value, NaN for none.
 fn sd(xs: &[f64]) -> f64 {
+    if xs.is_empty() {
+        return f64::NAN;
+    }
     let m = mean(xs.iter().copied());
     let ss: f64 = xs.iter().map(|x| (x - m).powi(2)).sum();
     (ss / (xs.len() as f64 - 1.0).max(1.0)).sqrt()
@@ -291,18 +299,10 @@ pub fn summarize(reports: &[CycleReport]) -> Summary {
         cycles: reports.len(),
         valid_cycles: valid.len(),
         friction_mean_n: avg(|r| r.friction_n),
-        friction_sd_n: if valid.is_empty() {
-            f64::NAN
-        } else {
-            sd(&col(|r| r.friction_n))
-        },
+        friction_sd_n: sd(&col(|r| r.friction_n)),
         friction_uncertainty_n: avg(|r| r.friction_uncertainty_n),
         energy_mean_j: avg(|r| r.impact_energy_j),
-        energy_sd_j: if valid.is_empty() {
-            f64::NAN
-        } else {
-            sd(&col(|r| r.impact_energy_j))
-        },
+        energy_sd_j: sd(&col(|r| r.impact_energy_j)),
         energy_uncertainty_j: avg(|r| r.impact_energy_uncertainty_j),
         energy_frictionless_mean_j: avg(|r| r.impact_energy_frictionless_j),
         frequency_mean_hz: avg(|r| r.frequency_hz),
@@ -368,10 +368,9 @@ struct VLine {
     label: Option<String>,
 }
 
-/// A shaded band around a line (an expanded uncertainty).
+/// A shaded band around a line (an expanded uncertainty); its line's legend
+/// entry names it.
 struct Band<'a> {
-    /// None: the band is named in its line's legend entry.
-    label: Option<String>,
     color: RGBColor,
     x: &'a [f64],
     lo: Vec<f64>,
@@ -504,7 +503,9 @@ fn segments(x: &[f64], y: &[f64]) -> Vec<Vec<(f64, f64)>> {
     let mut out: Vec<Vec<(f64, f64)>> = vec![Vec::new()];
     for (&x, &y) in x.iter().zip(y) {
         if x.is_finite() && y.is_finite() {
-            out.last_mut().map(|s| s.push((x, y)));
+            if let Some(s) = out.last_mut() {
+                s.push((x, y));
+            }
         } else if out.last().is_some_and(|s| !s.is_empty()) {
             out.push(Vec::new());
         }
@@ -589,18 +590,11 @@ fn draw_spans(ctx: &mut Ctx, c: &Chart, (y0, y1): (f64, f64)) -> Result<()> {
 fn draw_bands(ctx: &mut Ctx, c: &Chart, (y0, y1): (f64, f64)) -> Result<()> {
     for b in &c.bands {
         let fill = b.color.mix(0.2).filled();
-        let mut first = true;
-        for seg in segments(b.x, &b.lo).into_iter().zip(segments(b.x, &b.hi)) {
-            let (lo, hi) = seg;
+        for (lo, hi) in segments(b.x, &b.lo).into_iter().zip(segments(b.x, &b.hi)) {
             let mut poly: Vec<(f64, f64)> = hi.iter().map(|&(x, y)| (x, y.clamp(y0, y1))).collect();
             poly.extend(lo.iter().rev().map(|&(x, y)| (x, y.clamp(y0, y1))));
-            let anno = ctx
-                .draw_series(std::iter::once(Polygon::new(poly, fill)))
+            ctx.draw_series(std::iter::once(Polygon::new(poly, fill)))
                 .map_err(plot_err)?;
-            if let Some(label) = b.label.as_ref().filter(|_| std::mem::take(&mut first)) {
-                anno.label(label.clone())
-                    .legend(move |(x, y)| Rectangle::new([(x, y - 6), (x + 18, y + 6)], fill));
-            }
         }
     }
     Ok(())
@@ -904,7 +898,6 @@ fn run_chart<'a>(
         if let Some(u) = uncertainty {
             let (u, _) = split_valid(reports, u);
             chart.bands.push(Band {
-                label: None,
                 color,
                 x,
                 lo: y.iter().zip(&u).map(|(y, u)| y - u).collect(),

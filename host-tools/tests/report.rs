@@ -11,8 +11,8 @@ use hammer_host::sim::SimConfig;
 use hammer_host::simulate::{simulate, Simulation};
 use hammer_host::trace::{read_csv, read_sidecar, write_csv, write_sidecar};
 
-/// A drawn figure is far larger than a blank canvas with a title and axes
-/// (a few kB: flat colour compresses to almost nothing).
+/// A white canvas compresses to a few kB; titles, axes, curves and bands take
+/// a figure past 100 kB.
 const MIN_DRAWN_BYTES: u64 = 30_000;
 
 fn tmp_dir(name: &str) -> PathBuf {
