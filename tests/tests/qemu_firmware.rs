@@ -31,33 +31,13 @@ fn connect(emu: &mut Emulator) -> Link<std::net::TcpStream> {
     for _ in 0..10 {
         let stream = emu.connect(T).expect("connect to the board's UART");
         let mut link = Link::new(stream);
-        match hello(&mut link) {
+        match hammer_host::demo::handshake(&mut link, Duration::from_secs(10)) {
             Ok(_) => return link,
             Err(e) => eprintln!("handshake failed ({e}); reconnecting"),
         }
         std::thread::sleep(Duration::from_millis(200));
     }
     panic!("no handshake with the emulated board");
-}
-
-fn hello(link: &mut Link<std::net::TcpStream>) -> std::io::Result<DeviceInfo> {
-    for _ in 0..5 {
-        link.send(&HostMsg::Hello {
-            protocol_version: PROTOCOL_VERSION,
-        })?;
-        let (info, _) = link.recv_until(Duration::from_secs(2), |m| {
-            if let DeviceMsg::Hello(i) = m {
-                Some(i.clone())
-            } else {
-                None
-            }
-        })?;
-        if let Some(info) = info {
-            assert_eq!(info.protocol_version, PROTOCOL_VERSION);
-            return Ok(info);
-        }
-    }
-    Err(std::io::Error::new(std::io::ErrorKind::TimedOut, "no Hello in 10 s"))
 }
 
 fn status(link: &mut Link<std::net::TcpStream>) -> Status {
