@@ -41,8 +41,9 @@ impl Trace {
 
 #[derive(Debug, thiserror::Error)]
 pub enum TraceError {
-    #[error("{path}: {source}")]
-    Io { path: String, source: std::io::Error },
+    /// The OS error is part of the message, not a `source`: printed once.
+    #[error("{path}: {error}")]
+    Io { path: String, error: std::io::Error },
     #[error("{path}: empty file (expected a header row with {cols})", cols = REQUIRED_COLUMNS.join(","))]
     Empty { path: String },
     #[error("{path}: missing column `{column}` (required: {cols})", cols = REQUIRED_COLUMNS.join(","))]
@@ -77,9 +78,9 @@ pub enum TraceError {
 }
 
 pub fn write_csv(path: &Path, trace: &Trace) -> Result<(), TraceError> {
-    let io = |source| TraceError::Io {
+    let io = |error| TraceError::Io {
         path: path.display().to_string(),
-        source,
+        error,
     };
     let mut w = BufWriter::new(File::create(path).map_err(io)?);
     let mut header = REQUIRED_COLUMNS.join(",");
@@ -107,16 +108,10 @@ pub fn write_csv(path: &Path, trace: &Trace) -> Result<(), TraceError> {
 
 pub fn read_csv(path: &Path) -> Result<Trace, TraceError> {
     let p = path.display().to_string();
-    let file = File::open(path).map_err(|source| TraceError::Io {
-        path: p.clone(),
-        source,
-    })?;
+    let file = File::open(path).map_err(|error| TraceError::Io { path: p.clone(), error })?;
     let mut lines = BufReader::new(file).lines();
     let header = match lines.next() {
-        Some(l) => l.map_err(|source| TraceError::Io {
-            path: p.clone(),
-            source,
-        })?,
+        Some(l) => l.map_err(|error| TraceError::Io { path: p.clone(), error })?,
         None => return Err(TraceError::Empty { path: p }),
     };
     let names: Vec<String> = header
@@ -148,10 +143,7 @@ pub fn read_csv(path: &Path) -> Result<Trace, TraceError> {
         .collect::<Result<_, _>>()?;
     for (k, line) in lines.enumerate() {
         let line_no = k + 2;
-        let line = line.map_err(|source| TraceError::Io {
-            path: p.clone(),
-            source,
-        })?;
+        let line = line.map_err(|error| TraceError::Io { path: p.clone(), error })?;
         if line.trim().is_empty() {
             continue;
         }
@@ -259,9 +251,9 @@ pub fn write_sidecar(trace: &Path, sidecar: &Sidecar) -> Result<(), TraceError> 
         path: path.display().to_string(),
         message: e.to_string(),
     })?;
-    std::fs::write(&path, text).map_err(|source| TraceError::Io {
+    std::fs::write(&path, text).map_err(|error| TraceError::Io {
         path: path.display().to_string(),
-        source,
+        error,
     })
 }
 
@@ -272,10 +264,7 @@ pub fn read_sidecar(trace: &Path) -> Result<Option<Sidecar>, TraceError> {
         return Ok(None);
     }
     let p = path.display().to_string();
-    let text = std::fs::read_to_string(&path).map_err(|source| TraceError::Io {
-        path: p.clone(),
-        source,
-    })?;
+    let text = std::fs::read_to_string(&path).map_err(|error| TraceError::Io { path: p.clone(), error })?;
     let s: Sidecar = serde_json::from_str(&text).map_err(|e| TraceError::Sidecar {
         path: p.clone(),
         message: e.to_string(),
