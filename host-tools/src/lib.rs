@@ -6,6 +6,7 @@ pub mod capture;
 pub mod cli;
 pub mod config;
 pub mod demo;
+pub mod diagnose;
 pub mod emulator;
 pub mod estimate;
 pub mod link;
