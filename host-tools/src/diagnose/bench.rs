@@ -1,0 +1,458 @@
+//! The blind benchmark: measurements with a hidden effect (or none, or two)
+//! at a random magnitude, made by a generator that is *not* the diagnosis'
+//! model — nominal parameters jittered, a finer solver tolerance, a random
+//! sensor bandwidth, noise and quantisation — then diagnosed without a hint.
+
+use std::collections::BTreeMap;
+
+use serde::{Deserialize, Serialize};
+
+use super::engine::{diagnose, MeasuredInput, Options};
+use crate::sim::effects::{
+    AccelZeroShift, CoulombFriction, Effects, HeatTransfer, Leakage, PressureGainError, SupplyRestriction, ValveDelay,
+    ViscousFriction, EFFECT_NAMES,
+};
+use crate::sim::sensor::Rng;
+use crate::sim::SimConfig;
+use crate::simulate::simulate;
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct BenchOptions {
+    pub cases: usize,
+    pub seed: u64,
+    /// Operating points of every case, bar; the first and last are fitted.
+    pub points: Vec<f64>,
+    pub duration_s: f64,
+    /// Relative half-width of the uniform jitter of the nominal parameters.
+    pub jitter: f64,
+}
+
+impl Default for BenchOptions {
+    fn default() -> Self {
+        Self {
+            cases: 24,
+            seed: 1,
+            points: vec![4.0, 5.5, 7.0],
+            duration_s: 1.0,
+            jitter: 0.03,
+        }
+    }
+}
+
+/// What a case hides.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Hidden {
+    None,
+    One(String),
+    Two(String, String),
+}
+
+impl Hidden {
+    pub fn names(&self) -> Vec<String> {
+        match self {
+            Hidden::None => vec![],
+            Hidden::One(a) => vec![a.clone()],
+            Hidden::Two(a, b) => vec![a.clone(), b.clone()],
+        }
+    }
+
+    pub fn label(&self) -> String {
+        match self {
+            Hidden::None => "none".into(),
+            Hidden::One(a) => a.clone(),
+            Hidden::Two(..) => "pair".into(),
+        }
+    }
+}
+
+/// The case plan: eight single effects, two controls and two pairs in every
+/// twelve cases, so a short run still covers the catalogue.
+pub fn hidden_for(index: usize, rng: &mut Rng) -> Hidden {
+    match index % 12 {
+        k @ 0..=7 => Hidden::One(EFFECT_NAMES[(k + index / 12) % 8].to_string()),
+        8 | 9 => Hidden::None,
+        _ => {
+            let a = (rng.next_u64() % 8) as usize;
+            let b = (a + 1 + (rng.next_u64() % 7) as usize) % 8;
+            let (a, b) = (a.min(b), a.max(b));
+            Hidden::Two(EFFECT_NAMES[a].to_string(), EFFECT_NAMES[b].to_string())
+        }
+    }
+}
+
+fn between(rng: &mut Rng, lo: f64, hi: f64) -> f64 {
+    lo + (hi - lo) * rng.uniform()
+}
+
+/// A random magnitude over the range a bench would meet.
+pub fn draw_effect(effects: &mut Effects, name: &str, rng: &mut Rng) {
+    match name {
+        "coulomb_friction" => {
+            let s = between(rng, 0.5, 1.5);
+            let d = CoulombFriction::default();
+            effects.coulomb_friction = Some(CoulombFriction {
+                f0_n: d.f0_n * s,
+                k_n_per_bar: d.k_n_per_bar * s,
+                ..d
+            });
+        }
+        "viscous_friction" => {
+            effects.viscous_friction = Some(ViscousFriction {
+                c_n_s_per_m: between(rng, 1.0, 5.0),
+            })
+        }
+        "leakage" => {
+            effects.leakage = Some(Leakage {
+                gap_m: between(rng, 12e-6, 35e-6),
+                ..Default::default()
+            })
+        }
+        "valve_delay" => {
+            effects.valve_delay = Some(ValveDelay {
+                tau_s: between(rng, 0.4e-3, 2.5e-3),
+            })
+        }
+        "heat_transfer" => {
+            effects.heat_transfer = Some(HeatTransfer {
+                h_w_per_m2_k: between(rng, 200.0, 1500.0),
+            })
+        }
+        "supply_restriction" => {
+            effects.supply_restriction = Some(SupplyRestriction {
+                orifice_diameter_m: between(rng, 1.5e-3, 2.5e-3),
+                ..Default::default()
+            })
+        }
+        "accel_zero_shift" => {
+            effects.accel_zero_shift = Some(AccelZeroShift {
+                amplitude_mps2: between(rng, 10.0, 40.0),
+                ..Default::default()
+            })
+        }
+        "pressure_gain_error" => {
+            let mut g = || {
+                let s = if rng.next_u64() & 1 == 0 { 1.0 } else { -1.0 };
+                s * between(rng, 0.01, 0.05)
+            };
+            effects.pressure_gain_error = Some(PressureGainError { rear: g(), front: g() })
+        }
+        _ => {}
+    }
+}
+
+/// The generator's hammer: the nominal one with its uncertain parameters
+/// (valve, ports, dead volumes, contact) jittered, a finer solver tolerance
+/// and a random sensor bandwidth. Mass and areas stay: the estimator and the
+/// force balance rely on them, and they are measured to better than 0.1 %.
+pub fn generator_config(base: &SimConfig, jitter: f64, rng: &mut Rng) -> SimConfig {
+    let mut c = base.clone();
+    for (_, field) in super::model::NUISANCE {
+        *field(&mut c) *= 1.0 + jitter * (2.0 * rng.uniform() - 1.0);
+    }
+    c.solver.rtol = 1e-8;
+    let bw = 10e3 + 30e3 * rng.uniform();
+    for ch in [&mut c.sensors.rear, &mut c.sensors.front, &mut c.sensors.accel] {
+        ch.bandwidth_hz = bw;
+    }
+    c
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct CaseResult {
+    pub index: usize,
+    pub hidden: Hidden,
+    pub hidden_params: serde_json::Value,
+    pub named: Vec<String>,
+    pub correct: bool,
+    /// Relative error of each named-right effect's magnitude.
+    pub param_errors: BTreeMap<String, f64>,
+    pub score: f64,
+    pub energy_error_before: f64,
+    pub energy_error_after: f64,
+    pub frequency_error_before: f64,
+    pub frequency_error_after: f64,
+    pub diagnose_s: f64,
+    #[serde(skip)]
+    pub report: Option<super::engine::Report>,
+}
+
+/// Runs case `index` of the plan.
+pub fn run_case(opts: &BenchOptions, index: usize, diag: &Options) -> anyhow::Result<CaseResult> {
+    let mut rng = Rng::new(opts.seed.wrapping_mul(0x9E37_79B9).wrapping_add(index as u64));
+    let hidden = hidden_for(index, &mut rng);
+    let base = SimConfig::default();
+    let mut gen = generator_config(&base, opts.jitter, &mut rng);
+    for name in hidden.names() {
+        draw_effect(&mut gen.effects, &name, &mut rng);
+    }
+    gen.solver.duration_s = opts.duration_s;
+    let mut inputs = Vec::new();
+    let last = opts.points.len().saturating_sub(1);
+    for (k, &bar) in opts.points.iter().enumerate() {
+        let mut c = gen.clone();
+        c.supply.pressure_bar = bar;
+        c.seed = rng.next_u64();
+        let sim = simulate(&c)?;
+        inputs.push(MeasuredInput {
+            label: format!("case {index} at {bar} bar"),
+            supply_bar: bar,
+            trace: sim.trace(),
+            fit: k == 0 || k == last,
+        });
+    }
+    let t = std::time::Instant::now();
+    let out = diagnose(&inputs, &base, diag, &|_, _, _| {})?;
+    let diagnose_s = t.elapsed().as_secs_f64();
+    let r = &out.report;
+    let named: Vec<String> = r.verdict.effects.iter().filter(|e| *e != "none").cloned().collect();
+    let mut want = hidden.names();
+    want.sort();
+    let mut got = named.clone();
+    got.sort();
+    let correct = want == got;
+    let mut param_errors = BTreeMap::new();
+    if correct {
+        for name in &want {
+            let fitted = if named.len() == 1 {
+                r.verdict.params.clone()
+            } else {
+                r.verdict.params.get(name).cloned().unwrap_or_default()
+            };
+            if let Some(e) = magnitude_error(&gen.effects, name, &fitted, &opts.points) {
+                param_errors.insert(name.clone(), e);
+            }
+        }
+    }
+    let s = &r.shrink;
+    Ok(CaseResult {
+        index,
+        hidden_params: serde_json::to_value(&gen.effects).unwrap_or_default(),
+        hidden,
+        named,
+        correct,
+        param_errors,
+        score: r.verdict.score,
+        energy_error_before: s.impact_energy_error_before,
+        energy_error_after: s.impact_energy_error_after,
+        frequency_error_before: s.frequency_error_before,
+        frequency_error_after: s.frequency_error_after,
+        diagnose_s,
+        report: Some(out.report),
+    })
+}
+
+/// Relative error of the fitted magnitude: friction force over the points,
+/// the one parameter otherwise, the worse of the two gains.
+fn magnitude_error(truth: &Effects, name: &str, fitted: &serde_json::Value, points: &[f64]) -> Option<f64> {
+    let f = |k: &str| fitted.get(k).and_then(|v| v.as_f64());
+    let rel = |a: f64, b: f64| ((a - b) / b).abs();
+    Some(match name {
+        "coulomb_friction" => {
+            let t = truth.coulomb_friction.as_ref()?;
+            let (f0, k) = (f("f0_n")?, f("k_n_per_bar")?);
+            points.iter().map(|&p| rel(f0 + k * p, t.force_n(p))).sum::<f64>() / points.len().max(1) as f64
+        }
+        "viscous_friction" => rel(f("c_n_s_per_m")?, truth.viscous_friction.as_ref()?.c_n_s_per_m),
+        "leakage" => rel(f("gap_m")?, truth.leakage.as_ref()?.gap_m),
+        "valve_delay" => rel(f("tau_s")?, truth.valve_delay.as_ref()?.tau_s),
+        "heat_transfer" => rel(f("h_w_per_m2_k")?, truth.heat_transfer.as_ref()?.h_w_per_m2_k),
+        "supply_restriction" => rel(
+            f("orifice_diameter_m")?,
+            truth.supply_restriction.as_ref()?.orifice_diameter_m,
+        ),
+        "accel_zero_shift" => rel(f("amplitude_mps2")?, truth.accel_zero_shift.as_ref()?.amplitude_mps2),
+        "pressure_gain_error" => {
+            let t = truth.pressure_gain_error.as_ref()?;
+            rel(f("rear")?, t.rear).max(rel(f("front")?, t.front))
+        }
+        _ => return None,
+    })
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct BenchSummary {
+    pub options: BenchOptions,
+    pub cases: Vec<CaseResult>,
+    /// Rows: what was hidden (an effect, `none`, `pair`); columns: what was named.
+    pub confusion: BTreeMap<String, BTreeMap<String, usize>>,
+    pub single_right: (usize, usize),
+    pub none_flagged: (usize, usize),
+    pub pair_right: (usize, usize),
+    pub params_within_10pct: (usize, usize),
+    pub median_param_error: BTreeMap<String, f64>,
+    pub max_param_error: BTreeMap<String, f64>,
+    /// Mean over cases with an effect, %.
+    pub energy_error_before: f64,
+    pub energy_error_after: f64,
+    pub frequency_error_before: f64,
+    pub frequency_error_after: f64,
+    pub mean_diagnose_s: f64,
+}
+
+pub fn summarize(options: &BenchOptions, cases: Vec<CaseResult>) -> BenchSummary {
+    let mut confusion: BTreeMap<String, BTreeMap<String, usize>> = BTreeMap::new();
+    let (mut single, mut none, mut pair, mut params) = ((0, 0), (0, 0), (0, 0), (0, 0));
+    let mut errs: BTreeMap<String, Vec<f64>> = BTreeMap::new();
+    for c in &cases {
+        let col = match (&c.hidden, c.named.len()) {
+            (Hidden::Two(..), _) if c.correct => "pair (right)".to_string(),
+            (_, 0) => "none".to_string(),
+            (_, 1) => c.named[0].clone(),
+            _ => format!("pair: {}", c.named.join("+")),
+        };
+        *confusion.entry(c.hidden.label()).or_default().entry(col).or_default() += 1;
+        match &c.hidden {
+            Hidden::None => {
+                none.1 += 1;
+                none.0 += usize::from(!c.named.is_empty());
+            }
+            Hidden::One(_) => {
+                single.1 += 1;
+                single.0 += usize::from(c.correct);
+            }
+            Hidden::Two(..) => {
+                pair.1 += 1;
+                pair.0 += usize::from(c.correct);
+            }
+        }
+        for (k, e) in &c.param_errors {
+            params.1 += 1;
+            params.0 += usize::from(*e <= 0.10);
+            errs.entry(k.clone()).or_default().push(*e);
+        }
+    }
+    let with_effect: Vec<&CaseResult> = cases.iter().filter(|c| c.hidden != Hidden::None).collect();
+    let mean = |f: &dyn Fn(&CaseResult) -> f64| {
+        with_effect.iter().map(|c| f(c)).sum::<f64>() / with_effect.len().max(1) as f64
+    };
+    let mut median_param_error = BTreeMap::new();
+    let mut max_param_error = BTreeMap::new();
+    for (k, mut v) in errs {
+        v.sort_by(f64::total_cmp);
+        median_param_error.insert(k.clone(), v[v.len() / 2]);
+        max_param_error.insert(k, *v.last().unwrap_or(&0.0));
+    }
+    BenchSummary {
+        options: options.clone(),
+        confusion,
+        single_right: single,
+        none_flagged: none,
+        pair_right: pair,
+        params_within_10pct: params,
+        median_param_error,
+        max_param_error,
+        energy_error_before: mean(&|c| c.energy_error_before),
+        energy_error_after: mean(&|c| c.energy_error_after),
+        frequency_error_before: mean(&|c| c.frequency_error_before),
+        frequency_error_after: mean(&|c| c.frequency_error_after),
+        mean_diagnose_s: cases.iter().map(|c| c.diagnose_s).sum::<f64>() / cases.len().max(1) as f64,
+        cases,
+    }
+}
+
+fn pct(x: (usize, usize)) -> String {
+    if x.1 == 0 {
+        "-".into()
+    } else {
+        format!("{}/{} ({:.0} %)", x.0, x.1, 100.0 * x.0 as f64 / x.1 as f64)
+    }
+}
+
+/// The benchmark's result as a text page.
+pub fn render(s: &BenchSummary) -> String {
+    use std::fmt::Write as _;
+    let mut out = String::new();
+    let o = &s.options;
+    let _ = writeln!(
+        out,
+        "diagnose-bench: {} cases, seed {}, points {:?} bar (first and last fitted), {:.1} s per trace, jitter ±{:.0} %",
+        s.cases.len(),
+        o.seed,
+        o.points,
+        o.duration_s,
+        100.0 * o.jitter
+    );
+    let mut cols: Vec<String> = EFFECT_NAMES.iter().map(|s| s.to_string()).collect();
+    cols.push("none".into());
+    cols.push("pair (right)".into());
+    for row in s.confusion.values() {
+        for k in row.keys() {
+            if !cols.contains(k) {
+                cols.push(k.clone());
+            }
+        }
+    }
+    let short = |c: &str| -> String {
+        c.split('_')
+            .map(|w| w.chars().take(4).collect::<String>())
+            .collect::<Vec<_>>()
+            .join("_")
+    };
+    let _ = writeln!(out, "\nconfusion (rows hidden, columns named):");
+    let _ = write!(out, "{:>20}", "");
+    for c in &cols {
+        let _ = write!(out, " {:>10}", short(c));
+    }
+    let _ = writeln!(out);
+    let mut rows: Vec<String> = EFFECT_NAMES.iter().map(|s| s.to_string()).collect();
+    rows.push("none".into());
+    rows.push("pair".into());
+    for r in rows {
+        let Some(row) = s.confusion.get(&r) else { continue };
+        let _ = write!(out, "{r:>20}");
+        for c in &cols {
+            let n = row.get(c).copied().unwrap_or(0);
+            let _ = write!(out, " {:>10}", if n == 0 { ".".to_string() } else { n.to_string() });
+        }
+        let _ = writeln!(out);
+    }
+    let _ = writeln!(
+        out,
+        "\nsingle effect named right: {}   (target ≥ 95 %)",
+        pct(s.single_right)
+    );
+    let _ = writeln!(
+        out,
+        "no-effect controls flagged: {}   (target ≤ 5 %)",
+        pct(s.none_flagged)
+    );
+    let _ = writeln!(
+        out,
+        "pairs named right:          {}   (target ≥ 80 %)",
+        pct(s.pair_right)
+    );
+    let _ = writeln!(out, "parameters within 10 %:     {}", pct(s.params_within_10pct));
+    let _ = writeln!(out, "\nparameter error (named right)    median      max");
+    for (k, m) in &s.median_param_error {
+        let _ = writeln!(
+            out,
+            "{k:>28} {:>9.1} % {:>7.1} %",
+            100.0 * m,
+            100.0 * s.max_param_error.get(k).copied().unwrap_or(0.0)
+        );
+    }
+    let _ = writeln!(
+        out,
+        "\nheld-out shrink (cases with an effect, mean): impact energy {:.2} % → {:.2} %, frequency {:.2} % → {:.2} %",
+        s.energy_error_before, s.energy_error_after, s.frequency_error_before, s.frequency_error_after
+    );
+    let _ = writeln!(out, "mean diagnosis time per case: {:.2} s", s.mean_diagnose_s);
+    let wrong: Vec<&CaseResult> = s.cases.iter().filter(|c| !c.correct).collect();
+    if !wrong.is_empty() {
+        let _ = writeln!(out, "\nmisnamed cases:");
+        for c in wrong {
+            let _ = writeln!(
+                out,
+                "  case {:>3}: hidden {:?}, named {:?}",
+                c.index,
+                c.hidden.names(),
+                if c.named.is_empty() {
+                    vec!["none".to_string()]
+                } else {
+                    c.named.clone()
+                }
+            );
+        }
+    }
+    out
+}

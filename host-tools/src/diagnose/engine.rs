@@ -1,0 +1,1094 @@
+//! The diagnosis: where the gap lies, which catalogued effect explains it,
+//! and how far it shrinks on data the fit did not see.
+//!
+//! Statistics. Each operating point contributes the mean of its fit cycles'
+//! features; a feature's variance is its cycle-to-cycle variance over the
+//! number of cycles plus a **model floor**: the nominal model is never the
+//! hammer (its parameters are known to a few percent), and a gap below that
+//! floor is no evidence. An effect's score is a BIC difference on these
+//! per-cycle features, χ²_nominal − χ²_effect − k·ln(cycles): samples within
+//! a cycle are correlated, so raw samples would overstate the evidence.
+
+use std::collections::BTreeMap;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Mutex;
+
+use serde::{Deserialize, Serialize};
+
+use super::features::{
+    feature_name, steady_from, summarize, wave_index, wave_of, CycleFeatures, Extractor, Signals, Summary, BINS,
+    ENERGY, F_BACKHAUL, F_STROKE, GAIN_FRONT, GAIN_REAR, N_FEATURES, PERIOD, VISCOUS, WAVE_SIGNALS, ZERO_SHIFT_SQ,
+};
+use super::fit::{levenberg_marquardt, FitResult};
+use super::gap::{breakdown, measured_cycles, normalized, template, CycleSignals};
+use super::model::{apply, catalogue_params, free_params, Candidate, ModelRunner, NUISANCE, ZERO_SHIFT_SQ_FACTOR};
+use super::stages::Stage;
+use crate::sim::effects::{Effects, EFFECT_NAMES};
+use crate::sim::run::TruthTrace;
+use crate::sim::{simulate_truth, SimConfig};
+use crate::trace::Trace;
+
+/// One measured trace and its role.
+#[derive(Debug, Clone)]
+pub struct MeasuredInput {
+    pub label: String,
+    pub supply_bar: f64,
+    pub trace: Trace,
+    /// Part of the fit set (its later half of cycles is still held out).
+    pub fit: bool,
+}
+
+/// Model-floor standard deviations (see the module docs), calibrated on
+/// no-effect controls of `hammer diagnose-bench` whose nominal parameters
+/// were jittered (docs/diagnosis.md).
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
+pub struct Floors {
+    pub period_rel: f64,
+    pub energy_rel: f64,
+    pub force_offset_n: f64,
+    pub viscous_n_s_per_m: f64,
+    pub gain: f64,
+    pub zero_shift_sq_m2ps4: f64,
+    /// Relative to each waveform's RMS over the cycle.
+    pub wave_rel: f64,
+}
+
+impl Default for Floors {
+    fn default() -> Self {
+        Self {
+            period_rel: 0.002,
+            energy_rel: 0.003,
+            force_offset_n: 0.3,
+            viscous_n_s_per_m: 0.2,
+            gain: 0.002,
+            zero_shift_sq_m2ps4: 9.0,
+            wave_rel: 0.005,
+        }
+    }
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Options {
+    pub floors: Floors,
+    /// Relative standard deviation of the nominal parameters the model is
+    /// unsure of ([`super::model::NUISANCE`]); 0 trusts them exactly.
+    pub nominal_uncertainty: f64,
+    pub max_iterations: usize,
+    /// An effect must score above this (BIC units) to be named.
+    pub min_score: f64,
+    /// ... and explain at least this fraction of the nominal χ².
+    pub min_explained: f64,
+    /// Pairs are tried when the best single effect leaves a reduced χ² above this.
+    pub pair_residual: f64,
+    pub threads: usize,
+    /// Keep the waveforms for the figures.
+    pub figures: bool,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Self {
+            floors: Floors::default(),
+            nominal_uncertainty: 0.02,
+            max_iterations: 12,
+            min_score: 20.0,
+            min_explained: 0.5,
+            pair_residual: 2.0,
+            threads: std::thread::available_parallelism().map_or(2, |n| n.get()),
+            figures: true,
+        }
+    }
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct InputInfo {
+    pub label: String,
+    pub supply_bar: f64,
+    pub cycles: usize,
+    /// Cycles dropped as start-up.
+    pub startup_cycles: usize,
+    pub fit_cycles: usize,
+    pub held_out_cycles: usize,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct WhereCell {
+    pub supply_bar: f64,
+    pub signal: String,
+    pub stage: Stage,
+    pub bias: f64,
+    pub rms: f64,
+    pub relative_rms: f64,
+    pub timing_shift_s: f64,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct FittedParam {
+    pub key: String,
+    pub value: f64,
+    pub sd: f64,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct EffectResult {
+    /// An effect of the catalogue, or two joined by `+`.
+    pub name: String,
+    /// In the catalogue's terms, ready for a config file.
+    pub params: serde_json::Value,
+    /// The free parameters as fitted, with their standard deviations.
+    pub fitted: Vec<FittedParam>,
+    pub chi2: f64,
+    /// BIC difference against the nominal model: higher explains more.
+    pub score: f64,
+    pub explained_fraction: f64,
+    pub evidence: Vec<String>,
+    pub simulations: usize,
+    #[serde(skip)]
+    pub candidate: Candidate,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Verdict {
+    /// Effect names, or `["none"]`.
+    pub effects: Vec<String>,
+    pub params: serde_json::Value,
+    /// The named model's score (the best single effect's when `none`).
+    pub score: f64,
+    pub reason: String,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct PointShrink {
+    pub supply_bar: f64,
+    pub held_out_point: bool,
+    pub cycles: usize,
+    pub impact_energy_measured_j: f64,
+    pub impact_energy_nominal_j: f64,
+    pub impact_energy_fitted_j: f64,
+    /// The nominal model with its uncertain parameters refitted, no effect.
+    pub impact_energy_recalibrated_j: f64,
+    pub frequency_measured_hz: f64,
+    pub frequency_nominal_hz: f64,
+    pub frequency_fitted_hz: f64,
+    /// RMS of the binned waveform residual per signal, nominal and fitted model.
+    pub rms_before: BTreeMap<String, f64>,
+    pub rms_after: BTreeMap<String, f64>,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Shrink {
+    /// Mean |simulated − measured| / measured over the held-out data, %.
+    pub impact_energy_error_before: f64,
+    pub impact_energy_error_after: f64,
+    pub frequency_error_before: f64,
+    pub frequency_error_after: f64,
+    /// The control: nominal parameters refitted within their prior, no effect added.
+    pub impact_energy_error_recalibrated_only: f64,
+    /// Supply pressures (bar) not used for fitting.
+    pub held_out_points: Vec<f64>,
+    /// What the figures above were computed on.
+    pub judged_on: String,
+    pub points: Vec<PointShrink>,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Report {
+    pub tool: String,
+    pub inputs: Vec<InputInfo>,
+    pub fit_points: Vec<f64>,
+    #[serde(rename = "where")]
+    pub where_: Vec<WhereCell>,
+    pub effects: Vec<EffectResult>,
+    pub pairs: Vec<EffectResult>,
+    pub verdict: Verdict,
+    pub shrink: Shrink,
+    pub chi2_nominal: f64,
+    pub features_compared: usize,
+    pub fit_cycles: usize,
+    pub options: Options,
+    pub simulations: usize,
+    pub elapsed_s: f64,
+}
+
+/// Waveforms of one operating point for the figures: mean measured cycle,
+/// nominal and fitted model, on the simulated cycle's time base.
+#[derive(Debug, Clone)]
+pub struct PointWaves {
+    pub supply_bar: f64,
+    pub t_s: Vec<f64>,
+    pub stages: Vec<Stage>,
+    pub measured: CycleSignals,
+    pub nominal: CycleSignals,
+    pub fitted: Option<CycleSignals>,
+}
+
+#[derive(Debug, Clone)]
+pub struct Outcome {
+    pub report: Report,
+    pub waves: Vec<PointWaves>,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum DiagnoseError {
+    #[error("no measured trace given")]
+    NoInput,
+    #[error("{0}: no complete impact cycle found (is the accelerometer connected, does the hammer run?)")]
+    NoCycles(String),
+    #[error("{0}: supply pressure unknown: give it in the sidecar or with --supply-bar after the trace")]
+    NoPressure(String),
+    #[error("the nominal model does not run at {0} bar: {1}")]
+    Model(f64, String),
+}
+
+/// Progress: (done, total, what is running).
+pub type Progress<'a> = &'a (dyn Fn(usize, usize, &str) + Sync);
+
+struct Point {
+    supply_bar: f64,
+    fit: Vec<CycleFeatures>,
+    held: Vec<CycleFeatures>,
+    is_fit_point: bool,
+    inputs: Vec<usize>,
+}
+
+/// The fit set's data and its weights, shared by every effect's fit.
+struct FitSet<'a> {
+    runner: &'a ModelRunner,
+    points: Vec<(f64, Summary, Vec<f64>)>, // bar, summary, sigma
+    nominal_truth: Vec<TruthTrace>,
+    pressures: (f64, f64),
+    distinct: usize,
+    sims: AtomicUsize,
+    /// Whitened sensitivities of the fit features to each nuisance parameter
+    /// (per unit of its prior standard deviation), concatenated over points.
+    nuisance: Vec<Vec<f64>>,
+}
+
+impl FitSet<'_> {
+    fn residuals(&self, cand: &Candidate) -> Option<Vec<f64>> {
+        let mut r = Vec::with_capacity(self.points.len() * N_FEATURES);
+        for ((bar, s, sigma), truth) in self.points.iter().zip(&self.nominal_truth) {
+            if cand_has_physics(cand) {
+                self.sims.fetch_add(1, Ordering::Relaxed);
+            }
+            let m = self.runner.features(*bar, cand, Some(truth))?;
+            for j in 0..N_FEATURES {
+                r.push(residual(m[j], s.mean[j], sigma[j]));
+            }
+        }
+        Some(self.profile(r))
+    }
+
+    /// Profiles the nuisance parameters out of whitened residuals `r`: the
+    /// linearised model m + J·δ with prior δ ~ N(0, 1) is fitted in closed
+    /// form, and the residual plus the prior's terms returned.
+    fn profile(&self, mut r: Vec<f64>) -> Vec<f64> {
+        let k = self.nuisance.len();
+        if k == 0 {
+            return r;
+        }
+        let mut a = vec![vec![0.0; k]; k];
+        let mut b = vec![0.0; k];
+        for i in 0..k {
+            for j in 0..k {
+                a[i][j] = self.nuisance[i].iter().zip(&self.nuisance[j]).map(|(x, y)| x * y).sum();
+            }
+            a[i][i] += 1.0;
+            b[i] = -self.nuisance[i].iter().zip(&r).map(|(x, y)| x * y).sum::<f64>();
+        }
+        let Some(delta) = super::fit::solve(a, b) else {
+            return r;
+        };
+        for (i, col) in self.nuisance.iter().enumerate() {
+            for (x, c) in r.iter_mut().zip(col) {
+                *x += delta[i] * c;
+            }
+        }
+        r.extend(delta);
+        r
+    }
+
+    /// The nuisance parameters (in prior standard deviations) that best go with `cand`.
+    fn delta(&self, cand: &Candidate) -> Option<Vec<f64>> {
+        let r = self.residuals(cand)?;
+        let k = self.nuisance.len();
+        Some(r[r.len() - k..].to_vec())
+    }
+
+    fn chi2(&self, cand: &Candidate) -> Option<f64> {
+        self.residuals(cand).map(|r| r.iter().map(|x| x * x).sum())
+    }
+}
+
+fn cand_has_physics(c: &Candidate) -> bool {
+    let mut e = c.effects.clone();
+    e.accel_zero_shift = None;
+    e.pressure_gain_error = None;
+    e != Effects::default()
+}
+
+/// Missing on the model side where the measurement has it: a clear miss.
+fn residual(model: f64, meas: f64, sigma: f64) -> f64 {
+    match (model.is_finite(), meas.is_finite() && sigma.is_finite() && sigma > 0.0) {
+        (true, true) => (model - meas) / sigma,
+        (false, true) => 5.0,
+        _ => 0.0,
+    }
+}
+
+fn sigmas(s: &Summary, nominal: &[f64], f: &Floors) -> Vec<f64> {
+    let n = s.cycles.max(1) as f64;
+    let mut wave_scale = [0.0; 4];
+    for (si, scale) in wave_scale.iter_mut().enumerate() {
+        let xs: Vec<f64> = (0..BINS)
+            .map(|b| nominal[wave_index(si, b)])
+            .filter(|x| x.is_finite())
+            .collect();
+        *scale = (xs.iter().map(|x| x * x).sum::<f64>() / xs.len().max(1) as f64).sqrt();
+    }
+    (0..N_FEATURES)
+        .map(|j| {
+            let floor = match j {
+                PERIOD => f.period_rel * nominal[PERIOD].abs(),
+                ENERGY => f.energy_rel * nominal[ENERGY].abs(),
+                F_STROKE | F_BACKHAUL => f.force_offset_n,
+                VISCOUS => f.viscous_n_s_per_m,
+                GAIN_REAR | GAIN_FRONT => f.gain,
+                ZERO_SHIFT_SQ => f.zero_shift_sq_m2ps4,
+                _ => f.wave_rel * wave_scale[wave_of(j).map_or(0, |w| w.0)],
+            };
+            let sd = if s.sd[j].is_finite() { s.sd[j] } else { 0.0 };
+            (sd * sd / n + floor * floor).sqrt()
+        })
+        .collect()
+}
+
+/// Runs `jobs` on up to `threads` threads, results in job order.
+fn parallel<T: Send, R: Send>(threads: usize, jobs: Vec<T>, f: &(dyn Fn(T) -> R + Sync)) -> Vec<R> {
+    let n = jobs.len();
+    let queue = Mutex::new(jobs.into_iter().enumerate().collect::<Vec<_>>());
+    let out = Mutex::new((0..n).map(|_| None).collect::<Vec<Option<R>>>());
+    std::thread::scope(|s| {
+        for _ in 0..threads.clamp(1, n.max(1)) {
+            s.spawn(|| loop {
+                let job = queue.lock().unwrap().pop();
+                let Some((i, job)) = job else { break };
+                let r = f(job);
+                out.lock().unwrap()[i] = Some(r);
+            });
+        }
+    });
+    out.into_inner()
+        .unwrap()
+        .into_iter()
+        .map(|r| r.expect("every job ran"))
+        .collect()
+}
+
+/// The extractor for a trace recorded with `base`'s sensors and estimator thresholds.
+pub fn extractor_for(base: &SimConfig) -> Extractor {
+    let a = &base.sensors.accel;
+    let clip = 0.98 * a.range_max.abs().min(a.range_min.abs());
+    let mut ex = Extractor::new(
+        base.hammer.geometry(),
+        base.hammer.inclination_deg,
+        base.estimator.impact_threshold_mps2,
+        clip,
+    );
+    ex.zero_shift_tau_s = base.estimator.accel_zero_shift_tau_s;
+    ex
+}
+
+pub fn diagnose(
+    inputs: &[MeasuredInput],
+    base: &SimConfig,
+    opts: &Options,
+    progress: Progress,
+) -> Result<Outcome, DiagnoseError> {
+    let started = std::time::Instant::now();
+    if inputs.is_empty() {
+        return Err(DiagnoseError::NoInput);
+    }
+    let extractor = extractor_for(base);
+    let runner = ModelRunner::new(base.clone(), extractor);
+    let any_fit = inputs.iter().any(|i| i.fit);
+
+    // Cycles of every input, grouped by operating point.
+    let mut infos = Vec::new();
+    let mut points: Vec<Point> = Vec::new();
+    let mut steady_impacts: Vec<Vec<f64>> = Vec::new();
+    for (k, inp) in inputs.iter().enumerate() {
+        if !(inp.supply_bar.is_finite() && inp.supply_bar > 0.0) {
+            return Err(DiagnoseError::NoPressure(inp.label.clone()));
+        }
+        let s = Signals {
+            dt_s: inp.trace.dt_s,
+            p_rear_pa: &inp.trace.p_rear_pa,
+            p_front_pa: &inp.trace.p_front_pa,
+            accel_mps2: &inp.trace.accel_mps2,
+        };
+        let all = extractor.cycles(&s);
+        let st = steady_from(&all);
+        let steady = &all[st..];
+        if steady.is_empty() {
+            return Err(DiagnoseError::NoCycles(inp.label.clone()));
+        }
+        let mut imps: Vec<f64> = steady.iter().map(|c| c.t_impact_s).collect();
+        if let Some(last) = steady.last() {
+            imps.push(last.t_impact_s + last.values[PERIOD]);
+        }
+        steady_impacts.push(imps);
+        let is_fit = inp.fit || (!any_fit && k == 0);
+        let (fit, held) = if !is_fit {
+            (Vec::new(), steady.to_vec())
+        } else if steady.len() >= 2 {
+            let h = steady.len().div_ceil(2);
+            (steady[..h].to_vec(), steady[h..].to_vec())
+        } else {
+            (steady.to_vec(), steady.to_vec())
+        };
+        infos.push(InputInfo {
+            label: inp.label.clone(),
+            supply_bar: inp.supply_bar,
+            cycles: all.len(),
+            startup_cycles: st,
+            fit_cycles: fit.len(),
+            held_out_cycles: held.len(),
+        });
+        let key = (inp.supply_bar * 100.0).round() / 100.0;
+        match points.iter_mut().find(|p| (p.supply_bar - key).abs() < 1e-9) {
+            Some(p) => {
+                p.fit.extend(fit);
+                p.held.extend(held);
+                p.is_fit_point |= is_fit;
+                p.inputs.push(k);
+            }
+            None => points.push(Point {
+                supply_bar: key,
+                fit,
+                held,
+                is_fit_point: is_fit,
+                inputs: vec![k],
+            }),
+        }
+    }
+    points.sort_by(|a, b| a.supply_bar.total_cmp(&b.supply_bar));
+
+    // The nominal model at every point.
+    let total_steps = points.len() + EFFECT_NAMES.len() + 2;
+    let done = AtomicUsize::new(0);
+    let step = |what: &str| {
+        let d = done.fetch_add(1, Ordering::Relaxed) + 1;
+        progress(d.min(total_steps), total_steps, what);
+    };
+    progress(0, total_steps, "nominal model");
+    let bars: Vec<f64> = points.iter().map(|p| p.supply_bar).collect();
+    let nominal_runs = parallel(opts.threads, bars.clone(), &|bar| {
+        let r = simulate_truth(&runner.config(bar, &Effects::default()));
+        step(&format!("nominal model at {bar} bar"));
+        r
+    });
+    let mut nominal_runs_ok = Vec::new();
+    for (bar, r) in bars.iter().zip(nominal_runs) {
+        nominal_runs_ok.push(r.map_err(|e| DiagnoseError::Model(*bar, e.to_string()))?);
+    }
+    let nominal = Candidate::default();
+    let mut nominal_features = Vec::new();
+    for (bar, run) in bars.iter().zip(&nominal_runs_ok) {
+        nominal_features.push(
+            runner
+                .features_of_truth(&run.truth, &nominal.effects)
+                .ok_or_else(|| DiagnoseError::Model(*bar, "no steady impact cycle".into()))?,
+        );
+    }
+
+    let fit_idx: Vec<usize> = (0..points.len()).filter(|&i| points[i].is_fit_point).collect();
+    let fit_bars: Vec<f64> = fit_idx.iter().map(|&i| points[i].supply_bar).collect();
+    let pressures = (
+        fit_bars.iter().cloned().fold(f64::INFINITY, f64::min),
+        fit_bars.iter().cloned().fold(f64::NEG_INFINITY, f64::max),
+    );
+    let fs = FitSet {
+        runner: &runner,
+        points: fit_idx
+            .iter()
+            .map(|&i| {
+                let s = summarize(&points[i].fit);
+                let sig = sigmas(&s, &nominal_features[i], &opts.floors);
+                (points[i].supply_bar, s, sig)
+            })
+            .collect(),
+        nominal_truth: fit_idx.iter().map(|&i| nominal_runs_ok[i].truth.clone()).collect(),
+        pressures,
+        distinct: fit_bars.len(),
+        sims: AtomicUsize::new(points.len()),
+        nuisance: Vec::new(),
+    };
+    let mut fs = fs;
+    if opts.nominal_uncertainty > 0.0 {
+        let h = opts.nominal_uncertainty;
+        let jobs: Vec<(usize, usize)> = (0..fs.points.len())
+            .flat_map(|p| (0..NUISANCE.len()).map(move |k| (p, k)))
+            .collect();
+        let runner = &runner;
+        let fsr = &fs;
+        let cols = parallel(opts.threads, jobs.clone(), &|(p, k)| {
+            let mut c = runner.config(fsr.points[p].0, &Effects::default());
+            *(NUISANCE[k].1)(&mut c) *= 1.0 + h;
+            simulate_truth(&c)
+                .ok()
+                .and_then(|run| runner.features_of_truth(&run.truth, &Effects::default()))
+        });
+        let mut nuisance = vec![Vec::with_capacity(fs.points.len() * N_FEATURES); NUISANCE.len()];
+        for ((p, k), col) in jobs.into_iter().zip(cols) {
+            let nom = &nominal_features[fit_idx[p]];
+            let sigma = &fs.points[p].2;
+            for j in 0..N_FEATURES {
+                // One prior standard deviation's change of the feature, whitened.
+                let d = col.as_ref().map_or(f64::NAN, |f| (f[j] - nom[j]) / sigma[j]);
+                nuisance[k].push(if d.is_finite() { d } else { 0.0 });
+            }
+        }
+        fs.sims.fetch_add(fs.points.len() * NUISANCE.len(), Ordering::Relaxed);
+        fs.nuisance = nuisance;
+    }
+    let fs = fs;
+    let fit_cycles: usize = fs.points.iter().map(|p| p.1.cycles).sum();
+    let ln_n = (fit_cycles.max(2) as f64).ln();
+    let chi2_nominal = fs.chi2(&nominal).unwrap_or(f64::INFINITY);
+
+    // Which: every effect of the catalogue, fitted alone.
+    let singles: Vec<EffectResult> = parallel(opts.threads, EFFECT_NAMES.to_vec(), &|name| {
+        let r = fit_effects(&fs, &[name], &[], chi2_nominal, ln_n, opts);
+        step(&format!("fitted {name}"));
+        r
+    })
+    .into_iter()
+    .flatten()
+    .collect();
+    let mut effects = singles;
+    effects.sort_by(|a, b| b.score.total_cmp(&a.score));
+
+    let significant = |e: &EffectResult| e.score > opts.min_score && e.explained_fraction >= opts.min_explained;
+    let n_compared = fs.points.len() * N_FEATURES;
+    let mut pairs = Vec::new();
+    let mut verdict_cand = None;
+    let mut reason;
+    match effects.first() {
+        Some(best) if significant(best) => {
+            verdict_cand = Some(best.clone());
+            let reduced = best.chi2 / n_compared.max(1) as f64;
+            reason = format!(
+                "{} explains {:.0} % of the nominal gap (score {:.0}, next {} at {:.0})",
+                best.name,
+                100.0 * best.explained_fraction,
+                best.score,
+                effects.get(1).map_or("-", |e| e.name.as_str()),
+                effects.get(1).map_or(0.0, |e| e.score)
+            );
+            if reduced > opts.pair_residual || best.chi2 > opts.min_score {
+                let first = best.name.clone();
+                let start: Vec<FittedParam> = best.fitted.clone();
+                let others: Vec<&EffectResult> = effects.iter().skip(1).collect();
+                let jobs: Vec<(String, Vec<FittedParam>)> =
+                    others.iter().map(|o| (o.name.clone(), o.fitted.clone())).collect();
+                pairs = parallel(opts.threads, jobs, &|(other, other_start)| {
+                    let mut init = start.clone();
+                    init.extend(other_start);
+                    fit_effects(&fs, &[first.as_str(), other.as_str()], &init, chi2_nominal, ln_n, opts)
+                })
+                .into_iter()
+                .flatten()
+                .collect();
+                pairs.sort_by(|a, b| b.score.total_cmp(&a.score));
+                if let Some(p) = pairs.first() {
+                    // The pair must beat the single by as much as a single beats nominal.
+                    let extra = best.chi2 - p.chi2 - (p.fitted.len() - best.fitted.len()) as f64 * ln_n;
+                    if extra > opts.min_score && (best.chi2 - p.chi2) >= opts.min_explained * best.chi2 {
+                        reason = format!(
+                            "{} leaves a reduced χ² of {reduced:.1}; adding the second effect removes {:.0} % of the rest (score +{extra:.0})",
+                            best.name,
+                            100.0 * (best.chi2 - p.chi2) / best.chi2
+                        );
+                        verdict_cand = Some(p.clone());
+                    }
+                }
+            }
+            step("pairs");
+        }
+        Some(best) => {
+            reason = format!(
+                "no effect explains a significant part of the gap: best {} (score {:.0}, {:.0} % explained; needs > {:.0} and {:.0} %)",
+                best.name,
+                best.score,
+                100.0 * best.explained_fraction,
+                opts.min_score,
+                100.0 * opts.min_explained
+            );
+            step("pairs");
+        }
+        None => {
+            reason = "no effect could be fitted".into();
+            step("pairs");
+        }
+    }
+
+    // How far: the verdict's model, with the nominal parameters as its fit
+    // left them (within their prior), against the held-out data. The nominal
+    // model recalibrated alone is the control: the shrink must come from the effect.
+    let fitted_cand = verdict_cand.as_ref().map(|v| v.candidate.clone());
+    let calibrated = |cand: &Candidate| -> ModelRunner {
+        let mut r = runner.clone();
+        if let Some(delta) = fs.delta(cand) {
+            for (k, d) in delta.iter().enumerate() {
+                *(NUISANCE[k].1)(&mut r.base) *= 1.0 + opts.nominal_uncertainty * d;
+            }
+        }
+        r
+    };
+    let model_runs = |cand: &Candidate| -> (ModelRunner, Vec<Option<crate::sim::SimRun>>) {
+        let r = calibrated(cand);
+        let mut physics = cand.effects.clone();
+        physics.accel_zero_shift = None;
+        physics.pressure_gain_error = None;
+        let runs = parallel(opts.threads, bars.clone(), &|bar| {
+            simulate_truth(&r.config(bar, &physics)).ok()
+        });
+        (r, runs)
+    };
+    let (fitted_runner, fitted_runs) = match &fitted_cand {
+        Some(c) => model_runs(c),
+        None => (runner.clone(), bars.iter().map(|_| None).collect()),
+    };
+    let (recal_runner, recal_runs) = model_runs(&nominal);
+    step("held-out check");
+    let held_out_points: Vec<f64> = points
+        .iter()
+        .filter(|p| !p.is_fit_point)
+        .map(|p| p.supply_bar)
+        .collect();
+    let mut shrink_points = Vec::new();
+    for (i, p) in points.iter().enumerate() {
+        let s = summarize(&p.held);
+        if s.cycles == 0 {
+            continue;
+        }
+        let nom = &nominal_features[i];
+        let fitted = match (&fitted_cand, &fitted_runs[i]) {
+            (Some(c), Some(run)) => fitted_runner.features_of_truth(&run.truth, &c.effects),
+            _ => None,
+        };
+        let fitted = fitted.unwrap_or_else(|| nom.clone());
+        let recal = recal_runs[i]
+            .as_ref()
+            .and_then(|run| recal_runner.features_of_truth(&run.truth, &nominal.effects))
+            .unwrap_or_else(|| nom.clone());
+        let rms = |m: &[f64]| -> BTreeMap<String, f64> {
+            WAVE_SIGNALS
+                .iter()
+                .enumerate()
+                .map(|(si, name)| {
+                    let d: Vec<f64> = (0..BINS)
+                        .map(|b| m[wave_index(si, b)] - s.mean[wave_index(si, b)])
+                        .filter(|x| x.is_finite())
+                        .collect();
+                    let r = (d.iter().map(|x| x * x).sum::<f64>() / d.len().max(1) as f64).sqrt();
+                    (name.to_string(), r)
+                })
+                .collect()
+        };
+        shrink_points.push(PointShrink {
+            supply_bar: p.supply_bar,
+            held_out_point: !p.is_fit_point,
+            cycles: s.cycles,
+            impact_energy_measured_j: s.mean[ENERGY],
+            impact_energy_nominal_j: nom[ENERGY],
+            impact_energy_fitted_j: fitted[ENERGY],
+            impact_energy_recalibrated_j: recal[ENERGY],
+            frequency_measured_hz: 1.0 / s.mean[PERIOD],
+            frequency_nominal_hz: 1.0 / nom[PERIOD],
+            frequency_fitted_hz: 1.0 / fitted[PERIOD],
+            rms_before: rms(nom),
+            rms_after: rms(&fitted),
+        });
+    }
+    let judged: Vec<&PointShrink> = if held_out_points.is_empty() {
+        shrink_points.iter().collect()
+    } else {
+        shrink_points.iter().filter(|p| p.held_out_point).collect()
+    };
+    let mean_err = |f: &dyn Fn(&PointShrink) -> f64| {
+        100.0 * judged.iter().map(|p| f(p).abs()).sum::<f64>() / judged.len().max(1) as f64
+    };
+    let shrink = Shrink {
+        impact_energy_error_before: mean_err(&|p| {
+            (p.impact_energy_nominal_j - p.impact_energy_measured_j) / p.impact_energy_measured_j
+        }),
+        impact_energy_error_after: mean_err(&|p| {
+            (p.impact_energy_fitted_j - p.impact_energy_measured_j) / p.impact_energy_measured_j
+        }),
+        frequency_error_before: mean_err(&|p| {
+            (p.frequency_nominal_hz - p.frequency_measured_hz) / p.frequency_measured_hz
+        }),
+        frequency_error_after: mean_err(&|p| {
+            (p.frequency_fitted_hz - p.frequency_measured_hz) / p.frequency_measured_hz
+        }),
+        impact_energy_error_recalibrated_only: mean_err(&|p| {
+            (p.impact_energy_recalibrated_j - p.impact_energy_measured_j) / p.impact_energy_measured_j
+        }),
+        held_out_points: held_out_points.clone(),
+        judged_on: if held_out_points.is_empty() {
+            "the later half of the cycles of every trace (one operating point: no held-out pressure)".into()
+        } else {
+            "every steady cycle at the held-out pressures".into()
+        },
+        points: shrink_points,
+    };
+
+    // Where: the gap by signal × stage at every point, nominal model.
+    let mut where_ = Vec::new();
+    let mut waves = Vec::new();
+    for (i, p) in points.iter().enumerate() {
+        let Some((tpl, stages)) = template(&nominal_runs_ok[i], &base.hammer) else {
+            continue;
+        };
+        let mut meas = Vec::new();
+        for &k in &p.inputs {
+            meas.extend(measured_cycles(&inputs[k].trace, &steady_impacts[k]));
+        }
+        for c in breakdown(&tpl, &stages, &meas) {
+            where_.push(WhereCell {
+                supply_bar: p.supply_bar,
+                signal: c.signal,
+                stage: c.stage,
+                bias: c.bias,
+                rms: c.rms,
+                relative_rms: c.relative_rms,
+                timing_shift_s: c.timing_shift_s,
+            });
+        }
+        if opts.figures && !meas.is_empty() {
+            let fitted = fitted_runs[i]
+                .as_ref()
+                .and_then(|r| template(r, &base.hammer))
+                .map(|(mut f, _)| {
+                    if let Some(g) = fitted_cand
+                        .as_ref()
+                        .and_then(|c| c.effects.pressure_gain_error.as_ref())
+                    {
+                        f.p_rear_pa.iter_mut().for_each(|x| *x *= 1.0 + g.rear);
+                        f.p_front_pa.iter_mut().for_each(|x| *x *= 1.0 + g.front);
+                    }
+                    f
+                });
+            waves.push(PointWaves {
+                supply_bar: p.supply_bar,
+                t_s: (0..tpl.len()).map(|k| k as f64 * tpl.dt_s).collect(),
+                stages: stages.clone(),
+                measured: mean_cycle(&meas, tpl.len()),
+                nominal: tpl,
+                fitted,
+            });
+        }
+    }
+    where_.sort_by(|a, b| b.relative_rms.total_cmp(&a.relative_rms));
+
+    let verdict = match &verdict_cand {
+        Some(v) => Verdict {
+            effects: v.name.split('+').map(str::to_string).collect(),
+            params: v.params.clone(),
+            score: v.score,
+            reason,
+        },
+        None => Verdict {
+            effects: vec!["none".into()],
+            params: serde_json::json!({}),
+            score: effects.first().map_or(0.0, |e| e.score),
+            reason,
+        },
+    };
+    let simulations =
+        fs.sims.load(Ordering::Relaxed) + fitted_runs.iter().flatten().count() + recal_runs.iter().flatten().count();
+    Ok(Outcome {
+        report: Report {
+            tool: format!("hammer diagnose {}", env!("CARGO_PKG_VERSION")),
+            inputs: infos,
+            fit_points: fit_bars,
+            where_,
+            effects,
+            pairs,
+            verdict,
+            shrink,
+            chi2_nominal,
+            features_compared: n_compared,
+            fit_cycles,
+            options: opts.clone(),
+            simulations,
+            elapsed_s: started.elapsed().as_secs_f64(),
+        },
+        waves,
+    })
+}
+
+/// The average of measured cycles, each stretched onto `len` samples.
+fn mean_cycle(meas: &[CycleSignals], len: usize) -> CycleSignals {
+    let stretched: Vec<CycleSignals> = meas.iter().map(|m| normalized(m, len)).collect();
+    let avg = |f: &dyn Fn(&CycleSignals) -> &Vec<f64>| -> Vec<f64> {
+        (0..len)
+            .map(|k| {
+                let xs: Vec<f64> = stretched.iter().map(|c| f(c)[k]).filter(|x| x.is_finite()).collect();
+                if xs.is_empty() {
+                    f64::NAN
+                } else {
+                    xs.iter().sum::<f64>() / xs.len() as f64
+                }
+            })
+            .collect()
+    };
+    CycleSignals {
+        dt_s: stretched.first().map_or(1e-5, |c| c.dt_s),
+        p_rear_pa: avg(&|c| &c.p_rear_pa),
+        p_front_pa: avg(&|c| &c.p_front_pa),
+        accel_mps2: avg(&|c| &c.accel_mps2),
+        velocity_mps: avg(&|c| &c.velocity_mps),
+    }
+}
+
+/// Start values from what the measurement shows directly.
+fn start_values(fs: &FitSet, name: &str) -> Vec<f64> {
+    let mean_at = |bar: f64, j: usize| {
+        fs.points
+            .iter()
+            .find(|p| (p.0 - bar).abs() < 1e-9)
+            .map_or(0.0, |p| p.1.mean[j])
+    };
+    let avg = |j: usize| fs.points.iter().map(|p| p.1.mean[j]).sum::<f64>() / fs.points.len().max(1) as f64;
+    let friction = |bar: f64| (0.5 * (mean_at(bar, F_STROKE) + mean_at(bar, F_BACKHAUL))).max(0.1);
+    let specs = free_params(name, fs.distinct);
+    match name {
+        "coulomb_friction" => specs
+            .iter()
+            .enumerate()
+            .map(|(i, _)| friction(if i == 0 { fs.pressures.0 } else { fs.pressures.1 }))
+            .collect(),
+        "viscous_friction" => vec![avg(VISCOUS).max(0.05)],
+        "pressure_gain_error" => vec![avg(GAIN_REAR), avg(GAIN_FRONT)],
+        "accel_zero_shift" => {
+            let nominal_zs = fs
+                .nominal_truth
+                .first()
+                .and_then(|t| fs.runner.features_of_truth(t, &Effects::default()))
+                .map_or(0.0, |f| f[ZERO_SHIFT_SQ]);
+            vec![((avg(ZERO_SHIFT_SQ) - nominal_zs).max(0.0) / ZERO_SHIFT_SQ_FACTOR).sqrt()]
+        }
+        _ => {
+            let mut e = Effects::default();
+            e.apply_spec(name).ok();
+            let v = catalogue_params(&e, name);
+            specs
+                .iter()
+                .map(|s| v.get(s.key).and_then(|x| x.as_f64()).unwrap_or(s.lo))
+                .collect()
+        }
+    }
+}
+
+/// Fits `names` together (one or two effects); `init` overrides start values.
+fn fit_effects(
+    fs: &FitSet,
+    names: &[&str],
+    init: &[FittedParam],
+    chi2_nominal: f64,
+    ln_n: f64,
+    opts: &Options,
+) -> Option<EffectResult> {
+    let mut specs = Vec::new();
+    let mut theta0 = Vec::new();
+    let mut owner = Vec::new();
+    for (k, name) in names.iter().enumerate() {
+        let sp = free_params(name, fs.distinct);
+        let st = start_values(fs, name);
+        for (s, v) in sp.iter().zip(st) {
+            let v = init
+                .iter()
+                .find(|p| p.key == format!("{name}.{}", s.key))
+                .map_or(v, |p| p.value);
+            specs.push(*s);
+            theta0.push(v);
+            owner.push(k);
+        }
+    }
+    let build = |theta: &[f64]| {
+        let mut c = Candidate::default();
+        for (k, name) in names.iter().enumerate() {
+            let t: Vec<f64> = theta
+                .iter()
+                .zip(&owner)
+                .filter(|(_, &o)| o == k)
+                .map(|(x, _)| *x)
+                .collect();
+            apply(&mut c.effects, name, &t, fs.pressures);
+        }
+        c
+    };
+    let sims_before = fs.sims.load(Ordering::Relaxed);
+    let fit: FitResult = levenberg_marquardt(&specs, &theta0, opts.max_iterations, &mut |t| fs.residuals(&build(t)))?;
+    let cand = build(&fit.theta);
+    let k = specs.len() as f64;
+    let score = chi2_nominal - fit.chi2 - k * ln_n;
+    let explained = if chi2_nominal > 0.0 {
+        ((chi2_nominal - fit.chi2) / chi2_nominal).max(0.0)
+    } else {
+        0.0
+    };
+    let mut params = serde_json::Map::new();
+    for name in names {
+        params.insert(name.to_string(), catalogue_params(&cand.effects, name));
+    }
+    let fitted = specs
+        .iter()
+        .zip(&owner)
+        .zip(fit.theta.iter().zip(&fit.sd))
+        .map(|((s, &o), (&v, &sd))| FittedParam {
+            key: format!("{}.{}", names[o], s.key),
+            value: v,
+            sd,
+        })
+        .collect();
+    let evidence = evidence(fs, names, &cand);
+    Some(EffectResult {
+        name: names.join("+"),
+        params: if names.len() == 1 {
+            params.remove(names[0]).unwrap_or_default()
+        } else {
+            serde_json::Value::Object(params)
+        },
+        fitted,
+        chi2: fit.chi2,
+        score,
+        explained_fraction: explained,
+        evidence,
+        simulations: fs.sims.load(Ordering::Relaxed) - sims_before,
+        candidate: cand,
+    })
+}
+
+/// What in the measurement the effect matched: its signature in the force
+/// balance, and the features whose gap it closed most.
+fn evidence(fs: &FitSet, names: &[&str], cand: &Candidate) -> Vec<String> {
+    let mut out = Vec::new();
+    let mean = |j: usize| {
+        let n = fs.points.len().max(1) as f64;
+        let m = fs.points.iter().map(|p| p.1.mean[j]).sum::<f64>() / n;
+        let se = (fs.points.iter().map(|p| p.2[j] * p.2[j]).sum::<f64>()).sqrt() / n;
+        (m, se)
+    };
+    for name in names {
+        let line = match *name {
+            "coulomb_friction" => {
+                let (s, ss) = mean(F_STROKE);
+                let (b, sb) = mean(F_BACKHAUL);
+                let (g, sg) = mean(GAIN_REAR);
+                format!(
+                    "force balance: an offset opposing the motion, {s:.2} ± {ss:.2} N in the stroke and {b:.2} ± {sb:.2} N in the backhaul (it flips sign with the direction of motion); nothing proportional to the rear chamber force (γ = {g:.4} ± {sg:.4}), which a pressure gain error would leave"
+                )
+            }
+            "viscous_friction" => {
+                let (c, sc) = mean(VISCOUS);
+                format!("force balance: a force growing with the speed, {c:.2} ± {sc:.2} N·s/m, not a constant offset")
+            }
+            "pressure_gain_error" => {
+                let (g1, s1) = mean(GAIN_REAR);
+                let (g2, s2) = mean(GAIN_FRONT);
+                format!(
+                    "force balance: a force proportional to the chamber forces, rear {g1:+.4} ± {s1:.4}, front {g2:+.4} ± {s2:.4}, that does not flip with the direction of motion"
+                )
+            }
+            "accel_zero_shift" => {
+                let (z, _) = mean(ZERO_SHIFT_SQ);
+                format!(
+                    "force balance: an acceleration offset of random sign decaying from each impact, RMS {:.1} m/s²",
+                    z.max(0.0).sqrt()
+                )
+            }
+            _ => String::new(),
+        };
+        if !line.is_empty() {
+            out.push(line);
+        }
+    }
+    // The features whose gap the candidate closed most, grouped by signal and stage.
+    let nominal = Candidate::default();
+    let mut gains: BTreeMap<String, f64> = BTreeMap::new();
+    let stages_of_bins = fs.nominal_truth.first().map(|t| bin_stages(t, &fs.runner.base.hammer));
+    for ((bar, s, sigma), truth) in fs.points.iter().zip(&fs.nominal_truth) {
+        let (Some(m0), Some(m1)) = (
+            fs.runner.features(*bar, &nominal, Some(truth)),
+            fs.runner.features(*bar, cand, Some(truth)),
+        ) else {
+            continue;
+        };
+        for j in 0..N_FEATURES {
+            let r0 = residual(m0[j], s.mean[j], sigma[j]);
+            let r1 = residual(m1[j], s.mean[j], sigma[j]);
+            let label = match (wave_of(j), &stages_of_bins) {
+                (Some((si, b)), Some(st)) => format!("{} in {}", WAVE_SIGNALS[si], st[b].name()),
+                _ => feature_name(j),
+            };
+            *gains.entry(label).or_default() += r0 * r0 - r1 * r1;
+        }
+    }
+    let mut g: Vec<(String, f64)> = gains.into_iter().filter(|(_, v)| *v > 0.0).collect();
+    g.sort_by(|a, b| b.1.total_cmp(&a.1));
+    let total: f64 = g.iter().map(|x| x.1).sum();
+    if total > 0.0 {
+        let top: Vec<String> = g
+            .iter()
+            .take(4)
+            .map(|(k, v)| format!("{k} ({:.0} %)", 100.0 * v / total))
+            .collect();
+        out.push(format!("closes the gap mostly in: {}", top.join(", ")));
+    }
+    out
+}
+
+/// The dominant stage of each waveform bin of the nominal cycle.
+fn bin_stages(truth: &TruthTrace, hammer: &crate::sim::params::HammerParams) -> Vec<Stage> {
+    let edges = super::stages::Edges {
+        front_outlet_m: hammer.front_outlet_opens_m,
+        rear_outlet_m: hammer.rear_outlet_opens_m,
+    };
+    // The last cycle of the solution: from the last-but-one contact to the last.
+    let a = &truth.accel_mps2;
+    let mut imps = Vec::new();
+    for i in 1..a.len() {
+        if a[i] < -1500.0 && a[i - 1] >= -1500.0 && imps.last().is_none_or(|&l: &usize| i - l > 1000) {
+            imps.push(i);
+        }
+    }
+    let (i0, i1) = match imps.len() {
+        n if n >= 2 => (imps[n - 2], imps[n - 1]),
+        _ => return vec![Stage::StrokeIntake; BINS],
+    };
+    let n = i1 - i0;
+    (0..BINS)
+        .map(|b| {
+            let mut count: BTreeMap<Stage, usize> = BTreeMap::new();
+            for k in (b * n / BINS)..((b + 1) * n / BINS) {
+                let i = i0 + k;
+                let st = super::stages::stage_of(
+                    &edges,
+                    truth.x_m[i],
+                    truth.v_mps[i],
+                    k as f64 * truth.dt_s,
+                    super::gap::IMPACT_WINDOW_S,
+                );
+                *count.entry(st).or_default() += 1;
+            }
+            count
+                .into_iter()
+                .max_by_key(|x| x.1)
+                .map_or(Stage::StrokeIntake, |x| x.0)
+        })
+        .collect()
+}

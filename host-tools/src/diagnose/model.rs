@@ -1,0 +1,223 @@
+//! The model side of the diagnosis: the nominal simulator plus candidate
+//! effects, read by the same feature extractor as the measurement.
+
+use serde::{Deserialize, Serialize};
+
+use super::features::{summarize, Extractor, Signals, N_FEATURES, ZERO_SHIFT_SQ};
+use super::fit::ParamSpec;
+use crate::sim::effects::{
+    AccelZeroShift, CoulombFriction, Effects, HeatTransfer, Leakage, PressureGainError, SupplyRestriction, ValveDelay,
+    ViscousFriction,
+};
+use crate::sim::run::TruthTrace;
+use crate::sim::{simulate_truth, SimConfig};
+
+/// E[u²] of the zero-shift magnitude factor u ~ U(0.5, 1.5) (`sim::sensor`).
+pub const ZERO_SHIFT_SQ_FACTOR: f64 = 1.0 + 1.0 / 12.0;
+
+/// A candidate model: physical effects for the simulator, sensor effects
+/// applied to its ideal signals.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Candidate {
+    pub effects: Effects,
+}
+
+impl Candidate {
+    fn has_physics(&self) -> bool {
+        let e = &self.effects;
+        e.coulomb_friction.is_some()
+            || e.viscous_friction.is_some()
+            || e.leakage.is_some()
+            || e.valve_delay.is_some()
+            || e.heat_transfer.is_some()
+            || e.supply_restriction.is_some()
+    }
+}
+
+/// The free parameters the diagnosis fits for an effect, and the catalogue
+/// keys they set. Every other key keeps its default (documented in
+/// docs/diagnosis.md): a leakage's eccentricity and rod guide, a supply
+/// line's volume, a zero shift's discharge time constant.
+pub fn free_params(name: &str, distinct_pressures: usize) -> Vec<ParamSpec> {
+    let p = |key, lo, hi, log, step| ParamSpec { key, lo, hi, log, step };
+    match name {
+        // Friction at the lowest and highest fitted pressure (a line between
+        // them is the catalogue's F0 + k·p); from one pressure, F ∝ p.
+        "coulomb_friction" if distinct_pressures >= 2 => vec![
+            p("friction_at_low_n", 0.0, 300.0, false, 0.05),
+            p("friction_at_high_n", 0.0, 300.0, false, 0.05),
+        ],
+        "coulomb_friction" => vec![p("friction_at_low_n", 0.0, 300.0, false, 0.05)],
+        "viscous_friction" => vec![p("c_n_s_per_m", 0.01, 200.0, true, 0.02)],
+        "leakage" => vec![p("gap_m", 1e-6, 1.5e-4, true, 0.01)],
+        "valve_delay" => vec![p("tau_s", 1e-5, 0.03, true, 0.02)],
+        "heat_transfer" => vec![p("h_w_per_m2_k", 1.0, 5e4, true, 0.02)],
+        "supply_restriction" => vec![p("orifice_diameter_m", 5e-4, 0.03, true, 0.01)],
+        "accel_zero_shift" => vec![p("amplitude_mps2", 0.0, 1e3, false, 0.1)],
+        "pressure_gain_error" => vec![p("rear", -0.3, 0.3, false, 1e-3), p("front", -0.3, 0.3, false, 1e-3)],
+        _ => Vec::new(),
+    }
+}
+
+/// Writes fitted values `theta` of `name` into `effects`. `pressures` are the
+/// lowest and highest supply pressures of the fit set, bar.
+pub fn apply(effects: &mut Effects, name: &str, theta: &[f64], pressures: (f64, f64)) {
+    match name {
+        "coulomb_friction" => {
+            let (lo, hi) = pressures;
+            let (f0, k) = if theta.len() >= 2 && hi > lo {
+                let k = (theta[1] - theta[0]) / (hi - lo);
+                (theta[0] - k * lo, k)
+            } else {
+                (0.0, theta[0] / lo.max(1e-3))
+            };
+            effects.coulomb_friction = Some(CoulombFriction {
+                f0_n: f0,
+                k_n_per_bar: k,
+                ..Default::default()
+            });
+        }
+        "viscous_friction" => effects.viscous_friction = Some(ViscousFriction { c_n_s_per_m: theta[0] }),
+        "leakage" => {
+            effects.leakage = Some(Leakage {
+                gap_m: theta[0],
+                ..Default::default()
+            })
+        }
+        "valve_delay" => effects.valve_delay = Some(ValveDelay { tau_s: theta[0] }),
+        "heat_transfer" => effects.heat_transfer = Some(HeatTransfer { h_w_per_m2_k: theta[0] }),
+        "supply_restriction" => {
+            effects.supply_restriction = Some(SupplyRestriction {
+                orifice_diameter_m: theta[0],
+                ..Default::default()
+            })
+        }
+        "accel_zero_shift" => {
+            effects.accel_zero_shift = Some(AccelZeroShift {
+                amplitude_mps2: theta[0],
+                ..Default::default()
+            })
+        }
+        "pressure_gain_error" => {
+            effects.pressure_gain_error = Some(PressureGainError {
+                rear: theta[0],
+                front: theta[1],
+            })
+        }
+        _ => {}
+    }
+}
+
+/// The catalogue parameters of an effect as they would go in a config file.
+pub fn catalogue_params(effects: &Effects, name: &str) -> serde_json::Value {
+    let v = serde_json::to_value(effects).unwrap_or_default();
+    v.get(name).cloned().unwrap_or(serde_json::Value::Null)
+}
+
+/// The nominal parameters a modeller knows only to a few percent (calibrated
+/// or estimated in docs/model.md): the diagnosis lets each of them move
+/// within a Gaussian prior rather than blame an effect for what they explain.
+/// Mass and piston areas are not among them: they are measured.
+pub const NUISANCE: [(&str, fn(&mut SimConfig) -> &mut f64); 9] = [
+    ("valve.full_open_area_m2", |c| &mut c.valve.full_open_area_m2),
+    ("valve.cd", |c| &mut c.valve.cd),
+    ("valve.damping_n_s_per_m", |c| &mut c.valve.damping_n_s_per_m),
+    ("valve.pilot_area_rear_m2", |c| &mut c.valve.pilot_area_rear_m2),
+    ("valve.pilot_area_front_m2", |c| &mut c.valve.pilot_area_front_m2),
+    ("hammer.outlet_cd", |c| &mut c.hammer.outlet_cd),
+    ("hammer.rear_dead_volume_m3", |c| &mut c.hammer.rear_dead_volume_m3),
+    ("hammer.front_dead_volume_m3", |c| &mut c.hammer.front_dead_volume_m3),
+    ("contact.restitution", |c| &mut c.contact.restitution),
+];
+
+/// Runs the model at operating points and reads it like a measurement.
+#[derive(Debug, Clone)]
+pub struct ModelRunner {
+    pub base: SimConfig,
+    pub extractor: Extractor,
+    /// Simulated time per run; the cycles after `settle_s` are averaged.
+    pub duration_s: f64,
+    pub settle_s: f64,
+}
+
+impl ModelRunner {
+    pub fn new(base: SimConfig, extractor: Extractor) -> Self {
+        Self {
+            base,
+            extractor,
+            duration_s: 0.45,
+            settle_s: 0.27,
+        }
+    }
+
+    pub fn config(&self, supply_bar: f64, effects: &Effects) -> SimConfig {
+        let mut c = self.base.clone();
+        c.supply.pressure_bar = supply_bar;
+        c.solver.duration_s = self.duration_s;
+        c.effects = effects.clone();
+        c
+    }
+
+    /// The ideal (noiseless) solution of the physical part of a candidate.
+    pub fn truth(&self, supply_bar: f64, cand: &Candidate) -> Option<TruthTrace> {
+        let mut physics = cand.effects.clone();
+        physics.accel_zero_shift = None;
+        physics.pressure_gain_error = None;
+        simulate_truth(&self.config(supply_bar, &physics)).ok().map(|r| r.truth)
+    }
+
+    /// Mean steady features of the candidate at `supply_bar`; `nominal_truth`
+    /// is reused when the candidate has no physical effect.
+    pub fn features(&self, supply_bar: f64, cand: &Candidate, nominal_truth: Option<&TruthTrace>) -> Option<Vec<f64>> {
+        let owned;
+        let truth = match nominal_truth {
+            Some(t) if !cand.has_physics() => t,
+            _ => {
+                owned = self.truth(supply_bar, cand)?;
+                &owned
+            }
+        };
+        self.features_of_truth(truth, &cand.effects)
+    }
+
+    /// Features of a simulated solution seen through the candidate's sensor effects.
+    pub fn features_of_truth(&self, truth: &TruthTrace, effects: &Effects) -> Option<Vec<f64>> {
+        let (g1, g2) = effects
+            .pressure_gain_error
+            .as_ref()
+            .map_or((0.0, 0.0), |g| (g.rear, g.front));
+        let scaled;
+        let (p1, p2): (&[f64], &[f64]) = if g1 != 0.0 || g2 != 0.0 {
+            scaled = (
+                truth.p_rear_pa.iter().map(|p| p * (1.0 + g1)).collect::<Vec<_>>(),
+                truth.p_front_pa.iter().map(|p| p * (1.0 + g2)).collect::<Vec<_>>(),
+            );
+            (&scaled.0, &scaled.1)
+        } else {
+            (&truth.p_rear_pa, &truth.p_front_pa)
+        };
+        let s = Signals {
+            dt_s: truth.dt_s,
+            p_rear_pa: p1,
+            p_front_pa: p2,
+            accel_mps2: &truth.accel_mps2,
+        };
+        let cycles: Vec<_> = self
+            .extractor
+            .cycles(&s)
+            .into_iter()
+            .filter(|c| c.t_impact_s >= self.settle_s)
+            .collect();
+        if cycles.is_empty() {
+            return None;
+        }
+        let mut mean = summarize(&cycles).mean;
+        // The zero shift's sign is random per impact: its expected effect on
+        // the corrected waveforms is nil, on the squared amplitude E[u²]·A².
+        if let Some(z) = &effects.accel_zero_shift {
+            mean[ZERO_SHIFT_SQ] += ZERO_SHIFT_SQ_FACTOR * z.amplitude_mps2 * z.amplitude_mps2;
+        }
+        debug_assert_eq!(mean.len(), N_FEATURES);
+        Some(mean)
+    }
+}
