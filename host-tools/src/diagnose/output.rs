@@ -366,6 +366,10 @@ pub fn markdown(report: &Report, figures: &[String]) -> String {
         pct(sh.frequency_error_before),
         pct(sh.frequency_error_after)
     );
+    line!(
+        "- control, the nominal parameters refitted within their prior and no effect added: impact energy error {} %",
+        pct(sh.impact_energy_error_recalibrated_only)
+    );
     line!();
     line!(
         "Judged on {}. Held-out operating points: {}.",
@@ -898,6 +902,7 @@ mod tests {
                 impact_energy_error_after: 1.23,
                 frequency_error_before: 5.0,
                 frequency_error_after: 0.4,
+                impact_energy_error_recalibrated_only: 7.5,
                 held_out_points: vec![],
                 judged_on: "the later half of the cycles".into(),
                 points: vec![PointShrink {
@@ -907,6 +912,7 @@ mod tests {
                     impact_energy_measured_j: 1.0,
                     impact_energy_nominal_j: 1.12,
                     impact_energy_fitted_j: 1.01,
+                    impact_energy_recalibrated_j: 0.95,
                     frequency_measured_hz: 30.0,
                     frequency_nominal_hz: 31.5,
                     frequency_fitted_hz: 30.1,
