@@ -52,6 +52,14 @@ pub enum Command {
     /// without friction, frequency (Hz), wear index (J), each with its
     /// expanded uncertainty, and quality flags.
     Estimate(EstimateArgs),
+    /// Sim-to-real gap diagnosis: where the nominal model misses the measured
+    /// traces (signal × stage), which catalogued effect explains it (fitted,
+    /// ranked, with evidence), and how far the gap shrinks on held-out data.
+    Diagnose(crate::diagnose::command::DiagnoseArgs),
+    /// Blind benchmark of the diagnosis: cases with a hidden effect (or none,
+    /// or two) from a perturbed generator; prints the confusion matrix,
+    /// parameter errors and the held-out shrink.
+    DiagnoseBench(crate::diagnose::command::BenchArgs),
 }
 
 #[derive(Args, Debug)]
@@ -198,6 +206,8 @@ pub fn run(cli: Cli) -> Result<()> {
             Ok(())
         }
         Command::Estimate(args) => estimate_cmd(&args),
+        Command::Diagnose(args) => crate::diagnose::command::run(&args),
+        Command::DiagnoseBench(args) => crate::diagnose::command::bench(&args),
         Command::Demo(args) => crate::demo::run(&args),
         Command::Config(ConfigCommand::Check { file }) => config_check(&file),
         Command::Monitor(args) => crate::monitor::run(&args),

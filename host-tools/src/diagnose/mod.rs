@@ -4,6 +4,7 @@
 //! once that effect is in the model.
 
 pub mod bench;
+pub mod command;
 pub mod engine;
 pub mod features;
 pub mod fit;

@@ -1,0 +1,248 @@
+//! `hammer diagnose` and `hammer diagnose-bench`.
+
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+
+use super::bench::{render, run_case, summarize, BenchOptions};
+use super::engine::{diagnose, MeasuredInput, Options};
+use super::output::{summary, write_all};
+use crate::config::load_toml;
+use crate::estimate::sensors_for;
+use crate::sim::SimConfig;
+use crate::trace::{read_csv, read_sidecar};
+
+#[derive(Args, Debug)]
+pub struct DiagnoseArgs {
+    /// A measured trace (project trace format, CSV + optional sidecar);
+    /// repeatable. Its supply pressure comes from the sidecar or from a
+    /// `--supply-bar` given right after it.
+    #[arg(long, value_name = "TRACE", required = true)]
+    pub measured: Vec<PathBuf>,
+    /// Gauge supply pressure of the preceding `--measured`, bar.
+    #[arg(long, value_name = "BAR")]
+    pub supply_bar: Vec<f64>,
+    /// Fit on these traces (repeatable; default: the first); the other
+    /// operating points, and the later half of the fitted traces' cycles, are held out.
+    #[arg(long, value_name = "TRACE")]
+    pub fit_on: Vec<PathBuf>,
+    /// TOML file of the nominal model: [hammer], [valve], [contact], [sensors], [estimator].
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Relative standard deviation of the nominal parameters the model is unsure of.
+    #[arg(long, default_value_t = 0.02)]
+    pub nominal_uncertainty: f64,
+    /// Directory for report.json, report.md and the figures.
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+#[derive(Args, Debug)]
+pub struct BenchArgs {
+    /// Number of cases (each twelve: the eight effects, two controls, two pairs).
+    #[arg(long, default_value_t = 24)]
+    pub cases: usize,
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Operating points of every case, bar (the first and last are fitted).
+    #[arg(long, value_delimiter = ',', default_value = "4,5.5,7")]
+    pub points: Vec<f64>,
+    /// Length of each generated trace, s.
+    #[arg(long, default_value_t = 1.0)]
+    pub duration: f64,
+    /// Half-width of the uniform jitter of the generator's nominal parameters.
+    #[arg(long, default_value_t = 0.03)]
+    pub jitter: f64,
+    /// Write bench.json (every case) and bench.txt here.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+/// Pairs every `--supply-bar` of the raw command line with the `--measured`
+/// before it (clap keeps the two lists apart).
+fn supply_bars_by_position(raw: &[String], n_measured: usize) -> Vec<Option<f64>> {
+    let mut out = vec![None; n_measured];
+    let mut current: Option<usize> = None;
+    let mut seen = 0usize;
+    let mut it = raw.iter().peekable();
+    while let Some(a) = it.next() {
+        let (flag, inline) = match a.split_once('=') {
+            Some((f, v)) if f.starts_with("--") => (f, Some(v.to_string())),
+            _ => (a.as_str(), None),
+        };
+        match flag {
+            "--measured" => {
+                current = Some(seen);
+                seen += 1;
+                if inline.is_none() {
+                    it.next();
+                }
+            }
+            "--supply-bar" => {
+                let v = inline.or_else(|| it.next().cloned());
+                if let (Some(i), Some(v)) = (current, v.and_then(|v| v.parse::<f64>().ok())) {
+                    if i < n_measured {
+                        out[i] = Some(v);
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+    out
+}
+
+fn progress_bar(len: u64, template: &str) -> ProgressBar {
+    if !std::io::stderr().is_terminal() {
+        return ProgressBar::with_draw_target(Some(len), ProgressDrawTarget::hidden());
+    }
+    let pb = ProgressBar::with_draw_target(Some(len), ProgressDrawTarget::stderr());
+    if let Ok(style) = ProgressStyle::with_template(template) {
+        pb.set_style(style);
+    }
+    pb
+}
+
+pub fn run(args: &DiagnoseArgs) -> Result<()> {
+    let raw: Vec<String> = std::env::args().collect();
+    let mut bars = supply_bars_by_position(&raw, args.measured.len());
+    if bars.iter().all(Option::is_none) && args.supply_bar.len() == args.measured.len() {
+        bars = args.supply_bar.iter().map(|b| Some(*b)).collect();
+    }
+    let mut base: SimConfig = match &args.config {
+        Some(p) => load_toml(p)?,
+        None => SimConfig::default(),
+    };
+    base.validate()?;
+    let same = |a: &Path, b: &Path| a == b || a.canonicalize().ok().is_some_and(|x| b.canonicalize().ok() == Some(x));
+    let mut inputs = Vec::new();
+    for (k, path) in args.measured.iter().enumerate() {
+        let trace = read_csv(path).with_context(|| format!("reading {}", path.display()))?;
+        let sidecar = read_sidecar(path).with_context(|| format!("reading the sidecar of {}", path.display()))?;
+        if k == 0 && args.config.is_none() {
+            base.sensors = sensors_for(sidecar.as_ref(), &base.sensors);
+        }
+        let supply_bar = bars[k]
+            .or_else(|| sidecar.as_ref().and_then(|s| s.supply_pressure_bar))
+            .with_context(|| {
+                format!(
+                    "{}: supply pressure unknown: not in its sidecar; give --supply-bar BAR right after it",
+                    path.display()
+                )
+            })?;
+        crate::config::check_range("--supply-bar", supply_bar, 0.5, 20.0)?;
+        inputs.push(MeasuredInput {
+            label: path.display().to_string(),
+            supply_bar,
+            trace,
+            fit: args.fit_on.iter().any(|f| same(f, path)),
+        });
+    }
+    for f in &args.fit_on {
+        if !args.measured.iter().any(|m| same(f, m)) {
+            bail!("--fit-on {}: not among the --measured traces", f.display());
+        }
+    }
+    let opts = Options {
+        nominal_uncertainty: args.nominal_uncertainty,
+        ..Options::default()
+    };
+    let pb = progress_bar(1, "{spinner} diagnose [{bar:30}] {pos}/{len} {msg} ({elapsed})");
+    let outcome = diagnose(&inputs, &base, &opts, &|done, total, what| {
+        pb.set_length(total as u64);
+        pb.set_position(done as u64);
+        pb.set_message(what.to_string());
+    })?;
+    pb.finish_and_clear();
+    let written = write_all(&args.out, &outcome)?;
+    print!("{}", summary(&outcome.report));
+    println!(
+        "wrote {} ({} simulations, {:.1} s)",
+        written
+            .iter()
+            .map(|p| p.display().to_string())
+            .collect::<Vec<_>>()
+            .join(", "),
+        outcome.report.simulations,
+        outcome.report.elapsed_s
+    );
+    Ok(())
+}
+
+pub fn bench(args: &BenchArgs) -> Result<()> {
+    if args.points.is_empty() {
+        bail!("--points: give at least one operating point");
+    }
+    for &p in &args.points {
+        crate::config::check_range("--points", p, 0.5, 20.0)?;
+    }
+    crate::config::check_range("--jitter", args.jitter, 0.0, 0.5)?;
+    crate::config::check_range("--duration", args.duration, 0.3, 60.0)?;
+    let opts = BenchOptions {
+        cases: args.cases,
+        seed: args.seed,
+        points: args.points.clone(),
+        duration_s: args.duration,
+        jitter: args.jitter,
+    };
+    let diag = Options {
+        figures: false,
+        ..Options::default()
+    };
+    let pb = progress_bar(
+        args.cases as u64,
+        "diagnose-bench [{bar:30}] {pos}/{len} {msg} ({elapsed}, eta {eta})",
+    );
+    let mut cases = Vec::new();
+    let mut right = 0;
+    for i in 0..args.cases {
+        let c = run_case(&opts, i, &diag).with_context(|| format!("case {i}"))?;
+        right += usize::from(c.correct);
+        pb.set_message(format!("{right} named right"));
+        pb.inc(1);
+        cases.push(c);
+    }
+    pb.finish_and_clear();
+    let s = summarize(&opts, cases);
+    let text = render(&s);
+    print!("{text}");
+    if let Some(dir) = &args.out {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        let json = dir.join("bench.json");
+        std::fs::write(&json, serde_json::to_string_pretty(&s)?)
+            .with_context(|| format!("writing {}", json.display()))?;
+        let txt = dir.join("bench.txt");
+        std::fs::write(&txt, &text).with_context(|| format!("writing {}", txt.display()))?;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn supply_bars_follow_their_trace() {
+        let raw: Vec<String> = [
+            "hammer",
+            "diagnose",
+            "--measured",
+            "a.csv",
+            "--supply-bar",
+            "4",
+            "--measured=b.csv",
+            "--measured",
+            "c.csv",
+            "--supply-bar=7",
+            "--out",
+            "d",
+        ]
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
+        assert_eq!(supply_bars_by_position(&raw, 3), vec![Some(4.0), None, Some(7.0)]);
+    }
+}
