@@ -125,6 +125,11 @@ impl Extractor {
         let a = &s.accel_mps2[..s.len()];
         let thr = -self.impact_threshold_mps2;
         let mut out: Vec<f64> = Vec::new();
+        // A trace that opens inside a shock opens with an impact: the board's
+        // raw capture starts at the sample where its estimator saw one.
+        if a.first().is_some_and(|&x| x < thr) {
+            out.push(0.0);
+        }
         for i in 1..a.len() {
             if a[i] < thr && a[i - 1] >= thr {
                 let f = (a[i - 1] - thr) / (a[i - 1] - a[i]);
