@@ -300,3 +300,83 @@ fn a_raw_capture_of_one_cycle_round_trips_into_the_trace_format() {
     );
     println!("capture: {} sample-sets from sample {start}", codes_back.len());
 }
+
+/// One-cycle raw captures from the emulated board, `n` of them, while it is
+/// fed a hammer with the paper's friction at `bar`; each becomes a trace.
+fn captures(bar: f64, n: usize, seed: u64) -> Vec<hammer_host::trace::Trace> {
+    let (_emu, mut link) = boot();
+    let mut cfg = SimConfig::nominal(bar);
+    cfg.solver.duration_s = 0.4 + 0.12 * n as f64;
+    cfg.seed = seed;
+    cfg.effects.apply_spec("coulomb_friction").unwrap();
+    let sim = simulate(&cfg).unwrap();
+    let est = estimator_config(&cfg.hammer, &cfg.sensors, &EstimatorParams::default(), 1e5, None).unwrap();
+    // The start-up from rest is not what a bench records: begin at 0.25 s.
+    let samples = &to_codes(&sim.trace(), &est)[25_000..];
+    let mut next = 0;
+    let mut out = Vec::new();
+    // Lock the estimator onto the cycle first.
+    stream(&mut link, &samples[..10_000], &mut next);
+    let mut at = 10_000;
+    while out.len() < n && at < samples.len() {
+        link.send(&HostMsg::StartCapture { cycles: 1 }).unwrap();
+        let end = (at + 10_000).min(samples.len());
+        let mut got = stream(&mut link, &samples[at..end], &mut next);
+        at = end;
+        let (_, more) = link
+            .recv_until(T, |m| {
+                matches!(m, DeviceMsg::Capture(c) if c.offset as usize + c.samples.len() == c.total as usize)
+                    .then_some(())
+            })
+            .unwrap();
+        got.extend(more);
+        let chunks: Vec<CaptureChunk> = got
+            .iter()
+            .filter_map(|m| {
+                if let DeviceMsg::Capture(c) = m {
+                    Some(c.clone())
+                } else {
+                    None
+                }
+            })
+            .collect();
+        if let Ok(codes) = hammer_host::capture::assemble(&chunks) {
+            out.push(hammer_host::capture::to_trace(&codes, &Config::default(), Some(bar)).0);
+        }
+    }
+    out
+}
+
+#[test]
+fn the_diagnosis_names_friction_from_the_boards_raw_captures() {
+    use hammer_host::diagnose::engine::{diagnose, MeasuredInput, Options};
+    let mut inputs = Vec::new();
+    for (bar, seed) in [(4.0, 31), (7.0, 32)] {
+        let traces = captures(bar, 3, seed);
+        assert_eq!(traces.len(), 3, "three captures at {bar} bar");
+        for (k, trace) in traces.into_iter().enumerate() {
+            inputs.push(MeasuredInput {
+                label: format!("capture {k} at {bar} bar"),
+                supply_bar: bar,
+                trace,
+                fit: true,
+            });
+        }
+    }
+    let opts = Options {
+        figures: false,
+        ..Options::default()
+    };
+    let r = diagnose(&inputs, &SimConfig::default(), &opts, &|_, _, _| {})
+        .expect("diagnosis of the captures")
+        .report;
+    println!("{:?}: {} {}", r.verdict.effects, r.verdict.reason, r.verdict.params);
+    for i in &r.inputs {
+        assert_eq!(i.cycles, 1, "a capture is one complete cycle: {i:?}");
+    }
+    assert_eq!(r.verdict.effects, vec!["coulomb_friction"]);
+    let p = &r.verdict.params;
+    let force = |bar: f64| p["f0_n"].as_f64().unwrap() + p["k_n_per_bar"].as_f64().unwrap() * bar;
+    assert!((force(4.0) - 10.27).abs() < 0.1 * 10.27, "{}", force(4.0));
+    assert!((force(7.0) - 16.7).abs() < 0.1 * 16.7, "{}", force(7.0));
+}
