@@ -80,6 +80,8 @@ pub struct Options {
     pub min_explained: f64,
     /// Pairs are tried when the best single effect leaves a reduced χ² above this.
     pub pair_residual: f64,
+    /// How many runners-up are tried as the second effect of a pair.
+    pub pair_candidates: usize,
     pub threads: usize,
     /// Keep the waveforms for the figures.
     pub figures: bool,
@@ -94,6 +96,7 @@ impl Default for Options {
             min_score: 20.0,
             min_explained: 0.5,
             pair_residual: 2.0,
+            pair_candidates: 5,
             threads: std::thread::available_parallelism().map_or(2, |n| n.get()),
             figures: true,
         }
@@ -586,10 +589,14 @@ pub fn diagnose(
                 effects.get(1).map_or("-", |e| e.name.as_str()),
                 effects.get(1).map_or(0.0, |e| e.score)
             );
-            if reduced > opts.pair_residual || best.chi2 > opts.min_score {
+            // A pair can only be named if the single leaves more than the
+            // threshold to explain: otherwise do not spend the simulations.
+            if reduced > opts.pair_residual || best.chi2 > opts.min_score + 2.0 * ln_n {
                 let first = best.name.clone();
                 let start: Vec<FittedParam> = best.fitted.clone();
-                let others: Vec<&EffectResult> = effects.iter().skip(1).collect();
+                // The next effects by their own score: a second effect shows
+                // there first, and each pair costs a fit.
+                let others: Vec<&EffectResult> = effects.iter().skip(1).take(opts.pair_candidates).collect();
                 let jobs: Vec<(String, Vec<FittedParam>)> =
                     others.iter().map(|o| (o.name.clone(), o.fitted.clone())).collect();
                 pairs = parallel(opts.threads, jobs, &|(other, other_start)| {
