@@ -23,7 +23,10 @@ fn main() {
         })
         .collect();
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
-    for (label, fit) in [("all four fitted", &bars[..]), ("4 and 7 bar fitted, 5 and 6 held out", &[4.0, 7.0][..])] {
+    for (label, fit) in [
+        ("all four fitted", &bars[..]),
+        ("4 and 7 bar fitted, 5 and 6 held out", &[4.0, 7.0][..]),
+    ] {
         let inputs: Vec<MeasuredInput> = bars
             .iter()
             .zip(&traces)

@@ -293,3 +293,148 @@ fn config_check_names_the_field_and_range_or_prints_the_resolved_config() {
     assert_eq!(code, 2);
     assert!(err.contains("missing field"), "{err}");
 }
+
+#[test]
+fn diagnose_writes_its_report_and_names_the_hidden_effect() {
+    let dir = tmp_dir("diagnose");
+    let mut paths = Vec::new();
+    for bar in ["4", "7"] {
+        let p = dir.join(format!("m{bar}.csv"));
+        let (code, _, err) = hammer(&[
+            "simulate",
+            "--supply-bar",
+            bar,
+            "--duration",
+            "0.8",
+            "--effect",
+            "viscous_friction:c_n_s_per_m=3",
+            "--seed",
+            "5",
+            "--out",
+            p.to_str().unwrap(),
+        ]);
+        assert_eq!(code, 0, "{err}");
+        paths.push(p);
+    }
+    // The 7 bar trace loses its sidecar: its pressure is given after it.
+    std::fs::remove_file(paths[1].with_extension("json")).unwrap();
+    let out = dir.join("report");
+    let (code, stdout, err) = hammer(&[
+        "diagnose",
+        "--measured",
+        paths[0].to_str().unwrap(),
+        "--measured",
+        paths[1].to_str().unwrap(),
+        "--supply-bar",
+        "7",
+        "--fit-on",
+        paths[0].to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    println!("{stdout}");
+    assert!(stdout.contains("verdict: viscous_friction"), "{stdout}");
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    for key in ["where", "effects", "verdict", "shrink"] {
+        assert!(json.get(key).is_some(), "report.json lacks {key}");
+    }
+    assert_eq!(json["verdict"]["effects"][0], "viscous_friction");
+    let c = json["verdict"]["params"]["c_n_s_per_m"].as_f64().unwrap();
+    assert!((c - 3.0).abs() < 0.3, "{c}");
+    assert_eq!(json["shrink"]["held_out_points"][0], 7.0);
+    assert_eq!(json["effects"].as_array().unwrap().len(), 8);
+    let md = std::fs::read_to_string(out.join("report.md")).unwrap();
+    assert!(md.contains("viscous_friction") && md.contains("gap-7bar.png"));
+    assert!(png_size(&out.join("gap-4bar.png")).0 > 0);
+    // No terminal, no progress bar on stderr.
+    assert!(!err.contains("diagnose ["), "{err}");
+}
+
+#[test]
+fn diagnose_refuses_bad_inputs_with_a_reason() {
+    let dir = tmp_dir("diagnose-bad");
+    let csv = dir.join("nosidecar.csv");
+    std::fs::write(&csv, "t_s,p_rear_pa,p_front_pa,accel_mps2\n0,0,0,0\n0.00001,0,0,0\n").unwrap();
+    let out = dir.join("out");
+    let (code, _, err) = hammer(&[
+        "diagnose",
+        "--measured",
+        csv.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_ne!(code, 0);
+    assert!(err.contains("supply pressure unknown"), "{err}");
+    let (code, _, err) = hammer(&[
+        "diagnose",
+        "--measured",
+        csv.to_str().unwrap(),
+        "--supply-bar",
+        "5",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_ne!(code, 0);
+    assert!(err.contains("no complete impact cycle"), "{err}");
+    let bad = dir.join("bad.csv");
+    std::fs::write(&bad, "t_s,p_rear_pa\n0,abc\n").unwrap();
+    let (code, _, err) = hammer(&[
+        "diagnose",
+        "--measured",
+        bad.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_ne!(code, 0);
+    assert!(err.contains("bad.csv"), "{err}");
+    let (code, _, err) = hammer(&[
+        "diagnose",
+        "--measured",
+        csv.to_str().unwrap(),
+        "--supply-bar",
+        "5",
+        "--fit-on",
+        "other.csv",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_ne!(code, 0);
+    assert!(err.contains("--fit-on"), "{err}");
+}
+
+/// The CI's small run of the blind benchmark: twelve cases (the eight
+/// effects, two controls, two pairs) from a perturbed generator.
+#[test]
+fn diagnose_bench_small_run() {
+    let dir = tmp_dir("bench");
+    let (code, stdout, err) = hammer(&[
+        "diagnose-bench",
+        "--cases",
+        "12",
+        "--seed",
+        "1",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    println!("{stdout}");
+    let count = |prefix: &str| -> (usize, usize) {
+        let line = stdout.lines().find(|l| l.starts_with(prefix)).unwrap();
+        let frac = line[prefix.len()..].split_whitespace().next().unwrap();
+        let (a, b) = frac.split_once('/').unwrap();
+        (a.parse().unwrap(), b.parse().unwrap())
+    };
+    let singles = count("single effect named right:");
+    let controls = count("no-effect controls flagged:");
+    let pairs = count("pairs named right:");
+    assert_eq!((singles.1, controls.1, pairs.1), (8, 2, 2));
+    assert!(singles.0 >= 7, "{singles:?}");
+    assert_eq!(controls.0, 0, "a control was flagged");
+    assert!(pairs.0 >= 1, "{pairs:?}");
+    assert!(stdout.contains("confusion (rows hidden, columns named)"));
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("bench.json")).unwrap()).unwrap();
+    assert_eq!(json["cases"].as_array().unwrap().len(), 12);
+}
