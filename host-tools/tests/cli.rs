@@ -358,50 +358,24 @@ fn diagnose_refuses_bad_inputs_with_a_reason() {
     let csv = dir.join("nosidecar.csv");
     std::fs::write(&csv, "t_s,p_rear_pa,p_front_pa,accel_mps2\n0,0,0,0\n0.00001,0,0,0\n").unwrap();
     let out = dir.join("out");
-    let (code, _, err) = hammer(&[
-        "diagnose",
-        "--measured",
-        csv.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]);
-    assert_ne!(code, 0);
-    assert!(err.contains("supply pressure unknown"), "{err}");
-    let (code, _, err) = hammer(&[
-        "diagnose",
-        "--measured",
-        csv.to_str().unwrap(),
-        "--supply-bar",
-        "5",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
-    assert_ne!(code, 0);
-    assert!(err.contains("no complete impact cycle"), "{err}");
+    let refused = |args: &[&str], reason: &str| {
+        let mut all = vec!["diagnose"];
+        all.extend_from_slice(args);
+        all.extend_from_slice(&["--out", out.to_str().unwrap()]);
+        let (code, _, err) = hammer(&all);
+        assert_ne!(code, 0, "{args:?}");
+        assert!(err.contains(reason), "{args:?}: {err}");
+    };
+    let csv = csv.to_str().unwrap();
+    refused(&["--measured", csv], "supply pressure unknown");
+    refused(&["--measured", csv, "--supply-bar", "5"], "no complete impact cycle");
     let bad = dir.join("bad.csv");
     std::fs::write(&bad, "t_s,p_rear_pa\n0,abc\n").unwrap();
-    let (code, _, err) = hammer(&[
-        "diagnose",
-        "--measured",
-        bad.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]);
-    assert_ne!(code, 0);
-    assert!(err.contains("bad.csv"), "{err}");
-    let (code, _, err) = hammer(&[
-        "diagnose",
-        "--measured",
-        csv.to_str().unwrap(),
-        "--supply-bar",
-        "5",
+    refused(&["--measured", bad.to_str().unwrap()], "bad.csv");
+    refused(
+        &["--measured", csv, "--supply-bar", "5", "--fit-on", "other.csv"],
         "--fit-on",
-        "other.csv",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
-    assert_ne!(code, 0);
-    assert!(err.contains("--fit-on"), "{err}");
+    );
 }
 
 /// The CI's small run of the blind benchmark: twelve cases (the eight

@@ -89,6 +89,25 @@ fn stream(link: &mut Link<std::net::TcpStream>, samples: &[RawSample], next_bloc
     got
 }
 
+/// Waits for the last chunk of a capture; returns every capture chunk in `got` and after it.
+fn finish_capture(link: &mut Link<std::net::TcpStream>, mut got: Vec<DeviceMsg>) -> Vec<CaptureChunk> {
+    let (_, more) = link
+        .recv_until(T, |m| {
+            matches!(m, DeviceMsg::Capture(c) if c.offset as usize + c.samples.len() == c.total as usize).then_some(())
+        })
+        .unwrap();
+    got.extend(more);
+    got.iter()
+        .filter_map(|m| {
+            if let DeviceMsg::Capture(c) = m {
+                Some(c.clone())
+            } else {
+                None
+            }
+        })
+        .collect()
+}
+
 fn reports(msgs: &[DeviceMsg]) -> Vec<Report> {
     msgs.iter()
         .filter_map(|m| if let DeviceMsg::Report(r) = m { Some(*r) } else { None })
@@ -250,23 +269,8 @@ fn a_raw_capture_of_one_cycle_round_trips_into_the_trace_format() {
         .unwrap();
     assert!(ack.is_some());
     let mut next = 0;
-    let mut got = stream(&mut link, &samples, &mut next);
-    let (_, more) = link
-        .recv_until(T, |m| {
-            matches!(m, DeviceMsg::Capture(c) if c.offset as usize + c.samples.len() == c.total as usize).then_some(())
-        })
-        .unwrap();
-    got.extend(more);
-    let chunks: Vec<CaptureChunk> = got
-        .iter()
-        .filter_map(|m| {
-            if let DeviceMsg::Capture(c) = m {
-                Some(c.clone())
-            } else {
-                None
-            }
-        })
-        .collect();
+    let got = stream(&mut link, &samples, &mut next);
+    let chunks = finish_capture(&mut link, got);
     let codes_back = hammer_host::capture::assemble(&chunks).expect("complete capture");
     assert!(
         codes_back.len() > 4000,
@@ -321,25 +325,9 @@ fn captures(bar: f64, n: usize, seed: u64) -> Vec<hammer_host::trace::Trace> {
     while out.len() < n && at < samples.len() {
         link.send(&HostMsg::StartCapture { cycles: 1 }).unwrap();
         let end = (at + 10_000).min(samples.len());
-        let mut got = stream(&mut link, &samples[at..end], &mut next);
+        let got = stream(&mut link, &samples[at..end], &mut next);
         at = end;
-        let (_, more) = link
-            .recv_until(T, |m| {
-                matches!(m, DeviceMsg::Capture(c) if c.offset as usize + c.samples.len() == c.total as usize)
-                    .then_some(())
-            })
-            .unwrap();
-        got.extend(more);
-        let chunks: Vec<CaptureChunk> = got
-            .iter()
-            .filter_map(|m| {
-                if let DeviceMsg::Capture(c) = m {
-                    Some(c.clone())
-                } else {
-                    None
-                }
-            })
-            .collect();
+        let chunks = finish_capture(&mut link, got);
         if let Ok(codes) = hammer_host::capture::assemble(&chunks) {
             out.push(hammer_host::capture::to_trace(&codes, &Config::default(), Some(bar)).0);
         }

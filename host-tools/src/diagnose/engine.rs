@@ -271,7 +271,7 @@ impl FitSet<'_> {
     fn residuals(&self, cand: &Candidate) -> Option<Vec<f64>> {
         let mut r = Vec::with_capacity(self.points.len() * N_FEATURES);
         for ((bar, s, sigma), truth) in self.points.iter().zip(&self.nominal_truth) {
-            if cand_has_physics(cand) {
+            if cand.has_physics() {
                 self.sims.fetch_add(1, Ordering::Relaxed);
             }
             let m = self.runner.features(*bar, cand, Some(truth))?;
@@ -321,13 +321,6 @@ impl FitSet<'_> {
     fn chi2(&self, cand: &Candidate) -> Option<f64> {
         self.residuals(cand).map(|r| r.iter().map(|x| x * x).sum())
     }
-}
-
-fn cand_has_physics(c: &Candidate) -> bool {
-    let mut e = c.effects.clone();
-    e.accel_zero_shift = None;
-    e.pressure_gain_error = None;
-    e != Effects::default()
 }
 
 /// Missing on the model side where the measurement has it: a clear miss.
@@ -655,9 +648,7 @@ pub fn diagnose(
     };
     let model_runs = |cand: &Candidate| -> (ModelRunner, Vec<Option<crate::sim::SimRun>>) {
         let r = calibrated(cand);
-        let mut physics = cand.effects.clone();
-        physics.accel_zero_shift = None;
-        physics.pressure_gain_error = None;
+        let physics = cand.physics();
         let runs = parallel(opts.threads, bars.clone(), &|bar| {
             simulate_truth(&r.config(bar, &physics)).ok()
         });
@@ -1027,7 +1018,10 @@ fn evidence(fs: &FitSet, names: &[&str], cand: &Candidate) -> Vec<String> {
     // The features whose gap the candidate closed most, grouped by signal and stage.
     let nominal = Candidate::default();
     let mut gains: BTreeMap<String, f64> = BTreeMap::new();
-    let stages_of_bins = fs.nominal_truth.first().map(|t| bin_stages(t, &fs.runner.base.hammer));
+    let stages_of_bins = fs
+        .nominal_truth
+        .first()
+        .map(|t| bin_stages(t, &fs.runner.base.hammer, &fs.runner.extractor));
     for ((bar, s, sigma), truth) in fs.points.iter().zip(&fs.nominal_truth) {
         let (Some(m0), Some(m1)) = (
             fs.runner.features(*bar, &nominal, Some(truth)),
@@ -1060,21 +1054,25 @@ fn evidence(fs: &FitSet, names: &[&str], cand: &Candidate) -> Vec<String> {
 }
 
 /// The dominant stage of each waveform bin of the nominal cycle.
-fn bin_stages(truth: &TruthTrace, hammer: &crate::sim::params::HammerParams) -> Vec<Stage> {
+fn bin_stages(truth: &TruthTrace, hammer: &crate::sim::params::HammerParams, extractor: &Extractor) -> Vec<Stage> {
     let edges = super::stages::Edges {
         front_outlet_m: hammer.front_outlet_opens_m,
         rear_outlet_m: hammer.rear_outlet_opens_m,
     };
-    // The last cycle of the solution: from the last-but-one contact to the last.
-    let a = &truth.accel_mps2;
-    let mut imps = Vec::new();
-    for i in 1..a.len() {
-        if a[i] < -1500.0 && a[i - 1] >= -1500.0 && imps.last().is_none_or(|&l: &usize| i - l > 1000) {
-            imps.push(i);
-        }
-    }
+    // The last cycle of the solution, its impacts found as the measurement's are.
+    let signals = super::features::Signals {
+        dt_s: truth.dt_s,
+        p_rear_pa: &truth.p_rear_pa,
+        p_front_pa: &truth.p_front_pa,
+        accel_mps2: &truth.accel_mps2,
+    };
+    let imps: Vec<usize> = extractor
+        .impacts(&signals)
+        .iter()
+        .map(|t| (t / truth.dt_s).ceil() as usize)
+        .collect();
     let (i0, i1) = match imps.len() {
-        n if n >= 2 => (imps[n - 2], imps[n - 1]),
+        n if n >= 2 => (imps[n - 2], imps[n - 1].min(truth.len())),
         _ => return vec![Stage::StrokeIntake; BINS],
     };
     let n = i1 - i0;

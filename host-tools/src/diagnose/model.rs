@@ -23,14 +23,16 @@ pub struct Candidate {
 }
 
 impl Candidate {
-    fn has_physics(&self) -> bool {
-        let e = &self.effects;
-        e.coulomb_friction.is_some()
-            || e.viscous_friction.is_some()
-            || e.leakage.is_some()
-            || e.valve_delay.is_some()
-            || e.heat_transfer.is_some()
-            || e.supply_restriction.is_some()
+    /// The effects the simulator must run; the sensor effects act on its output.
+    pub fn physics(&self) -> Effects {
+        let mut e = self.effects.clone();
+        e.accel_zero_shift = None;
+        e.pressure_gain_error = None;
+        e
+    }
+
+    pub fn has_physics(&self) -> bool {
+        self.physics() != Effects::default()
     }
 }
 
@@ -160,10 +162,9 @@ impl ModelRunner {
 
     /// The ideal (noiseless) solution of the physical part of a candidate.
     pub fn truth(&self, supply_bar: f64, cand: &Candidate) -> Option<TruthTrace> {
-        let mut physics = cand.effects.clone();
-        physics.accel_zero_shift = None;
-        physics.pressure_gain_error = None;
-        simulate_truth(&self.config(supply_bar, &physics)).ok().map(|r| r.truth)
+        simulate_truth(&self.config(supply_bar, &cand.physics()))
+            .ok()
+            .map(|r| r.truth)
     }
 
     /// Mean steady features of the candidate at `supply_bar`; `nominal_truth`
