@@ -6,9 +6,10 @@ use embassy_sync::blocking_mutex::raw::NoopRawMutex;
 use embassy_sync::pipe::Pipe;
 use hammer_app::{link_rx, link_tx, sampling, Clock, LinkRx, LinkSamples, LinkTx, Monitor, Shared};
 use hammer_estimator::{Config, Estimator, RawSample};
-use hammer_host::estimate::{estimator_config, to_codes, EstimatorParams};
-use hammer_host::sim::SimConfig;
-use hammer_host::simulate::simulate;
+use hammer_sim::estimation::{estimator_config, to_codes};
+use hammer_sim::simulate::simulate;
+use hammer_sim::SimConfig;
+use hammer_trace::EstimatorParams;
 use hammer_wire::*;
 
 fn codes(bar: f64, seconds: f64) -> Vec<RawSample> {

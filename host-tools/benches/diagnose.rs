@@ -4,9 +4,9 @@
 
 use hammer_host::diagnose::bench::generator_config;
 use hammer_host::diagnose::engine::{diagnose, MeasuredInput, Options};
-use hammer_host::sim::sensor::Rng;
-use hammer_host::sim::SimConfig;
-use hammer_host::simulate::simulate;
+use hammer_sim::sensor::Rng;
+use hammer_sim::simulate::simulate;
+use hammer_sim::SimConfig;
 
 fn main() {
     let bars = [4.0, 5.0, 6.0, 7.0];

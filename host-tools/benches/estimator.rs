@@ -5,9 +5,10 @@
 use std::time::Instant;
 
 use hammer_estimator::{Estimator, RawSample};
-use hammer_host::estimate::{estimator_config, to_codes, EstimatorParams};
-use hammer_host::sim::SimConfig;
-use hammer_host::simulate::simulate;
+use hammer_sim::estimation::{estimator_config, to_codes};
+use hammer_sim::simulate::simulate;
+use hammer_sim::SimConfig;
+use hammer_trace::EstimatorParams;
 
 fn main() {
     let mut cfg = SimConfig::nominal(5.0);

@@ -9,10 +9,11 @@
 use std::time::Duration;
 
 use hammer_host::emulator::{firmware_elf, qemu_available, Emulator};
-use hammer_host::estimate::{estimator_config, to_codes, EstimatorParams};
 use hammer_host::link::Link;
-use hammer_host::sim::SimConfig;
-use hammer_host::simulate::simulate;
+use hammer_sim::estimation::{estimator_config, to_codes};
+use hammer_sim::simulate::simulate;
+use hammer_sim::SimConfig;
+use hammer_trace::EstimatorParams;
 use hammer_wire::*;
 
 fn main() {

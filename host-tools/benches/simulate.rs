@@ -3,8 +3,8 @@
 
 use std::time::Instant;
 
-use hammer_host::sim::{simulate_truth, SimConfig};
-use hammer_host::simulate::simulate;
+use hammer_sim::simulate::simulate;
+use hammer_sim::{simulate_truth, SimConfig};
 
 fn main() {
     for (label, effects) in [

@@ -5,8 +5,8 @@
 //! records the values adopted as defaults.
 //! `cargo run --release -p hammer-host --example calibrate_nominal`
 
-use hammer_host::sim::sensor::Rng;
-use hammer_host::sim::{simulate_truth, SimConfig};
+use hammer_sim::sensor::Rng;
+use hammer_sim::{simulate_truth, SimConfig};
 
 /// Rear dead volume cm³, front dead volume cm³, outlets, pilot area ratio front/rear,
 /// valve full-open area mm², valve damping N·s/m, contact restitution.
@@ -50,7 +50,7 @@ fn evaluate(c: &Candidate) -> Option<(f64, [f64; 5])> {
         return None;
     }
     let n = steady.len() as f64;
-    let m = |f: &dyn Fn(&hammer_host::sim::CycleTruth) -> f64| steady.iter().map(|c| f(c)).sum::<f64>() / n;
+    let m = |f: &dyn Fn(&hammer_sim::CycleTruth) -> f64| steady.iter().map(|c| f(c)).sum::<f64>() / n;
     let v = m(&|c| c.impact_velocity_mps);
     let s = m(&|c| c.stroke_m) * 1e3;
     let p1 = m(&|c| c.peak_rear_pa) / 1e5;

@@ -3,7 +3,7 @@
 use hammer_estimator::Config;
 use hammer_wire::CaptureChunk;
 
-use crate::trace::{Sidecar, Trace};
+use hammer_trace::trace::{Sidecar, Trace};
 
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum CaptureError {

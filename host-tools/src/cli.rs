@@ -6,10 +6,10 @@ use std::process::ExitCode;
 use anyhow::{Context, Result};
 use clap::{Args, Parser, Subcommand};
 
-use crate::config::load_toml;
-use crate::sim::SimConfig;
-use crate::simulate::simulate;
-use crate::trace::{write_csv, write_sidecar};
+use hammer_sim::simulate::simulate;
+use hammer_sim::SimConfig;
+use hammer_trace::config::load_toml;
+use hammer_trace::trace::{write_csv, write_sidecar};
 
 #[derive(Parser, Debug)]
 #[command(
@@ -200,7 +200,7 @@ pub fn run(cli: Cli) -> Result<()> {
                 println!(
                     "wrote {} and {}",
                     out.display(),
-                    crate::trace::sidecar_path(out).display()
+                    hammer_trace::trace::sidecar_path(out).display()
                 );
             }
             Ok(())
@@ -272,7 +272,7 @@ fn capture_cmd(args: &CaptureArgs) -> Result<()> {
         codes.len(),
         codes.len() as f64 / cfg.sample_rate_hz as f64 * 1e3,
         args.out.display(),
-        crate::trace::sidecar_path(&args.out).display()
+        hammer_trace::trace::sidecar_path(&args.out).display()
     );
     Ok(())
 }
@@ -282,7 +282,7 @@ fn capture_cmd(args: &CaptureArgs) -> Result<()> {
 fn config_check(file: &std::path::Path) -> Result<()> {
     let cfg: SimConfig = load_toml(file)?;
     cfg.validate()?;
-    let est = crate::estimate::estimator_config(
+    let est = hammer_sim::estimation::estimator_config(
         &cfg.hammer,
         &cfg.sensors,
         &cfg.estimator,
@@ -326,16 +326,8 @@ fn estimate_cmd(args: &EstimateArgs) -> Result<()> {
         Some(p) => load_toml(p)?,
         None => SimConfig::default(),
     };
-    let trace = crate::trace::read_csv(&args.trace)?;
-    let sidecar = crate::trace::read_sidecar(&args.trace)?;
-    let supply = args.supply_bar.or(sidecar.as_ref().and_then(|s| s.supply_pressure_bar));
-    let sensors = sensors_for(sidecar.as_ref(), &file.sensors);
-    let hammer = sidecar
-        .as_ref()
-        .and_then(|s| s.simulation.as_ref())
-        .map_or(file.hammer.clone(), |s| s.config.hammer.clone());
-    let cfg = estimator_config(&hammer, &sensors, &file.estimator, 1.0 / trace.dt_s, supply)?;
-    let reports = run(&to_codes(&trace, &cfg), cfg)?;
+    let input = hammer_sim::estimation::open_for_estimation(&args.trace, &file, args.supply_bar)?;
+    let reports = hammer_sim::estimation::run(&input.codes, input.config)?;
     let mut out = std::io::BufWriter::new(std::io::stdout().lock());
     use std::io::Write as _;
     match args.format {

@@ -14,10 +14,10 @@ use hammer_estimator::RawSample;
 use hammer_wire::{encode, DeviceMsg, HostMsg, Report, SampleBlock, BLOCK_SAMPLES, MAX_FRAME, PROTOCOL_VERSION};
 
 use crate::emulator::{firmware_elf, qemu_available, Emulator};
-use crate::estimate::{estimator_config, to_codes};
 use crate::link::Link;
-use crate::sim::SimConfig;
-use crate::simulate::simulate;
+use hammer_sim::estimation::{estimator_config, to_codes};
+use hammer_sim::simulate::simulate;
+use hammer_sim::SimConfig;
 
 #[derive(Args, Debug, Clone)]
 pub struct DemoArgs {

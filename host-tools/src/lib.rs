@@ -4,7 +4,6 @@
 pub mod board;
 pub mod capture;
 pub mod cli;
-pub mod config;
 pub mod demo;
 pub mod diagnose;
 pub mod emulator;
@@ -13,6 +12,3 @@ pub mod link;
 pub mod monitor;
 pub mod plot;
 pub mod report;
-pub mod sim;
-pub mod simulate;
-pub mod trace;

@@ -6,8 +6,8 @@ use std::sync::Once;
 use anyhow::{anyhow, Context, Result};
 use plotters::prelude::*;
 
-use crate::sim::{SimConfig, EFFECT_NAMES};
-use crate::simulate::{simulate, Simulation};
+use hammer_sim::simulate::{simulate, Simulation};
+use hammer_sim::{SimConfig, EFFECT_NAMES};
 
 pub struct Series<'a> {
     pub label: String,
@@ -212,7 +212,7 @@ pub fn effect_figures(dir: &Path, supply_bar: f64) -> Result<Vec<PathBuf>> {
 }
 
 /// `key=value` pairs of an effect's parameters, short enough for a title.
-pub fn effect_params_text(effects: &crate::sim::Effects, name: &str) -> Result<String> {
+pub fn effect_params_text(effects: &hammer_sim::Effects, name: &str) -> Result<String> {
     let value = serde_json::to_value(effects)?;
     let Some(obj) = value.get(name).and_then(|v| v.as_object()) else {
         return Ok(String::new());

@@ -20,11 +20,12 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use crate::config::load_toml;
-use crate::estimate::{estimator_config, sensors_for, to_codes};
 use crate::plot::{Panel, Series, BLUE, EFFECT, NOMINAL};
-use crate::sim::{CycleTruth, SimConfig};
-use crate::trace::{read_csv, read_sidecar, Sidecar, SimulationInfo, Trace};
+use hammer_sim::estimation::open_for_estimation;
+use hammer_sim::simulate::{Sidecar, SimulationInfo};
+use hammer_sim::{CycleTruth, SimConfig};
+use hammer_trace::config::load_toml;
+use hammer_trace::trace::Trace;
 
 /// A report cycle and a truth cycle are the same impact when their impact
 /// times agree this closely (two samples at 100 kS/s).
@@ -224,21 +225,15 @@ fn analyse(args: &ReportArgs, pb: &ProgressBar) -> Result<Analysis> {
     };
     // The reader's message already names the path and the OS error; as an anyhow
     // chain it would print the OS error twice.
-    let trace = read_csv(&args.input).map_err(|e| anyhow!("{e}"))?;
-    let sidecar = read_sidecar(&args.input).map_err(|e| anyhow!("{e}"))?;
-    let supply = match (args.supply_bar, sidecar.as_ref().and_then(|s| s.supply_pressure_bar)) {
+    let input = open_for_estimation(&args.input, &file, args.supply_bar).map_err(|e| anyhow!("{e}"))?;
+    let supply = match (args.supply_bar, input.supply_bar) {
         (Some(b), _) => Supply::Flag(b),
         (None, Some(b)) => Supply::Sidecar(b),
         (None, None) => Supply::Unknown,
     };
-    let sensors = sensors_for(sidecar.as_ref(), &file.sensors);
-    let hammer = sidecar
-        .as_ref()
-        .and_then(|s| s.simulation.as_ref())
-        .map_or(file.hammer.clone(), |s| s.config.hammer.clone());
-    let cfg = estimator_config(&hammer, &sensors, &file.estimator, 1.0 / trace.dt_s, supply.bar())?;
+    let (trace, sidecar, cfg) = (input.trace, input.sidecar, input.config);
     stage(pb, "estimating");
-    let reports = crate::estimate::run(&to_codes(&trace, &cfg), cfg)?;
+    let reports = hammer_sim::estimation::run(&input.codes, cfg)?;
     let name = file_name(&args.input);
     if reports.is_empty() {
         bail!(

@@ -121,7 +121,7 @@ fn one_figure_per_effect() {
     let dir = tmp_dir("figs");
     let (code, out, err) = hammer(&["figures", "--out", dir.to_str().unwrap()]);
     assert_eq!(code, 0, "{err}");
-    for name in hammer_host::sim::EFFECT_NAMES {
+    for name in hammer_sim::EFFECT_NAMES {
         let f = dir.join(format!("effect-{name}.png"));
         assert!(out.contains(f.to_str().unwrap()));
         assert_eq!(png_size(&f), (1100, 900));
@@ -251,9 +251,9 @@ fn capture_from_a_demo_board_writes_a_trace_the_estimator_reads() {
     ]);
     assert_eq!(code, 0, "{err}");
     assert!(stdout.contains("captured"), "{stdout}");
-    let trace = hammer_host::trace::read_csv(&out).unwrap();
+    let trace = hammer_trace::trace::read_csv(&out).unwrap();
     assert!(trace.len() > 4000, "one full cycle at 100 kS/s: {}", trace.len());
-    let side = hammer_host::trace::read_sidecar(&out).unwrap().unwrap();
+    let side = hammer_trace::trace::read_sidecar(&out).unwrap().unwrap();
     assert_eq!(side.source, "device");
     assert_eq!(side.supply_pressure_bar, Some(5.0));
     // The capture runs from one impact past the next: one complete cycle.

@@ -6,9 +6,9 @@
 
 use hammer_host::diagnose::bench::generator_config;
 use hammer_host::diagnose::engine::{diagnose, MeasuredInput, Options, Report};
-use hammer_host::sim::sensor::Rng;
-use hammer_host::sim::SimConfig;
-use hammer_host::simulate::simulate;
+use hammer_sim::sensor::Rng;
+use hammer_sim::simulate::simulate;
+use hammer_sim::SimConfig;
 
 fn measure(effects: &[&str], bars: &[f64], fit: &[f64], seed: u64) -> Vec<MeasuredInput> {
     let mut rng = Rng::new(seed);

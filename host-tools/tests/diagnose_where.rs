@@ -4,9 +4,10 @@
 //! find nothing beyond noise when it carries none.
 
 use hammer_host::diagnose::gap::{breakdown, measured_cycles, template, GapCell};
-use hammer_host::estimate::{estimator_config, run, to_codes, EstimatorParams};
-use hammer_host::sim::{simulate_truth, SimConfig};
-use hammer_host::simulate::simulate;
+use hammer_sim::estimation::{estimator_config, run, to_codes};
+use hammer_sim::simulate::simulate;
+use hammer_sim::{simulate_truth, SimConfig};
+use hammer_trace::EstimatorParams;
 
 fn gaps(effect: Option<&str>, bar: f64) -> Vec<GapCell> {
     let mut meas_cfg = SimConfig::nominal(bar);

@@ -3,10 +3,11 @@
 //! no phase, position or velocity from the simulator reaches it.
 
 use hammer_estimator::{CycleReport, Flags};
-use hammer_host::estimate::{estimator_config, run, to_codes, EstimatorParams};
-use hammer_host::sim::run::CycleTruth;
-use hammer_host::sim::SimConfig;
-use hammer_host::simulate::{simulate, Simulation};
+use hammer_sim::estimation::{estimator_config, run, to_codes};
+use hammer_sim::run::CycleTruth;
+use hammer_sim::simulate::{simulate, Simulation};
+use hammer_sim::SimConfig;
+use hammer_trace::EstimatorParams;
 
 struct Matched {
     report: CycleReport,

@@ -2,9 +2,10 @@
 //! stuck and saturated sensors, dropped samples, a hammer that stops.
 
 use hammer_estimator::{CycleReport, Estimator, Flags, RawSample};
-use hammer_host::estimate::{estimator_config, to_codes, EstimatorParams};
-use hammer_host::sim::SimConfig;
-use hammer_host::simulate::simulate;
+use hammer_sim::estimation::{estimator_config, to_codes};
+use hammer_sim::simulate::simulate;
+use hammer_sim::SimConfig;
+use hammer_trace::EstimatorParams;
 
 fn stream(sensors_tweak: impl Fn(&mut SimConfig)) -> (Vec<RawSample>, hammer_estimator::Config) {
     let mut cfg = SimConfig::nominal(5.0);

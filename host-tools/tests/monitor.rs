@@ -18,9 +18,10 @@ use std::process::{Child, Command, Stdio};
 use std::sync::{Mutex, MutexGuard, OnceLock};
 use std::time::{Duration, Instant};
 
-use hammer_host::estimate::{estimator_config, run, to_codes, EstimatorParams};
-use hammer_host::sim::SimConfig;
-use hammer_host::simulate::simulate;
+use hammer_sim::estimation::{estimator_config, run, to_codes};
+use hammer_sim::simulate::simulate;
+use hammer_sim::SimConfig;
+use hammer_trace::EstimatorParams;
 use hammer_wire::*;
 
 /// The longest any single wait in these tests may take.

@@ -5,11 +5,12 @@ use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
 use hammer_estimator::CycleReport;
-use hammer_host::estimate::{estimator_config, sensors_for, to_codes};
 use hammer_host::report::{self, ReportArgs, CYCLE_SIZE, RUN_SIZE, TRUTH_SIZE};
-use hammer_host::sim::SimConfig;
-use hammer_host::simulate::{simulate, Simulation};
-use hammer_host::trace::{read_csv, read_sidecar, write_csv, write_sidecar};
+use hammer_sim::estimation::{estimator_config, sensors_for, to_codes};
+use hammer_sim::simulate::read_simulated_sidecar;
+use hammer_sim::simulate::{simulate, Simulation};
+use hammer_sim::SimConfig;
+use hammer_trace::trace::{read_csv, write_csv, write_sidecar};
 
 /// A white canvas compresses to a few kB; titles, axes, curves and bands take
 /// a figure past 100 kB.
@@ -81,7 +82,7 @@ fn assert_drawn(path: &Path, size: (u32, u32)) {
 fn estimate(trace_path: &Path) -> Vec<CycleReport> {
     let file = SimConfig::default();
     let trace = read_csv(trace_path).unwrap();
-    let sidecar = read_sidecar(trace_path).unwrap();
+    let sidecar = read_simulated_sidecar(trace_path).unwrap();
     let supply = sidecar.as_ref().and_then(|s| s.supply_pressure_bar);
     let sensors = sensors_for(sidecar.as_ref(), &file.sensors);
     let hammer = sidecar
@@ -89,7 +90,7 @@ fn estimate(trace_path: &Path) -> Vec<CycleReport> {
         .and_then(|s| s.simulation.as_ref())
         .map_or(file.hammer.clone(), |s| s.config.hammer.clone());
     let cfg = estimator_config(&hammer, &sensors, &file.estimator, 1.0 / trace.dt_s, supply).unwrap();
-    hammer_host::estimate::run(&to_codes(&trace, &cfg), cfg).unwrap()
+    hammer_sim::estimation::run(&to_codes(&trace, &cfg), cfg).unwrap()
 }
 
 #[test]

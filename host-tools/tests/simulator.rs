@@ -1,9 +1,9 @@
 //! Physical checks of the simulator: the paper's anchors, conservation laws,
 //! convergence, and what each catalogued effect must do to the signals.
 
-use hammer_host::sim::run::CycleTruth;
-use hammer_host::sim::{simulate_truth, SimConfig};
-use hammer_host::simulate::{simulate, Simulation};
+use hammer_sim::run::CycleTruth;
+use hammer_sim::simulate::{simulate, Simulation};
+use hammer_sim::{simulate_truth, SimConfig};
 
 fn ideal(bar: f64) -> SimConfig {
     let mut c = SimConfig::nominal(bar);
@@ -92,7 +92,7 @@ fn default_friction_costs_13_to_17_percent_of_impact_energy() {
             ratio * 100.0
         );
         // The friction that acts is the configured pressure-dependent value.
-        let f = hammer_host::sim::effects::CoulombFriction::default().force_n(bar);
+        let f = hammer_sim::effects::CoulombFriction::default().force_n(bar);
         assert_within("stroke friction", mean(&friction, |c| c.friction_stroke_n), f, 0.01);
         assert_within("backhaul friction", mean(&friction, |c| c.friction_backhaul_n), f, 0.01);
     }
@@ -189,7 +189,7 @@ fn each_effect_changes_the_signals_the_way_physics_says() {
     let vis = run(&with(bar, "viscous_friction"));
     assert!(mean(&vis, |c| c.impact_velocity_mps) < 0.98 * v0);
     // Viscous friction is c·|v| on average over the stroke.
-    let c = hammer_host::sim::effects::ViscousFriction::default().c_n_s_per_m;
+    let c = hammer_sim::effects::ViscousFriction::default().c_n_s_per_m;
     let t = &vis.run.truth;
     let cyc = &vis.steady_cycles()[0];
     let (i0, i1) = (
@@ -244,8 +244,8 @@ fn each_effect_changes_the_signals_the_way_physics_says() {
 
     // Zero shift: the measured acceleration carries a decaying offset after impacts.
     let zs = run(&with(bar, "accel_zero_shift"));
-    let amp = hammer_host::sim::effects::AccelZeroShift::default().amplitude_mps2;
-    let tau = hammer_host::sim::effects::AccelZeroShift::default().tau_s;
+    let amp = hammer_sim::effects::AccelZeroShift::default().amplitude_mps2;
+    let tau = hammer_sim::effects::AccelZeroShift::default().tau_s;
     let t = &zs.run.truth;
     for imp in zs.run.events.impacts.iter().skip(2).take(5) {
         let i = ((imp.t_s + 1e-3) / t.dt_s) as usize; // after the contact

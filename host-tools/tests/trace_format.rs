@@ -2,9 +2,9 @@
 
 use std::path::PathBuf;
 
-use hammer_host::sim::SimConfig;
-use hammer_host::simulate::simulate;
-use hammer_host::trace::{read_csv, read_sidecar, sidecar_path, write_csv, write_sidecar, Sidecar, TraceError};
+use hammer_sim::simulate::simulate;
+use hammer_sim::SimConfig;
+use hammer_trace::trace::{read_csv, read_sidecar, sidecar_path, write_csv, write_sidecar, Sidecar, TraceError};
 
 fn tmp(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("hammer-trace-test-{}", std::process::id()));
@@ -30,7 +30,9 @@ fn simulated_trace_round_trips_exactly_with_its_sidecar() {
     assert_eq!(back.extra["x_m"], trace.extra["x_m"]);
     assert_eq!(back.extra["v_mps"], trace.extra["v_mps"]);
     assert!((back.dt_s - 10e-6).abs() < 1e-12);
-    let side = read_sidecar(&path).unwrap().expect("sidecar");
+    let side = hammer_sim::simulate::read_simulated_sidecar(&path)
+        .unwrap()
+        .expect("sidecar");
     assert_eq!(side.supply_pressure_bar, Some(5.0));
     let info = side.simulation.expect("simulation info");
     assert_eq!(info.active_effects, vec!["coulomb_friction"]);
@@ -94,7 +96,7 @@ fn malformed_files_get_errors_that_say_where_and_what() {
 #[test]
 fn sidecars_of_another_format_or_a_newer_version_are_refused() {
     let path = tmp("side.csv");
-    let mut s = Sidecar::new(Some(4.0), "device");
+    let mut s: Sidecar = Sidecar::new(Some(4.0), "device");
     s.version = 99;
     write_sidecar(&path, &s).unwrap();
     let e = read_sidecar(&path).unwrap_err().to_string();

@@ -3,10 +3,11 @@
 //! wear state survives a reset.
 
 use hammer_estimator::{CycleReport, Estimator, Flags, RawSample, WearState};
-use hammer_host::estimate::{estimator_config, to_codes, EstimatorParams};
-use hammer_host::sim::sensor::measure;
-use hammer_host::sim::{simulate_truth, SimConfig};
-use hammer_host::simulate::simulate;
+use hammer_sim::estimation::{estimator_config, to_codes};
+use hammer_sim::sensor::measure;
+use hammer_sim::simulate::simulate;
+use hammer_sim::{simulate_truth, SimConfig};
+use hammer_trace::EstimatorParams;
 
 fn config_for(sim_cfg: &SimConfig) -> hammer_estimator::Config {
     estimator_config(
@@ -77,7 +78,7 @@ fn constant_friction_stream(cycles_wanted: usize, mut sink: impl FnMut(&[RawSamp
     let mut seed = 1;
     while cycles < cycles_wanted {
         let m = measure(&cfg.sensors, &cfg.effects, &run.truth, &run.events.impacts, seed);
-        let trace = hammer_host::trace::Trace {
+        let trace = hammer_trace::trace::Trace {
             dt_s: dt,
             t_s: run.truth.t_s[i0..i1].to_vec(),
             p_rear_pa: m.p_rear_pa[i0..i1].to_vec(),

@@ -10,10 +10,11 @@ use std::time::Duration;
 
 use hammer_estimator::{Config, Estimator, RawSample};
 use hammer_host::emulator::{firmware_elf, Emulator};
-use hammer_host::estimate::{estimator_config, to_codes, EstimatorParams};
 use hammer_host::link::Link;
-use hammer_host::sim::SimConfig;
-use hammer_host::simulate::simulate;
+use hammer_sim::estimation::{estimator_config, to_codes};
+use hammer_sim::simulate::simulate;
+use hammer_sim::SimConfig;
+use hammer_trace::EstimatorParams;
 use hammer_wire::*;
 
 const T: Duration = Duration::from_secs(20);
@@ -289,9 +290,9 @@ fn a_raw_capture_of_one_cycle_round_trips_into_the_trace_format() {
     let dir = std::env::temp_dir().join(format!("hammer-capture-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("capture.csv");
-    hammer_host::trace::write_csv(&path, &trace).unwrap();
-    hammer_host::trace::write_sidecar(&path, &side).unwrap();
-    let back = hammer_host::trace::read_csv(&path).unwrap();
+    hammer_trace::trace::write_csv(&path, &trace).unwrap();
+    hammer_trace::trace::write_sidecar(&path, &side).unwrap();
+    let back = hammer_trace::trace::read_csv(&path).unwrap();
     let recoded = to_codes(&back, &cfg);
     assert_eq!(recoded.len(), codes_back.len());
     assert!(recoded
@@ -299,7 +300,7 @@ fn a_raw_capture_of_one_cycle_round_trips_into_the_trace_format() {
         .zip(&codes_back)
         .all(|(a, b)| [a.rear, a.front, a.accel] == *b));
     assert_eq!(
-        hammer_host::trace::read_sidecar(&path).unwrap().unwrap().source,
+        hammer_trace::trace::read_sidecar(&path).unwrap().unwrap().source,
         "device"
     );
     println!("capture: {} sample-sets from sample {start}", codes_back.len());
@@ -307,7 +308,7 @@ fn a_raw_capture_of_one_cycle_round_trips_into_the_trace_format() {
 
 /// One-cycle raw captures from the emulated board, `n` of them, while it is
 /// fed a hammer with the paper's friction at `bar`; each becomes a trace.
-fn captures(bar: f64, n: usize, seed: u64) -> Vec<hammer_host::trace::Trace> {
+fn captures(bar: f64, n: usize, seed: u64) -> Vec<hammer_trace::trace::Trace> {
     let (_emu, mut link) = boot();
     let mut cfg = SimConfig::nominal(bar);
     cfg.solver.duration_s = 0.4 + 0.12 * n as f64;

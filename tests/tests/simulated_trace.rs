@@ -6,7 +6,8 @@
 use clap::Parser;
 use hammer_estimator::Geometry;
 use hammer_host::cli::{run, Cli};
-use hammer_host::trace::{read_csv, read_sidecar};
+use hammer_sim::simulate::read_simulated_sidecar;
+use hammer_trace::trace::read_csv;
 
 #[test]
 fn paper_force_balance_on_a_simulated_trace_recovers_the_applied_friction() {
@@ -28,7 +29,7 @@ fn paper_force_balance_on_a_simulated_trace_recovers_the_applied_friction() {
     run(Cli::parse_from(std::iter::once("hammer").chain(cli))).unwrap();
 
     let trace = read_csv(&path).unwrap();
-    let side = read_sidecar(&path).unwrap().unwrap();
+    let side = read_simulated_sidecar(&path).unwrap().unwrap();
     let truth = side.simulation.unwrap();
     let g = Geometry::PAPER;
     let (a1, a2, m) = (g.rear_area_m2(), g.front_area_m2(), g.piston_mass_kg);

@@ -8,13 +8,13 @@ use std::collections::BTreeMap;
 use serde::{Deserialize, Serialize};
 
 use super::engine::{diagnose, MeasuredInput, Options};
-use crate::sim::effects::{
+use hammer_sim::effects::{
     AccelZeroShift, CoulombFriction, Effects, HeatTransfer, Leakage, PressureGainError, SupplyRestriction, ValveDelay,
     ViscousFriction, EFFECT_NAMES,
 };
-use crate::sim::sensor::Rng;
-use crate::sim::SimConfig;
-use crate::simulate::simulate;
+use hammer_sim::sensor::Rng;
+use hammer_sim::simulate::simulate;
+use hammer_sim::SimConfig;
 
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct BenchOptions {

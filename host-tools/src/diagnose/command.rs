@@ -10,10 +10,11 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use super::bench::{render, run_case, summarize, BenchOptions};
 use super::engine::{diagnose, MeasuredInput, Options};
 use super::output::{summary, write_all};
-use crate::config::load_toml;
-use crate::estimate::sensors_for;
-use crate::sim::SimConfig;
-use crate::trace::{read_csv, read_sidecar};
+use hammer_sim::estimation::sensors_for;
+use hammer_sim::simulate::read_simulated_sidecar;
+use hammer_sim::SimConfig;
+use hammer_trace::config::load_toml;
+use hammer_trace::trace::read_csv;
 
 #[derive(Args, Debug)]
 pub struct DiagnoseArgs {
@@ -121,7 +122,8 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
     let mut inputs = Vec::new();
     for (k, path) in args.measured.iter().enumerate() {
         let trace = read_csv(path).with_context(|| format!("reading {}", path.display()))?;
-        let sidecar = read_sidecar(path).with_context(|| format!("reading the sidecar of {}", path.display()))?;
+        let sidecar =
+            read_simulated_sidecar(path).with_context(|| format!("reading the sidecar of {}", path.display()))?;
         if k == 0 && args.config.is_none() {
             base.sensors = sensors_for(sidecar.as_ref(), &base.sensors);
         }
@@ -133,7 +135,7 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
                     path.display()
                 )
             })?;
-        crate::config::check_range("--supply-bar", supply_bar, 0.5, 20.0)?;
+        hammer_trace::config::check_range("--supply-bar", supply_bar, 0.5, 20.0)?;
         inputs.push(MeasuredInput {
             label: path.display().to_string(),
             supply_bar,
@@ -177,10 +179,10 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         bail!("--points: give at least one operating point");
     }
     for &p in &args.points {
-        crate::config::check_range("--points", p, 0.5, 20.0)?;
+        hammer_trace::config::check_range("--points", p, 0.5, 20.0)?;
     }
-    crate::config::check_range("--jitter", args.jitter, 0.0, 0.5)?;
-    crate::config::check_range("--duration", args.duration, 0.3, 60.0)?;
+    hammer_trace::config::check_range("--jitter", args.jitter, 0.0, 0.5)?;
+    hammer_trace::config::check_range("--duration", args.duration, 0.3, 60.0)?;
     let opts = BenchOptions {
         cases: args.cases,
         seed: args.seed,

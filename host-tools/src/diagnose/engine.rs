@@ -23,10 +23,10 @@ use super::fit::{levenberg_marquardt, FitResult};
 use super::gap::{breakdown, measured_cycles, normalized, template, CycleSignals};
 use super::model::{apply, catalogue_params, free_params, Candidate, ModelRunner, NUISANCE, ZERO_SHIFT_SQ_FACTOR};
 use super::stages::Stage;
-use crate::sim::effects::{Effects, EFFECT_NAMES};
-use crate::sim::run::TruthTrace;
-use crate::sim::{simulate_truth, SimConfig};
-use crate::trace::Trace;
+use hammer_sim::effects::{Effects, EFFECT_NAMES};
+use hammer_sim::run::TruthTrace;
+use hammer_sim::{simulate_truth, SimConfig};
+use hammer_trace::trace::Trace;
 
 /// One measured trace and its role.
 #[derive(Debug, Clone)]
@@ -646,7 +646,7 @@ pub fn diagnose(
         }
         r
     };
-    let model_runs = |cand: &Candidate| -> (ModelRunner, Vec<Option<crate::sim::SimRun>>) {
+    let model_runs = |cand: &Candidate| -> (ModelRunner, Vec<Option<hammer_sim::SimRun>>) {
         let r = calibrated(cand);
         let physics = cand.physics();
         let runs = parallel(opts.threads, bars.clone(), &|bar| {
@@ -1054,7 +1054,7 @@ fn evidence(fs: &FitSet, names: &[&str], cand: &Candidate) -> Vec<String> {
 }
 
 /// The dominant stage of each waveform bin of the nominal cycle.
-fn bin_stages(truth: &TruthTrace, hammer: &crate::sim::params::HammerParams, extractor: &Extractor) -> Vec<Stage> {
+fn bin_stages(truth: &TruthTrace, hammer: &hammer_sim::params::HammerParams, extractor: &Extractor) -> Vec<Stage> {
     let edges = super::stages::Edges {
         front_outlet_m: hammer.front_outlet_opens_m,
         rear_outlet_m: hammer.rear_outlet_opens_m,

@@ -5,9 +5,9 @@
 use serde::{Deserialize, Serialize};
 
 use super::stages::{stage_of, Edges, Stage, STAGES};
-use crate::sim::params::HammerParams;
-use crate::sim::run::SimRun;
-use crate::trace::Trace;
+use hammer_sim::params::HammerParams;
+use hammer_sim::run::SimRun;
+use hammer_trace::trace::Trace;
 
 /// The compared signals, in the order of [`CycleSignals::get`].
 pub const SIGNALS: [&str; 4] = ["p_rear_pa", "p_front_pa", "accel_mps2", "velocity_mps"];

@@ -5,12 +5,12 @@ use serde::{Deserialize, Serialize};
 
 use super::features::{summarize, Extractor, Signals, N_FEATURES, ZERO_SHIFT_SQ};
 use super::fit::ParamSpec;
-use crate::sim::effects::{
+use hammer_sim::effects::{
     AccelZeroShift, CoulombFriction, Effects, HeatTransfer, Leakage, PressureGainError, SupplyRestriction, ValveDelay,
     ViscousFriction,
 };
-use crate::sim::run::TruthTrace;
-use crate::sim::{simulate_truth, SimConfig};
+use hammer_sim::run::TruthTrace;
+use hammer_sim::{simulate_truth, SimConfig};
 
 /// E[u²] of the zero-shift magnitude factor u ~ U(0.5, 1.5) (`sim::sensor`).
 pub const ZERO_SHIFT_SQ_FACTOR: f64 = 1.0 + 1.0 / 12.0;

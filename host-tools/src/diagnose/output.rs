@@ -1153,8 +1153,8 @@ mod tests {
     #[ignore = "runs the whole diagnosis (seconds to minutes)"]
     fn end_to_end_on_simulated_friction() {
         use super::super::engine::{diagnose, MeasuredInput};
-        use crate::sim::SimConfig;
-        use crate::simulate::simulate;
+        use hammer_sim::simulate::simulate;
+        use hammer_sim::SimConfig;
         let mut inputs = Vec::new();
         for bar in [4.0, 5.5, 7.0] {
             let mut c = SimConfig::nominal(bar);

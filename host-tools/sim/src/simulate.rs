@@ -2,11 +2,35 @@
 
 use std::fmt::Write as _;
 
-use crate::sim::run::{simulate_truth, SimRun};
-use crate::sim::sensor::{measure, Measured};
-use crate::sim::solver::SolverError;
-use crate::sim::SimConfig;
-use crate::trace::{Sidecar, SimulationInfo, Trace};
+use serde::{Deserialize, Serialize};
+
+use crate::run::{simulate_truth, CycleTruth, MassBalance, SimRun};
+use crate::sensor::{measure, Measured};
+use crate::solver::{SolverError, SolverStats};
+use crate::SimConfig;
+use hammer_trace::trace::{read_sidecar_as, Trace, TraceError};
+
+/// Everything the simulator knows about a trace it wrote: the sidecar's
+/// `simulation` object.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SimulationInfo {
+    pub active_effects: Vec<String>,
+    pub config: SimConfig,
+    pub cycles: Vec<CycleTruth>,
+    pub mass_balance: MassBalance,
+    pub solver: SolverStats,
+    /// Samples at either end of the ADC range: rear, front, accel.
+    pub clipped_samples: [usize; 3],
+}
+
+/// A sidecar read by a tool that knows the simulator.
+pub type Sidecar = hammer_trace::trace::Sidecar<SimulationInfo>;
+
+/// Reads the sidecar beside a trace, typing the simulator's record; a
+/// malformed record is an error, as any malformed sidecar field is.
+pub fn read_simulated_sidecar(trace: &std::path::Path) -> Result<Option<Sidecar>, TraceError> {
+    read_sidecar_as(trace)
+}
 
 pub struct Simulation {
     pub config: SimConfig,
@@ -70,7 +94,7 @@ impl Simulation {
     }
 
     /// Cycles after the start-up transient (the first 0.1 s and the first two impacts).
-    pub fn steady_cycles(&self) -> &[crate::sim::CycleTruth] {
+    pub fn steady_cycles(&self) -> &[CycleTruth] {
         let c = &self.run.cycles;
         let first = c
             .iter()
@@ -119,7 +143,7 @@ impl Simulation {
         let steady = self.steady_cycles();
         if !steady.is_empty() {
             let n = steady.len() as f64;
-            let mean = |f: fn(&crate::sim::CycleTruth) -> f64| steady.iter().map(f).sum::<f64>() / n;
+            let mean = |f: fn(&CycleTruth) -> f64| steady.iter().map(f).sum::<f64>() / n;
             let _ = writeln!(
                 s,
                 "steady mean over {} cycles: v_imp {:.4} m/s, E {:.4} J, f {:.3} Hz, stroke {:.2} mm, friction work {:.1} % of E",

@@ -8,10 +8,6 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::sim::run::{CycleTruth, MassBalance};
-use crate::sim::solver::SolverStats;
-use crate::sim::SimConfig;
-
 pub const REQUIRED_COLUMNS: [&str; 4] = ["t_s", "p_rear_pa", "p_front_pa", "accel_mps2"];
 pub const SIDECAR_FORMAT: &str = "hammer-trace";
 pub const SIDECAR_VERSION: u32 = 1;
@@ -204,20 +200,12 @@ pub fn read_csv(path: &Path) -> Result<Trace, TraceError> {
     Ok(trace)
 }
 
-/// Everything the simulator knows about a trace it wrote.
+/// `S` is what the writer knew about the trace's origin: the simulator types
+/// it as its own record; a tool that does not know the simulator reads it as
+/// plain JSON.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct SimulationInfo {
-    pub active_effects: Vec<String>,
-    pub config: SimConfig,
-    pub cycles: Vec<CycleTruth>,
-    pub mass_balance: MassBalance,
-    pub solver: SolverStats,
-    /// Samples at either end of the ADC range: rear, front, accel.
-    pub clipped_samples: [usize; 3],
-}
-
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Sidecar {
+#[serde(bound(deserialize = "S: Deserialize<'de>"))]
+pub struct Sidecar<S = serde_json::Value> {
     pub format: String,
     pub version: u32,
     /// Gauge supply pressure: the operating point (null when unknown, e.g. a device capture).
@@ -225,10 +213,10 @@ pub struct Sidecar {
     /// Where the trace came from: "simulator", "device", "import", ...
     pub source: String,
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub simulation: Option<SimulationInfo>,
+    pub simulation: Option<S>,
 }
 
-impl Sidecar {
+impl<S> Sidecar<S> {
     pub fn new(supply_pressure_bar: Option<f64>, source: &str) -> Self {
         Self {
             format: SIDECAR_FORMAT.into(),
@@ -245,7 +233,7 @@ pub fn sidecar_path(trace: &Path) -> PathBuf {
     trace.with_extension("json")
 }
 
-pub fn write_sidecar(trace: &Path, sidecar: &Sidecar) -> Result<(), TraceError> {
+pub fn write_sidecar<S: Serialize>(trace: &Path, sidecar: &Sidecar<S>) -> Result<(), TraceError> {
     let path = sidecar_path(trace);
     let text = serde_json::to_string_pretty(sidecar).map_err(|e| TraceError::Sidecar {
         path: path.display().to_string(),
@@ -257,15 +245,21 @@ pub fn write_sidecar(trace: &Path, sidecar: &Sidecar) -> Result<(), TraceError> 
     })
 }
 
-/// Reads the sidecar beside a trace; `Ok(None)` when there is none.
+/// Reads the sidecar beside a trace; `Ok(None)` when there is none. The
+/// `simulation` object stays plain JSON (see [`read_sidecar_as`]).
 pub fn read_sidecar(trace: &Path) -> Result<Option<Sidecar>, TraceError> {
+    read_sidecar_as(trace)
+}
+
+/// [`read_sidecar`] with the `simulation` object typed as `S`.
+pub fn read_sidecar_as<S: serde::de::DeserializeOwned>(trace: &Path) -> Result<Option<Sidecar<S>>, TraceError> {
     let path = sidecar_path(trace);
     if !path.exists() {
         return Ok(None);
     }
     let p = path.display().to_string();
     let text = std::fs::read_to_string(&path).map_err(|error| TraceError::Io { path: p.clone(), error })?;
-    let s: Sidecar = serde_json::from_str(&text).map_err(|e| TraceError::Sidecar {
+    let s: Sidecar<S> = serde_json::from_str(&text).map_err(|e| TraceError::Sidecar {
         path: p.clone(),
         message: e.to_string(),
     })?;

@@ -285,7 +285,7 @@ pub struct SimConfig {
     /// Seed of the sensor noise and of the zero-shift signs.
     pub seed: u64,
     /// How the estimator reads this hammer (thresholds, calibration accuracy).
-    pub estimator: crate::estimate::EstimatorParams,
+    pub estimator: hammer_trace::EstimatorParams,
 }
 
 impl SimConfig {

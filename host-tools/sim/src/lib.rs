@@ -1,0 +1,29 @@
+//! Lumped-parameter simulator of the paper's small pneumatic hammer, with the
+//! catalogue of effects the nominal model leaves out and the sensor chain
+//! that turns its solution into what a bench would record.
+//!
+//! Module map (data flows down the list):
+//! - [`params`]: every model parameter, [`SimConfig`] (the TOML root of a run);
+//! - [`effects`]: the effect catalogue, all off in the nominal model;
+//! - [`gas`], [`model`]: the equations (`docs/model.md`), [`solver`]: Dormand–Prince 5(4);
+//! - [`run`]: one solution with events, per-cycle truth and balances;
+//! - [`sensor`]: bandwidth, noise, clipping, quantisation and the sensor-side effects;
+//! - [`simulate`]: a complete simulated measurement as a trace plus sidecar;
+//! - [`estimation`]: the one path from any trace to the estimator's ADC codes and calibration.
+
+use hammer_trace::config;
+
+pub mod effects;
+pub mod estimation;
+pub mod gas;
+pub mod model;
+pub mod params;
+pub mod run;
+pub mod sensor;
+pub mod simulate;
+pub mod solver;
+
+pub use effects::{Effects, EFFECT_NAMES};
+pub use params::SimConfig;
+pub use run::{simulate_truth, CycleTruth, SimRun, TruthTrace};
+pub use simulate::{simulate, Simulation, SimulationInfo};

@@ -1,0 +1,16 @@
+//! The bottom of the host side: what every host tool reads and writes, and
+//! nothing above it. It imports no simulator, diagnosis or CLI code, so the
+//! file format cannot drift with them.
+//!
+//! Module map:
+//! - [`trace`]: the trace CSV and its JSON sidecar (`docs/trace-format.md`);
+//!   the sidecar's `simulation` object is opaque here (the simulator types it).
+//! - [`config`]: configuration errors that name the field and its range, TOML loading.
+//! - [`estimator_params`]: the `[estimator]` table of the project configuration.
+
+pub mod config;
+pub mod estimator_params;
+pub mod trace;
+
+pub use config::ConfigError;
+pub use estimator_params::EstimatorParams;
