@@ -3,7 +3,7 @@
 
 use hammer_estimator::tare::Tare;
 use hammer_estimator::wear::WEAR_STATE_BYTES;
-use hammer_estimator::{Config, Estimator, Flags, RawSample, WearState};
+use hammer_estimator::{Config, Estimator, Flags, RawSample, WearState, MAX_CONFIRM};
 use hammer_wire::{
     Alarm, AlarmKind, CaptureChunk, CommandKind, DeviceConfig, DeviceInfo, DeviceMsg, HostMsg, RejectReason, Report,
     Status, WearBlob, BLOCK_SAMPLES, PROTOCOL_VERSION,
@@ -56,6 +56,9 @@ pub struct Monitor {
     capture_buf: [RawSample; CAPTURE_SAMPLES],
     capture_len: usize,
     capture_id: u16,
+    /// The latest samples, so a capture starts at the impact's first shock
+    /// sample although the impact is confirmed a few samples later.
+    preroll: [RawSample; MAX_CONFIRM],
     alarm_on: bool,
     pub counters: MonitorCounters,
     /// Counters of estimators replaced by a new configuration: the status counts since boot.
@@ -75,6 +78,7 @@ impl Monitor {
             capture_buf: [RawSample::default(); CAPTURE_SAMPLES],
             capture_len: 0,
             capture_id: 0,
+            preroll: [RawSample::default(); MAX_CONFIRM],
             alarm_on: false,
             counters: MonitorCounters::default(),
             carried: Default::default(),
@@ -149,11 +153,16 @@ impl Monitor {
                     self.finish_tare(&t, out);
                 }
             }
+            self.preroll.copy_within(1.., 0);
+            self.preroll[MAX_CONFIRM - 1] = s;
+            let impacts = self.est.counters().impacts;
             let report = self.est.push(s);
             if let Some(r) = &report {
-                self.capture_on_impact();
                 out(DeviceMsg::Report(Report::from(r)));
                 self.alarms(r, out);
+            }
+            if self.est.counters().impacts != impacts && self.capture_on_impact() {
+                continue;
             }
             if matches!(self.capture, CaptureState::Recording { .. } | CaptureState::Tail { .. }) {
                 if self.capture_len < CAPTURE_SAMPLES {
@@ -174,19 +183,30 @@ impl Monitor {
         }
     }
 
-    fn capture_on_impact(&mut self) {
+    /// An impact was confirmed at the latest sample. True when that sample
+    /// is already in the capture (a recording started with its pre-roll).
+    fn capture_on_impact(&mut self) -> bool {
+        // The shock samples between the impact's start and its confirmation.
+        let since = (self.est.samples_since_impact() as usize).clamp(1, MAX_CONFIRM);
+        let mut started = false;
         self.capture = match self.capture {
             CaptureState::Armed { cycles } => {
-                self.capture_len = 0;
+                let preroll = &self.preroll[MAX_CONFIRM - since..];
+                self.capture_buf[..since].copy_from_slice(preroll);
+                self.capture_len = since;
                 self.capture_id = self.capture_id.wrapping_add(1);
+                started = true;
                 CaptureState::Recording { cycles_left: cycles }
             }
-            CaptureState::Recording { cycles_left } if cycles_left <= 1 => CaptureState::Tail { left: CAPTURE_TAIL },
+            CaptureState::Recording { cycles_left } if cycles_left <= 1 => CaptureState::Tail {
+                left: CAPTURE_TAIL.saturating_sub(since as u16 - 1).max(1),
+            },
             CaptureState::Recording { cycles_left } => CaptureState::Recording {
                 cycles_left: cycles_left - 1,
             },
             other => other,
         };
+        started
     }
 
     fn alarms(&mut self, r: &hammer_estimator::CycleReport, out: &mut impl FnMut(DeviceMsg)) {

@@ -123,8 +123,10 @@ impl Default for Config {
             sample_rate_hz: 100_000.0,
             geometry: Geometry::PAPER,
             inclination_deg: 0.0,
-            rear: ChannelCal::from_range(0.0, 10e5, 12),
-            front: ChannelCal::from_range(0.0, 10e5, 12),
+            // −1…+10 bar gauge: a vented chamber dips below atmosphere, and a
+            // transducer that reads vacuum sees the dip instead of clipping it.
+            rear: ChannelCal::from_range(-1e5, 10e5, 12),
+            front: ChannelCal::from_range(-1e5, 10e5, 12),
             accel: ChannelCal::from_range(-2000.0, 2000.0, 12),
             // The paper's Kistler sensors: 0.8 % of reading; offsets after tare ~1 kPa.
             rear_spec: ChannelSpec {
@@ -306,7 +308,8 @@ mod tests {
     fn default_is_valid_and_calibration_maps_the_range() {
         let c = Config::default();
         c.validate().unwrap();
-        assert_eq!(c.rear.value(0), 0.0);
+        // The range starts below atmosphere so a vented chamber reads as a number, not a rail.
+        assert!((c.rear.value(0) + 1e5).abs() < 1.0);
         assert!((c.rear.value(4095) - 10e5).abs() < 1.0);
         assert!((c.accel.value(0) + 2000.0).abs() < 1e-3);
         assert!((c.accel.value(4095) - 2000.0).abs() < 1e-2);

@@ -43,6 +43,18 @@ pub struct Sums {
     pub w: f32,
 }
 
+/// Σ force, Σ force², Σ r·force (with n and Σ r): the slope of the force
+/// balance's residual on the force, ≈ 0 for a sound accelerometer (−0.5 at
+/// half gain, −1 for a dead one, −2 with its sign inverted).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct SlopeSums {
+    pub n: f32,
+    pub r: f32,
+    pub f: f32,
+    pub ff: f32,
+    pub rf: f32,
+}
+
 impl Sums {
     fn minus(&self, o: &Sums) -> Sums {
         Sums {
@@ -104,7 +116,18 @@ pub struct Calibration {
     pub zero: [f32; 3],
     pub scale: [f32; 3],
     pub full: [u16; 3],
+    /// Whether a sample at the bottom rail is a fault. A pressure transducer
+    /// whose range reaches vacuum cannot be driven there by the air (the
+    /// default); one that starts at 0 gauge clips a vented chamber's dip
+    /// below atmosphere, which is data lost, not a fault.
+    pub bottom_is_fault: [bool; 3],
 }
+
+/// Gauge pressure below which no chamber can go (absolute vacuum), with margin.
+pub const VACUUM_GAUGE_PA: f32 = -0.9e5;
+/// How far below atmosphere a vented chamber's dip can reach: twice the
+/// deepest the simulator shows (−9 kPa at 4 bar, docs/estimator.md).
+pub const CLIPPED_DIP_BOUND_PA: f32 = 0.2e5;
 
 impl Calibration {
     pub fn new(c: &Config) -> Self {
@@ -112,6 +135,7 @@ impl Calibration {
             zero: [c.rear.zero_code, c.front.zero_code, c.accel.zero_code],
             scale: [c.rear.scale, c.front.scale, c.accel.scale],
             full: [c.rear.full_scale_code, c.front.full_scale_code, c.accel.full_scale_code],
+            bottom_is_fault: [c.rear.value(0) <= VACUUM_GAUGE_PA, c.front.value(0) <= VACUUM_GAUGE_PA, true],
         }
     }
 }
@@ -125,22 +149,31 @@ struct Watch {
 }
 
 impl Watch {
-    /// A pressure at its bottom rail is a vented chamber near 0 gauge, not a
-    /// clipped reading; every other rail sample is.
+    /// A sample at a rail is a saturated reading, except a pressure at the
+    /// bottom rail of a transducer that starts at 0 gauge (`bottom_is_fault`
+    /// false): a vented chamber below atmosphere, clipped. That is neither
+    /// saturation nor a stuck sensor; its share of the cycle goes into the
+    /// uncertainty instead (see [`estimate`]).
     #[inline(always)]
-    fn check(&mut self, ch: usize, c: u16, full: u16, stuck_limit: u32, bottom_clips: bool) {
+    fn check(&mut self, ch: usize, c: u16, full: u16, stuck_limit: u32, bottom_is_fault: bool) {
         const SAT: [Flags; 3] = [Flags::REAR_SATURATED, Flags::FRONT_SATURATED, Flags::ACCEL_SATURATED];
         const STUCK: [Flags; 3] = [Flags::REAR_STUCK, Flags::FRONT_STUCK, Flags::ACCEL_STUCK];
         // One compare for both rails: code 0 wraps to the top.
+        // A clipped dip holds code 0 for a while without the sensor being
+        // stuck: there, only a run longer than any dip (4× the limit, 20 ms
+        // by default against the ~12 ms dips seen) is.
+        let mut limit = stuck_limit;
         if c.wrapping_sub(1) >= full.wrapping_sub(1) {
             self.rail[ch] = self.rail[ch].saturating_add(1);
-            if bottom_clips || c != 0 {
+            if bottom_is_fault || c != 0 {
                 self.flags.insert(SAT[ch]);
+            } else {
+                limit = stuck_limit.saturating_mul(4);
             }
         }
         if c == self.last[ch] {
             self.run[ch] = self.run[ch].saturating_add(1);
-            if self.run[ch] == stuck_limit {
+            if self.run[ch] == limit || (self.run[ch] > limit && limit == stuck_limit) {
                 self.flags.insert(STUCK[ch]);
             }
         } else {
@@ -170,9 +203,83 @@ pub struct CycleAcc {
     pub rail: [u32; 3],
     run: [u32; 3],
     last_code: [u16; 3],
+    /// Running slope sums, and their values at the last checkpoints (a ring).
+    pub slope: SlopeSums,
+    slope_cp: [SlopeSums; SLOPE_WINDOW_CP],
+    slope_cp_len: usize,
+    /// Pressure extremes (rear high, rear low, front high, front low) of the
+    /// last few 8 ms spans: whether the hammer runs *now*.
+    spans: [[f32; 4]; SPANS],
+    span_count: usize,
+    span_now: [f32; 4],
+    /// Kept samples at which an accelerometer fault was first seen.
+    pub accel_fault_at: Option<u32>,
 }
 
+/// Checkpoints per span of the recent-activity record, and spans kept.
+const SPAN_CP: usize = 8;
+const SPANS: usize = 4;
+const EMPTY_SPAN: [f32; 4] = [f32::NEG_INFINITY, f32::INFINITY, f32::NEG_INFINITY, f32::INFINITY];
+
+/// Samples the accelerometer's force-balance slope is judged on: the last
+/// few milliseconds (checkpoints), so a fault that begins mid-cycle shows.
+const SLOPE_WINDOW_CP: usize = 8;
+const SLOPE_MIN_SAMPLES: f32 = 500.0;
+/// Spread of the pressure force (standard deviation, N) needed to judge it:
+/// a running hammer swings by hundreds of newtons.
+const SLOPE_MIN_FORCE_SD_N: f32 = 50.0;
+/// |slope| above which the accelerometer disagrees with the pressures; a
+/// sound one stays within a few percent (its gain error, friction's share).
+const SLOPE_LIMIT: f32 = 0.3;
+
 impl CycleAcc {
+    /// The slope of r on the force over the last milliseconds, if they hold
+    /// enough samples and enough swing of the force to judge it.
+    pub fn force_slope(&self) -> Option<f32> {
+        let c = self.slope;
+        // The oldest checkpoint in the ring, once it is full: the window's start.
+        let w = if self.slope_cp_len >= SLOPE_WINDOW_CP {
+            let o = self.slope_cp[self.slope_cp_len % SLOPE_WINDOW_CP];
+            SlopeSums {
+                n: c.n - o.n,
+                r: c.r - o.r,
+                f: c.f - o.f,
+                ff: c.ff - o.ff,
+                rf: c.rf - o.rf,
+            }
+        } else {
+            c
+        };
+        let n = w.n;
+        if n < SLOPE_MIN_SAMPLES {
+            return None;
+        }
+        let var = w.ff - w.f * w.f / n;
+        if !(var > n * SLOPE_MIN_FORCE_SD_N * SLOPE_MIN_FORCE_SD_N) {
+            return None;
+        }
+        Some((w.rf - w.r * w.f / n) / var)
+    }
+
+    /// Samples still to be pushed before the next checkpoint (where the
+    /// accelerometer is judged): runs end there, so that the block path and
+    /// the sample path see a fault at the same sample.
+    pub fn to_checkpoint(&self, d: &Derived) -> u32 {
+        d.k - self.since_cp
+    }
+
+    /// Pressure swing over the last 24–32 ms (the larger of the two
+    /// chambers'): a hammer that runs swings by bars within a cycle, one that
+    /// has stopped by its sensors' noise.
+    pub fn recent_pressure_swing_pa(&self) -> f32 {
+        let mut e = self.span_now;
+        for sp in &self.spans[..self.span_count.min(SPANS)] {
+            e = [e[0].max(sp[0]), e[1].min(sp[1]), e[2].max(sp[2]), e[3].min(sp[3])];
+        }
+        let swing = |hi: f32, lo: f32| if hi >= lo { hi - lo } else { 0.0 };
+        swing(e[0], e[1]).max(swing(e[2], e[3]))
+    }
+
     pub fn new() -> Self {
         Self {
             cp: Vec::new(),
@@ -190,6 +297,13 @@ impl CycleAcc {
             rail: [0; 3],
             run: [0; 3],
             last_code: [u16::MAX; 3],
+            slope: SlopeSums::default(),
+            slope_cp: [SlopeSums::default(); SLOPE_WINDOW_CP],
+            slope_cp_len: 0,
+            spans: [EMPTY_SPAN; SPANS],
+            span_count: 0,
+            span_now: EMPTY_SPAN,
+            accel_fault_at: None,
         }
     }
 
@@ -214,6 +328,7 @@ impl CycleAcc {
         let mut prev_force = self.prev_force;
         let (mut jp1, mut jp2) = (self.jp1, self.jp2);
         let (mut peak_p1, mut peak_p2) = (self.peak_p1, self.peak_p2);
+        let mut sl = self.slope;
         let mut since_cp = self.since_cp;
         let mut w = Watch {
             rail: self.rail,
@@ -245,17 +360,43 @@ impl CycleAcc {
             s.rr += r * r;
             s.p1 += p1;
             s.p2 += p2;
+            sl.f += force;
+            sl.ff += force * force;
+            sl.rf += r * force;
             prev_force = force;
             peak_p1 = if p1 > peak_p1 { p1 } else { peak_p1 };
             peak_p2 = if p2 > peak_p2 { p2 } else { peak_p2 };
-            w.check(0, smp.rear, cal.full[0], stuck_limit, false);
-            w.check(1, smp.front, cal.full[1], stuck_limit, false);
-            w.check(2, smp.accel, cal.full[2], stuck_limit, true);
+            w.check(0, smp.rear, cal.full[0], stuck_limit, cal.bottom_is_fault[0]);
+            w.check(1, smp.front, cal.full[1], stuck_limit, cal.bottom_is_fault[1]);
+            w.check(2, smp.accel, cal.full[2], stuck_limit, cal.bottom_is_fault[2]);
             since_cp += 1;
             if since_cp == d.k {
                 since_cp = 0;
                 if self.cp.push(s).is_err() {
                     w.flags.insert(Flags::OVERFLOW);
+                }
+                // Once a millisecond: is the accelerometer still believable?
+                sl.n = s.n;
+                sl.r = s.r;
+                self.slope = sl;
+                if self.accel_fault_at.is_none() {
+                    if self.force_slope().is_some_and(|b| math::abs(b) > SLOPE_LIMIT) {
+                        w.flags.insert(Flags::ACCEL_FAULT);
+                    }
+                    if w.flags.intersects(Flags::ACCEL_FAULT | Flags::ACCEL_STUCK) {
+                        self.accel_fault_at = Some(s.n as u32);
+                    }
+                }
+                self.slope_cp[self.slope_cp_len % SLOPE_WINDOW_CP] = sl;
+                self.slope_cp_len += 1;
+                // Pressure extremes per span, sampled once a millisecond:
+                // enough for swings of bars over tens of milliseconds.
+                let sp = &mut self.span_now;
+                *sp = [sp[0].max(p1), sp[1].min(p1), sp[2].max(p2), sp[3].min(p2)];
+                if self.slope_cp_len % SPAN_CP == 0 {
+                    self.spans[self.span_count % SPANS] = self.span_now;
+                    self.span_count += 1;
+                    self.span_now = EMPTY_SPAN;
                 }
             }
         }
@@ -267,6 +408,9 @@ impl CycleAcc {
         self.jp2 = jp2;
         self.peak_p1 = peak_p1;
         self.peak_p2 = peak_p2;
+        sl.n = s.n;
+        sl.r = s.r;
+        self.slope = sl;
         self.since_cp = since_cp;
         self.rail = w.rail;
         self.run = w.run;
@@ -493,7 +637,19 @@ pub fn estimate(
         d.a2 / m * d.dt * acc.cur.p2,
         d.a2 / m * d.dt * d.dt * (last * acc.cur.p2 - acc.jp2),
     );
-    let sources: [(f32, f32, f32, f32, f32); 6] = [
+    // A transducer that starts at 0 gauge clips a vented chamber's dip below
+    // atmosphere: those samples read high by up to the dip's depth. Carried
+    // as an offset uncertainty over the cycle, in proportion to the samples
+    // at the bottom rail (none with the default vacuum-reaching ranges).
+    let clip_u = |cal: &crate::config::ChannelCal, rail: u32| {
+        if rail == 0 || cal.value(0) <= VACUUM_GAUGE_PA {
+            0.0
+        } else {
+            CLIPPED_DIP_BOUND_PA * (rail as f32 / n) / math::sqrt(3.0)
+        }
+    };
+    let (clip_rear, clip_front) = (clip_u(&c.rear, acc.rail[0]), clip_u(&c.front, acc.rail[1]));
+    let sources: [(f32, f32, f32, f32, f32); 8] = [
         (c.rear_spec.gain_rel, -d.a1 * p1b, d.a1 * p1s, v1, w1),
         (c.front_spec.gain_rel, d.a2 * p2b, -d.a2 * p2s, -v2, -w2),
         (c.accel_spec.gain_rel, m * ab, -m * as_, 0.0, 0.0),
@@ -512,6 +668,20 @@ pub fn estimate(
             -d.a2 * 0.5 * t_end * t_end / m,
         ),
         (c.accel_spec.offset, m, -m, 0.0, 0.0),
+        (
+            clip_rear,
+            -d.a1,
+            d.a1,
+            d.a1 * t_end / m,
+            d.a1 * 0.5 * t_end * t_end / m,
+        ),
+        (
+            clip_front,
+            d.a2,
+            -d.a2,
+            -d.a2 * t_end / m,
+            -d.a2 * 0.5 * t_end * t_end / m,
+        ),
     ];
 
     // The impact velocity and its sensitivities (by linearity, one closure each).

@@ -70,14 +70,32 @@ fn impact_code(cfg: &Config) -> Option<u16> {
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Phase {
-    /// Waiting for an impact to start a cycle.
-    Searching,
+    /// An accelerometer sample crossed the impact threshold; the next few
+    /// tell a shock from a spike. `trigger` is its index; the samples since
+    /// are in `Estimator::held`.
+    Confirming { trigger: u64 },
     /// Discarding the shock; `left` samples to go; `in_shock` while the
     /// accelerometer still shows the contact.
     Blanking { left: u32, in_shock: bool },
     /// Accumulating the cycle.
     Collecting,
 }
+
+/// Longest a real shock needs to prove itself, in samples.
+/// The most samples an impact is confirmed over (the shock's minimum length).
+pub const MAX_CONFIRM: usize = 8;
+/// A contact lasts tens of microseconds (≈ 75 µs for the paper's hammer);
+/// an accelerometer beyond the threshold for less than this is a spike.
+const MIN_SHOCK_S: f32 = 25e-6;
+/// Valid cycles kept for the neighbour check.
+const HISTORY: usize = 8;
+/// A cycle whose period or stroke leaves these bands around the recent
+/// median contradicts its neighbours (a supply change moves the period by
+/// ~25 % between 4 and 7 bar; a split or merged cycle by 50 % or more).
+const PERIOD_BAND: (f32, f32) = (0.6, 1.7);
+const STROKE_BAND: (f32, f32) = (0.7, 1.4);
+/// Pressure swing that says the hammer runs while no impact comes.
+const RUNNING_SWING_PA: f32 = 0.5e5;
 
 /// Running totals, for the status a device reports.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -89,6 +107,51 @@ pub struct Counters {
     pub invalid_cycles: u32,
     /// Cycles abandoned because no impact came within `max_period_s`.
     pub stalls: u32,
+    /// Accelerometer excursions too short to be a shock, held over.
+    pub spikes: u32,
+}
+
+/// Recent valid cycles' periods and strokes, for the neighbour check.
+#[derive(Debug, Clone, Copy, Default)]
+struct History {
+    period_s: [f32; HISTORY],
+    stroke_m: [f32; HISTORY],
+    len: usize,
+    next: usize,
+}
+
+impl History {
+    fn push(&mut self, period_s: f32, stroke_m: f32) {
+        self.period_s[self.next] = period_s;
+        self.stroke_m[self.next] = stroke_m;
+        self.next = (self.next + 1) % HISTORY;
+        self.len = (self.len + 1).min(HISTORY);
+    }
+
+    fn median(values: &[f32; HISTORY], len: usize) -> f32 {
+        let mut v = [0.0f32; HISTORY];
+        v[..len].copy_from_slice(&values[..len]);
+        // Insertion sort of at most eight values.
+        for i in 1..len {
+            let mut j = i;
+            while j > 0 && v[j - 1] > v[j] {
+                v.swap(j - 1, j);
+                j -= 1;
+            }
+        }
+        v[len / 2]
+    }
+
+    /// True when the cycle contradicts the recent ones (needs four of them).
+    fn contradicts(&self, period_s: f32, stroke_m: f32) -> bool {
+        if self.len < 4 {
+            return false;
+        }
+        let p = Self::median(&self.period_s, self.len);
+        let x = Self::median(&self.stroke_m, self.len);
+        let out = |v: f32, m: f32, (lo, hi): (f32, f32)| !(v >= lo * m && v <= hi * m);
+        out(period_s, p, PERIOD_BAND) || out(stroke_m, x, STROKE_BAND)
+    }
 }
 
 pub struct Estimator {
@@ -105,8 +168,32 @@ pub struct Estimator {
     pre_samples: usize,
     blank_samples: u32,
     stuck_limit: u32,
+    min_shock: usize,
     max_period_samples: u64,
-    last_impact: Option<u64>,
+    /// Where the cycle under way began (an impact, or where the estimator
+    /// started listening).
+    cycle_start: u64,
+    /// Whether that beginning was a confirmed impact: only such cycles are estimates.
+    opened_by_impact: bool,
+    /// Index of the cycle's first kept sample (after its blanking).
+    kept_start: u64,
+    /// An accelerometer fault was already reported for the cycle under way.
+    fault_reported: bool,
+    /// Impacts count only after the accelerometer left the impact region:
+    /// one stuck beyond the threshold is one event, not a flood.
+    armed: bool,
+    /// Samples after a trigger, waiting for the shock to prove itself.
+    held: [RawSample; MAX_CONFIRM],
+    held_len: usize,
+    /// The newest sample the cycle took: what a spike is replaced with.
+    last_good: RawSample,
+    /// The report of the cycle an impact closed, held until its shock has
+    /// been seen to end (a shock that does not is no impact).
+    pending: Option<CycleReport>,
+    /// Reports ready to leave, oldest first (a sample can close a cycle and
+    /// release the one before: two at most).
+    ready: heapless::Deque<CycleReport, 3>,
+    history: History,
     next_index: u64,
     dropped_in_cycle: bool,
     /// Samples the shock of the last impact lasted (≈ the contact duration).
@@ -124,19 +211,35 @@ impl Estimator {
         cfg.validate()?;
         let fs = cfg.sample_rate_hz;
         let pre = (math::round(cfg.blank_before_s * fs) as usize).min(MAX_PRE_BLANK - 1);
+        let shock = MIN_SHOCK_S * fs;
+        let min_shock = (shock as usize + usize::from((shock as usize as f32) < shock)).clamp(1, MAX_CONFIRM);
+        let d = Derived::new(&cfg);
+        let mut acc = CycleAcc::new();
+        acc.start(&d, u32::MAX / 2);
         Ok(Self {
-            d: Derived::new(&cfg),
-            phase: Phase::Searching,
+            d,
+            phase: Phase::Collecting,
             delay: [RawSample::default(); MAX_PRE_BLANK],
             delay_len: 0,
             cal: cycle::Calibration::new(&cfg),
             impact_code: impact_code(&cfg),
-            acc: CycleAcc::new(),
+            acc,
             pre_samples: pre,
             blank_samples: math::round(cfg.blank_after_s * fs) as u32,
             stuck_limit: math::round(cfg.stuck_after_s * fs) as u32,
+            min_shock,
             max_period_samples: math::round(cfg.max_period_s * fs) as u64,
-            last_impact: None,
+            cycle_start: 0,
+            opened_by_impact: false,
+            kept_start: 0,
+            fault_reported: false,
+            armed: true,
+            held: [RawSample::default(); MAX_CONFIRM],
+            held_len: 0,
+            last_good: RawSample::default(),
+            pending: None,
+            ready: heapless::Deque::new(),
+            history: History::default(),
             next_index: 0,
             dropped_in_cycle: false,
             contact_samples: 0,
@@ -151,6 +254,13 @@ impl Estimator {
 
     pub fn config(&self) -> &Config {
         &self.cfg
+    }
+
+    /// Samples from the latest confirmed impact's first shock sample to the
+    /// latest sample, inclusive: a capture that starts on an impact (seen
+    /// through `counters().impacts`) starts that many samples back.
+    pub fn samples_since_impact(&self) -> u64 {
+        self.next_index.wrapping_sub(self.cycle_start)
     }
 
     pub fn counters(&self) -> Counters {
@@ -185,73 +295,77 @@ impl Estimator {
     pub fn push_block(&mut self, block: &[RawSample], mut on_report: impl FnMut(CycleReport)) {
         let mut i = 0;
         while i < block.len() {
-            if self.phase == Phase::Collecting {
+            if self.phase == Phase::Collecting && self.armed {
                 let rest = &block[i..];
-                // Up to the next impact, and short of the sample that would stall the cycle.
-                let to_stall = self.last_impact.map_or(u64::MAX, |last| {
-                    (last + self.max_period_samples + 1).saturating_sub(self.next_index)
-                });
-                let limit = rest.len().min(to_stall.min(usize::MAX as u64) as usize);
+                // Up to the next impact, short of the sample that would stall
+                // the cycle, and no further than the next checkpoint.
+                let to_stall = (self.cycle_start + self.max_period_samples + 1).saturating_sub(self.next_index);
+                let to_cp = self.acc.to_checkpoint(&self.d) as usize + self.pre_samples.saturating_sub(self.delay_len);
+                let limit = rest.len().min(to_stall.min(usize::MAX as u64) as usize).min(to_cp);
                 let n = rest[..limit].iter().position(|s| self.is_impact(s)).unwrap_or(limit);
                 if n > 0 {
                     self.next_index = self.next_index.wrapping_add(n as u64);
                     self.counters.samples = self.counters.samples.wrapping_add(n as u64);
                     self.collect(&rest[..n]);
+                    self.accel_fault_record();
+                    while let Some(r) = self.ready.pop_front() {
+                        on_report(r);
+                    }
                     i += n;
                     continue;
                 }
             }
-            if let Some(r) = self.push(block[i]) {
+            self.step(block[i]);
+            while let Some(r) = self.ready.pop_front() {
                 on_report(r);
             }
             i += 1;
         }
     }
 
-    /// Feeds one sample-set. Returns the report of the cycle an impact closes.
+    /// Feeds one sample-set. Returns a report when one is ready (a cycle
+    /// closed, or a fault record); a second one ready at the same sample
+    /// comes with the next call.
     pub fn push(&mut self, s: RawSample) -> Option<CycleReport> {
+        self.step(s);
+        self.ready.pop_front()
+    }
+
+    fn emit(&mut self, r: Option<CycleReport>) {
+        if let Some(r) = r {
+            // Bounded: at most two are made per sample and each call drains.
+            let _ = self.ready.push_back(r);
+        }
+    }
+
+    fn step(&mut self, s: RawSample) {
         let index = self.next_index;
         self.next_index = self.next_index.wrapping_add(1);
         self.counters.samples = self.counters.samples.wrapping_add(1);
-        let impact = self.is_impact(&s);
+        let beyond = self.is_impact(&s);
         match self.phase {
-            Phase::Searching => {
-                if impact {
-                    self.begin_cycle(index);
-                }
-                None
-            }
-            Phase::Blanking { left, in_shock } => {
-                let still = in_shock && impact;
-                if still {
-                    self.contact_samples = self.contact_samples.saturating_add(1);
-                }
-                self.phase = if left <= 1 {
-                    self.start_collecting()
-                } else {
-                    Phase::Blanking {
-                        left: left - 1,
-                        in_shock: still,
-                    }
-                };
-                None
-            }
+            Phase::Confirming { trigger } => self.confirm(trigger, s, beyond),
+            Phase::Blanking { left, in_shock } => self.blank(left, in_shock, beyond),
             Phase::Collecting => {
-                if impact {
-                    let report = self.close_cycle(index);
-                    self.begin_cycle(index);
-                    return Some(report);
+                if !beyond {
+                    self.armed = true;
                 }
-                if let Some(last) = self.last_impact {
-                    if index.wrapping_sub(last) > self.max_period_samples {
-                        self.counters.stalls = self.counters.stalls.wrapping_add(1);
-                        self.phase = Phase::Searching;
-                        self.last_impact = None;
-                        return None;
+                if beyond && self.armed {
+                    self.held[0] = s;
+                    self.held_len = 1;
+                    if self.min_shock <= 1 {
+                        self.impact(index);
+                    } else {
+                        self.phase = Phase::Confirming { trigger: index };
                     }
+                    return;
+                }
+                if index.wrapping_sub(self.cycle_start) > self.max_period_samples {
+                    self.stall(index, s);
+                    return;
                 }
                 self.collect(core::slice::from_ref(&s));
-                None
+                self.accel_fault_record();
             }
         }
     }
@@ -263,8 +377,16 @@ impl Estimator {
         self.counters.dropped_samples = self.counters.dropped_samples.wrapping_add(missing as u64);
         match self.phase {
             Phase::Collecting => self.dropped_in_cycle = true,
+            Phase::Confirming { trigger } => {
+                // The shock cannot be judged across a hole: take it as an impact.
+                self.held_len = 1;
+                self.impact(trigger);
+                self.dropped_in_cycle = true;
+            }
             Phase::Blanking { left, .. } => {
                 self.phase = if left <= missing {
+                    let r = self.pending.take().map(|r| self.finalize(r));
+                    self.emit(r);
                     self.start_collecting()
                 } else {
                     Phase::Blanking {
@@ -274,13 +396,94 @@ impl Estimator {
                 };
                 self.dropped_in_cycle = true;
             }
-            Phase::Searching => {}
         }
+    }
+
+    /// One more sample after a trigger: a shock is confirmed once
+    /// `min_shock` samples of it have been seen, a spike once the
+    /// accelerometer fell back before that.
+    fn confirm(&mut self, trigger: u64, s: RawSample, beyond: bool) {
+        self.held[self.held_len] = s;
+        self.held_len += 1;
+        if !beyond {
+            // A spike: hold the accelerometer over it, keep the pressures.
+            self.counters.spikes = self.counters.spikes.wrapping_add(1);
+            let held_len = self.held_len;
+            let mut held = self.held;
+            for h in &mut held[..held_len - 1] {
+                h.accel = self.last_good.accel;
+            }
+            self.phase = Phase::Collecting;
+            self.held_len = 0;
+            self.collect(&held[..held_len]);
+            self.accel_fault_record();
+            return;
+        }
+        if self.held_len >= self.min_shock {
+            self.impact(trigger);
+        }
+    }
+
+    /// A confirmed impact at `trigger`: the cycle under way closes (its
+    /// report waits for the shock to end), the next one opens, and the
+    /// samples held since the trigger are the first of its blanking.
+    fn impact(&mut self, trigger: u64) {
+        let earlier = self.pending.take().map(|r| self.finalize(r));
+        self.emit(earlier);
+        if self.opened_by_impact {
+            self.pending = Some(self.close_cycle(trigger));
+        }
+        self.begin_cycle(trigger);
+        let held_len = self.held_len;
+        self.held_len = 0;
+        for k in 1..held_len {
+            let s = self.held[k];
+            let beyond = self.is_impact(&s);
+            match self.phase {
+                Phase::Blanking { left, in_shock } => self.blank(left, in_shock, beyond),
+                _ => self.collect(core::slice::from_ref(&s)),
+            }
+        }
+        if self.phase == Phase::Collecting {
+            // No blanking configured: nothing to wait for.
+            let r = self.pending.take().map(|r| self.finalize(r));
+            self.emit(r);
+        }
+    }
+
+    fn blank(&mut self, left: u32, in_shock: bool, beyond: bool) {
+        let still = in_shock && beyond;
+        if still {
+            self.contact_samples = self.contact_samples.saturating_add(1);
+        }
+        if left > 1 {
+            self.phase = Phase::Blanking {
+                left: left - 1,
+                in_shock: still,
+            };
+            return;
+        }
+        self.phase = self.start_collecting();
+        let mut r = self.pending.take();
+        if still {
+            // Beyond the threshold for the whole blanking: no contact lasts
+            // that long. The accelerometer is railed or stuck there; what
+            // closed the previous cycle was not an impact.
+            self.armed = false;
+            self.opened_by_impact = false;
+            if let Some(r) = r.as_mut() {
+                r.flags.insert(Flags::ACCEL_FAULT);
+            }
+        }
+        let r = r.map(|r| self.finalize(r));
+        self.emit(r);
     }
 
     fn begin_cycle(&mut self, index: u64) {
         self.counters.impacts = self.counters.impacts.wrapping_add(1);
-        self.last_impact = Some(index);
+        self.cycle_start = index;
+        self.opened_by_impact = true;
+        self.fault_reported = false;
         self.delay_len = 0;
         self.dropped_in_cycle = false;
         self.contact_samples = 1;
@@ -295,15 +498,31 @@ impl Estimator {
     }
 
     fn start_collecting(&mut self) -> Phase {
+        self.kept_start = self.next_index;
         self.cycle_contact_samples = self.contact_samples;
         self.acc.start(&self.d, self.blank_samples + 1);
         Phase::Collecting
+    }
+
+    /// A cycle that did not open at an impact (start-up, after a stall or a
+    /// fault): accumulated for the fault checks, never an estimate.
+    fn open_without_impact(&mut self, index: u64) {
+        self.cycle_start = index;
+        self.kept_start = index;
+        self.opened_by_impact = false;
+        self.delay_len = 0;
+        self.dropped_in_cycle = false;
+        self.acc.start(&self.d, u32::MAX / 2);
+        self.phase = Phase::Collecting;
     }
 
     /// Samples of the cycle under way, none of them an impact. The newest
     /// `pre_samples` wait in the delay line: if the next sample is an impact,
     /// they hold its leading edge and are discarded; the rest are processed.
     fn collect(&mut self, run: &[RawSample]) {
+        if let Some(last) = run.last() {
+            self.last_good = *last;
+        }
         let pre = self.pre_samples;
         let total = self.delay_len + run.len();
         if total <= pre {
@@ -329,8 +548,70 @@ impl Estimator {
         self.delay_len = keep_old + tail.len();
     }
 
+    /// An accelerometer fault seen in the cycle under way is reported at
+    /// once (the cycle cannot close on an impact the sensor will not show),
+    /// then the estimator listens on without an impact; once per cycle.
+    fn accel_fault_record(&mut self) {
+        if self.fault_reported {
+            return;
+        }
+        let Some(at) = self.acc.accel_fault_at else {
+            return;
+        };
+        let index = self.kept_start + u64::from(at);
+        let flags = self.acc.flags;
+        let r = self.record(index.min(self.next_index), flags | Flags::NO_IMPACT);
+        self.open_without_impact(self.next_index);
+        self.fault_reported = true;
+        self.emit(Some(r));
+    }
+
+    /// No impact within `max_period_s`. A hammer that stands still (its
+    /// pressures flat) is only counted; one whose pressures keep cycling has
+    /// a silent accelerometer, and that is reported.
+    fn stall(&mut self, index: u64, s: RawSample) {
+        if self.opened_by_impact {
+            self.counters.stalls = self.counters.stalls.wrapping_add(1);
+        }
+        let running = self.acc.recent_pressure_swing_pa() > RUNNING_SWING_PA;
+        let r = (running || self.acc.flags.intersects(Flags::ACCEL_FAULT))
+            .then(|| self.record(index, self.acc.flags | Flags::NO_IMPACT));
+        let reported = self.fault_reported;
+        self.open_without_impact(index);
+        self.fault_reported = reported && r.is_none();
+        self.emit(r);
+        self.collect(core::slice::from_ref(&s));
+        self.accel_fault_record();
+    }
+
+    /// A record with flags and no numbers: what happened instead of a cycle.
+    fn record(&mut self, index: u64, mut flags: Flags) -> CycleReport {
+        let period_s = index.wrapping_sub(self.cycle_start) as f32 * self.d.dt;
+        let n = self.acc.cur.n.max(1.0);
+        if self.acc.rail.iter().any(|&r| r as f32 > 0.9 * n) {
+            flags.insert(Flags::DISCONNECTED);
+        }
+        let finite = |x: f32| if math::is_finite(x) { x } else { 0.0 };
+        let r = CycleReport {
+            seq: self.seq,
+            t_impact_s: (index as f64 - 0.5) / self.cfg.sample_rate_hz as f64,
+            period_s,
+            frequency_hz: 0.0,
+            peak_rear_pa: finite(self.acc.peak_p1),
+            peak_front_pa: finite(self.acc.peak_p2),
+            wear_index_j: self.wear.friction_work_j as f32,
+            drift_score: self.wear.cusum,
+            flags,
+            ..Default::default()
+        };
+        self.counters.cycles = self.counters.cycles.wrapping_add(1);
+        self.counters.invalid_cycles = self.counters.invalid_cycles.wrapping_add(1);
+        self.seq = self.seq.wrapping_add(1);
+        r
+    }
+
     fn close_cycle(&mut self, index: u64) -> CycleReport {
-        let start = self.last_impact.unwrap_or(index);
+        let start = self.cycle_start;
         let period_s = index.wrapping_sub(start) as f32 * self.d.dt;
         let tail = self.delay_len as u32;
         let mut e = cycle::estimate(
@@ -349,7 +630,10 @@ impl Estimator {
         if self.dropped_in_cycle {
             e.flags.insert(Flags::DROPPED_SAMPLES);
         }
-        if period_s < self.cfg.min_period_s || period_s > self.cfg.max_period_s {
+        if period_s < self.cfg.min_period_s
+            || period_s > self.cfg.max_period_s
+            || self.history.contradicts(period_s, e.stroke_m)
+        {
             e.flags.insert(Flags::IMPLAUSIBLE);
         }
         let m = self.d.m;
@@ -387,7 +671,16 @@ impl Estimator {
         if r.impact_energy_j > 0.0 {
             r.friction_work_ratio = e.friction_work_stroke_j / r.impact_energy_j;
         }
+        self.counters.cycles = self.counters.cycles.wrapping_add(1);
+        self.seq = self.seq.wrapping_add(1);
+        r
+    }
+
+    /// The bookkeeping that depends on a closed cycle's validity, done when
+    /// its report leaves (after its closing shock was seen to end).
+    fn finalize(&mut self, mut r: CycleReport) -> CycleReport {
         if r.is_valid() {
+            self.history.push(r.period_s, r.stroke_m);
             let op = if self.cfg.supply_pressure_pa.is_nan() {
                 r.peak_rear_pa
             } else {
@@ -405,8 +698,6 @@ impl Estimator {
         } else {
             self.counters.invalid_cycles = self.counters.invalid_cycles.wrapping_add(1);
         }
-        self.counters.cycles = self.counters.cycles.wrapping_add(1);
-        self.seq = self.seq.wrapping_add(1);
         r
     }
 }

@@ -30,6 +30,13 @@ impl Flags {
     pub const PHASE_MISMATCH: Flags = Flags(1 << 12);
     /// Warning: the friction drift alarm is active.
     pub const DRIFT_ALARM: Flags = Flags(1 << 13);
+    /// The accelerometer disagrees with the force the pressures exert (its
+    /// gain, its sign, or a dead sensor): the force balance cannot hold.
+    pub const ACCEL_FAULT: Flags = Flags(1 << 14);
+    /// No impact came when one was due while the pressures kept cycling (a
+    /// record instead of silence; the other flags name the suspect), or the
+    /// cycle did not open at a confirmed impact.
+    pub const NO_IMPACT: Flags = Flags(1 << 15);
 
     pub const INVALIDATING: Flags = Flags(
         Self::REAR_SATURATED.0
@@ -42,10 +49,25 @@ impl Flags {
             | Self::DROPPED_SAMPLES.0
             | Self::NO_REVERSAL.0
             | Self::IMPLAUSIBLE.0
-            | Self::OVERFLOW.0,
+            | Self::OVERFLOW.0
+            | Self::ACCEL_FAULT.0
+            | Self::NO_IMPACT.0,
     );
 
-    pub const NAMES: [(Flags, &'static str); 14] = [
+    /// Flags that blame a sensor rather than the hammer: the device's
+    /// `SensorFault` alarm.
+    pub const SENSOR_FAULTS: Flags = Flags(
+        Self::REAR_SATURATED.0
+            | Self::FRONT_SATURATED.0
+            | Self::ACCEL_SATURATED.0
+            | Self::REAR_STUCK.0
+            | Self::FRONT_STUCK.0
+            | Self::ACCEL_STUCK.0
+            | Self::DISCONNECTED.0
+            | Self::ACCEL_FAULT.0,
+    );
+
+    pub const NAMES: [(Flags, &'static str); 16] = [
         (Self::REAR_SATURATED, "rear_saturated"),
         (Self::FRONT_SATURATED, "front_saturated"),
         (Self::ACCEL_SATURATED, "accel_saturated"),
@@ -60,6 +82,8 @@ impl Flags {
         (Self::ACCEL_ZERO_SHIFT, "accel_zero_shift"),
         (Self::PHASE_MISMATCH, "phase_mismatch"),
         (Self::DRIFT_ALARM, "drift_alarm"),
+        (Self::ACCEL_FAULT, "accel_fault"),
+        (Self::NO_IMPACT, "no_impact"),
     ];
 
     pub fn contains(self, other: Flags) -> bool {

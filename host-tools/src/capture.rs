@@ -59,6 +59,7 @@ pub fn to_trace(codes: &[[u16; 3]], cfg: &Config, supply_bar: Option<f64>) -> (T
         p_front_pa: codes.iter().map(|c| val(&cfg.front, c[1])).collect(),
         accel_mps2: codes.iter().map(|c| val(&cfg.accel, c[2])).collect(),
         extra: Default::default(),
+        gaps: Vec::new(),
     };
     (trace, Sidecar::new(supply_bar, "device"))
 }

@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use clap::{Args, Parser, Subcommand};
 
 use hammer_sim::simulate::simulate;
@@ -192,12 +192,22 @@ pub fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Simulate(args) => {
             let cfg = args.config()?;
+            if let Some(out) = args
+                .out
+                .as_ref()
+                .filter(|o| hammer_trace::trace::sidecar_path(o) == **o)
+            {
+                bail!(
+                    "--out {}: the sidecar would overwrite the trace; give the trace another extension (.csv)",
+                    out.display()
+                );
+            }
             let sim = simulate(&cfg).context("simulation failed")?;
-            print!("{}", sim.summary());
+            out!("{}", sim.summary());
             if let Some(out) = &args.out {
                 write_csv(out, &sim.trace())?;
                 write_sidecar(out, &sim.sidecar())?;
-                println!(
+                outln!(
                     "wrote {} and {}",
                     out.display(),
                     hammer_trace::trace::sidecar_path(out).display()
@@ -215,14 +225,14 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Capture(args) => capture_cmd(&args),
         Command::Report(args) => {
             for f in crate::report::run(&args)? {
-                println!("wrote {}", f.display());
+                outln!("wrote {}", f.display());
             }
             Ok(())
         }
         Command::Figures(args) => {
             let files = crate::plot::effect_figures(&args.out, args.supply_bar)?;
             for f in files {
-                println!("wrote {}", f.display());
+                outln!("wrote {}", f.display());
             }
             Ok(())
         }
@@ -267,7 +277,7 @@ fn capture_cmd(args: &CaptureArgs) -> Result<()> {
     let (trace, sidecar) = crate::capture::to_trace(&codes, &cfg, args.supply_bar.or(supply));
     write_csv(&args.out, &trace)?;
     write_sidecar(&args.out, &sidecar)?;
-    println!(
+    outln!(
         "captured {} sample-sets ({:.1} ms) into {} and {}",
         codes.len(),
         codes.len() as f64 / cfg.sample_rate_hz as f64 * 1e3,
@@ -289,8 +299,8 @@ fn config_check(file: &std::path::Path) -> Result<()> {
         1.0 / cfg.solver.output_step_s,
         Some(cfg.supply.pressure_bar),
     )?;
-    println!("{}: ok", file.display());
-    println!(
+    outln!("{}: ok", file.display());
+    outln!(
         "  hammer: {} kg piston, bore {} mm, rod {} mm, supply {} bar, inclination {}°",
         cfg.hammer.piston_mass_kg,
         cfg.hammer.bore_diameter_m * 1e3,
@@ -300,7 +310,7 @@ fn config_check(file: &std::path::Path) -> Result<()> {
     );
     let (r0, r1) = est.rear.range();
     let (a0, a1) = est.accel.range();
-    println!(
+    outln!(
         "  sensors: pressure {:.2} … {:.2} bar, acceleration {:.0} … {:.0} m/s², {} kS/s",
         r0 / 1e5,
         r1 / 1e5,
@@ -309,7 +319,7 @@ fn config_check(file: &std::path::Path) -> Result<()> {
         est.sample_rate_hz / 1e3
     );
     let active = cfg.effects.active();
-    println!(
+    outln!(
         "  simulator effects: {}",
         if active.is_empty() {
             "none".to_string()
@@ -326,8 +336,17 @@ fn estimate_cmd(args: &EstimateArgs) -> Result<()> {
         Some(p) => load_toml(p)?,
         None => SimConfig::default(),
     };
-    let input = hammer_sim::estimation::open_for_estimation(&args.trace, &file, args.supply_bar)?;
-    let reports = hammer_sim::estimation::run(&input.codes, input.config)?;
+    // Streamed: an hour of samples takes no more memory than a second.
+    let mut reports = Vec::new();
+    let summary = hammer_sim::estimation::stream_estimation(&args.trace, &file, args.supply_bar, |r| reports.push(r))?;
+    if reports.is_empty() {
+        bail!(
+            "{}: no impact cycle in {} samples ({:.3} s): no impact reached the estimator's threshold",
+            args.trace.display(),
+            summary.samples,
+            (summary.samples + summary.missing_samples) as f64 / summary.sample_rate_hz
+        );
+    }
     let mut out = std::io::BufWriter::new(std::io::stdout().lock());
     use std::io::Write as _;
     match args.format {
@@ -344,6 +363,8 @@ fn estimate_cmd(args: &EstimateArgs) -> Result<()> {
         }
         Format::Table => write!(out, "{}", table(&reports))?,
     }
+    // A full disk or a closed pipe must not pass for success.
+    out.flush().context("writing to standard output")?;
     Ok(())
 }
 

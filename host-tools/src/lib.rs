@@ -1,6 +1,9 @@
 //! Host side of hammer-monitor: the hammer simulator, trace files and the
 //! `hammer` command line.
 
+#[macro_use]
+mod stdout;
+
 pub mod board;
 pub mod capture;
 pub mod cli;

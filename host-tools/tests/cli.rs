@@ -412,3 +412,53 @@ fn diagnose_bench_small_run() {
         serde_json::from_str(&std::fs::read_to_string(dir.join("bench.json")).unwrap()).unwrap();
     assert_eq!(json["cases"].as_array().unwrap().len(), 12);
 }
+
+/// Standard output that cannot be written is an error, never a panic or a
+/// silent success; a trace with no impact is an error as in `report`.
+#[test]
+fn output_failures_and_empty_traces_are_errors_not_panics_or_silence() {
+    let dir = tmp_dir("outerr");
+    let run = dir.join("run.csv");
+    assert_eq!(simulate_to(&run).0, 0);
+    let full = |args: &[&str]| {
+        let out = Command::new(env!("CARGO_BIN_EXE_hammer"))
+            .args(args)
+            .stdout(std::fs::OpenOptions::new().write(true).open("/dev/full").unwrap())
+            .output()
+            .unwrap();
+        (out.status.code(), String::from_utf8_lossy(&out.stderr).into_owned())
+    };
+    for args in [
+        &["estimate", run.to_str().unwrap()][..],
+        &["estimate", run.to_str().unwrap(), "--format", "jsonl"],
+        &["simulate", "--duration", "0.05"],
+    ] {
+        let (code, stderr) = full(args);
+        assert_eq!(code, Some(2), "{args:?}: {stderr}");
+        assert!(
+            stderr.contains("writing to standard output") && !stderr.contains("panicked"),
+            "{stderr}"
+        );
+    }
+    // --out naming the sidecar's own path would overwrite the trace with it.
+    let (code, _, stderr) = hammer(&[
+        "simulate",
+        "--duration",
+        "0.05",
+        "--out",
+        dir.join("x.json").to_str().unwrap(),
+    ]);
+    assert_eq!(code, 2, "{stderr}");
+    assert!(stderr.contains("sidecar would overwrite the trace"), "{stderr}");
+    assert!(!dir.join("x.json").exists());
+    // A quiet trace: no cycle is an error that says so.
+    let quiet = dir.join("quiet.csv");
+    let mut text = String::from("t_s,p_rear_pa,p_front_pa,accel_mps2\n");
+    for i in 0..5000 {
+        text += &format!("{:.9},100000,50000,0\n", i as f64 * 1e-5);
+    }
+    std::fs::write(&quiet, text).unwrap();
+    let (code, stdout, stderr) = hammer(&["estimate", quiet.to_str().unwrap(), "--supply-bar", "4"]);
+    assert_eq!(code, 2, "{stdout}");
+    assert!(stderr.contains("no impact cycle in 5000 samples"), "{stderr}");
+}

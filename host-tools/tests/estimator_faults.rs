@@ -131,9 +131,22 @@ fn dropped_samples_flag_their_cycle_keep_the_timing_and_the_sequence() {
 #[test]
 fn a_hammer_that_stops_is_counted_as_a_stall_not_reported_as_a_cycle() {
     let (clean, cfg) = stream(|_| {});
-    // Cut out 0.4–0.7 s and hold the last sample: the piston stands still.
+    // Cut out 0.4–0.7 s and hold the last sample with the sensors' noise
+    // (±2 LSB): the piston stands still, the sensors live.
     let mut s = clean[..40_000].to_vec();
-    s.extend(std::iter::repeat(clean[40_000]).take(30_000));
+    let held = clean[40_000];
+    let mut x = 7u32;
+    let mut lsb = move |c: u16| {
+        x ^= x << 13;
+        x ^= x >> 17;
+        x ^= x << 5;
+        (c as i32 + (x % 5) as i32 - 2).clamp(0, 4095) as u16
+    };
+    s.extend((0..30_000).map(|_| RawSample {
+        rear: lsb(held.rear),
+        front: lsb(held.front),
+        accel: lsb(held.accel),
+    }));
     s.extend_from_slice(&clean[70_000..]);
     let mut e = Estimator::new(cfg).unwrap();
     let mut out = vec![];

@@ -4,7 +4,8 @@ use std::path::PathBuf;
 
 use hammer_sim::simulate::simulate;
 use hammer_sim::SimConfig;
-use hammer_trace::trace::{read_csv, read_sidecar, sidecar_path, write_csv, write_sidecar, Sidecar, TraceError};
+use hammer_trace::rows::MAX_LINE_BYTES;
+use hammer_trace::trace::{read_csv, read_sidecar, sidecar_path, write_csv, write_sidecar, Gap, Sidecar, TraceError};
 
 fn tmp(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("hammer-trace-test-{}", std::process::id()));
@@ -80,11 +81,22 @@ fn malformed_files_get_errors_that_say_where_and_what() {
     assert!(e.contains("p_rear_pa") && e.contains("NaN"), "{e}");
     let e = error_of("short.csv", "t_s,p_rear_pa,p_front_pa,accel_mps2\n0,1,2,3\n0.1,1,2\n");
     assert!(e.contains("expected 4 fields, found 3"), "{e}");
+    // An interval that is no whole number of periods is refused at its own line.
     let e = error_of(
-        "gap.csv",
-        "t_s,p_rear_pa,p_front_pa,accel_mps2\n0,1,2,3\n0.1,1,2,3\n0.3,1,2,3\n0.4,1,2,3\n",
+        "jitter.csv",
+        "t_s,p_rear_pa,p_front_pa,accel_mps2\n0,1,2,3\n0.1,1,2,3\n0.2,1,2,3\n0.35,1,2,3\n0.45,1,2,3\n",
     );
-    assert!(e.contains("not uniform"), "{e}");
+    assert!(e.contains(":5:") && e.contains("not uniform"), "{e}");
+    let e = error_of(
+        "backwards.csv",
+        "t_s,p_rear_pa,p_front_pa,accel_mps2\n0,1,2,3\n0.1,1,2,3\n0.0,1,2,3\n",
+    );
+    assert!(e.contains(":4:") && e.contains("not uniform"), "{e}");
+    let e = error_of(
+        "binary.csv",
+        "t_s,p_rear_pa,p_front_pa,accel_mps2\n0,1,2,3\n\u{0}\u{0}\u{ff}\n",
+    );
+    assert!(e.contains(":3:"), "{e}");
     let e = error_of("dup.csv", "t_s,p_rear_pa,p_front_pa,accel_mps2,t_s\n0,1,2,3,0\n");
     assert!(e.contains("duplicate column `t_s`"), "{e}");
     let e = error_of("one.csv", "t_s,p_rear_pa,p_front_pa,accel_mps2\n0,1,2,3\n");
@@ -110,4 +122,134 @@ fn sidecars_of_another_format_or_a_newer_version_are_refused() {
     assert!(e.contains("format is `other`"), "{e}");
     std::fs::write(sidecar_path(&path), "{not json").unwrap();
     assert!(read_sidecar(&path).is_err());
+    // What an outside user writes by hand: the operating point alone.
+    std::fs::write(sidecar_path(&path), "{\"supply_pressure_bar\": 4}").unwrap();
+    let s = read_sidecar(&path).unwrap().unwrap();
+    assert_eq!(
+        (s.format.as_str(), s.version, s.supply_pressure_bar),
+        ("hammer-trace", 1, Some(4.0))
+    );
+    assert_eq!(s.source, "import");
+}
+
+#[test]
+fn a_gap_in_the_timestamps_is_a_gap_not_a_rejected_file() {
+    let e = |t: &[f64]| {
+        let mut text = String::from("t_s,p_rear_pa,p_front_pa,accel_mps2\n");
+        for x in t {
+            text += &format!("{x},1,2,3\n");
+        }
+        text
+    };
+    let path = tmp("gap.csv");
+    std::fs::write(&path, e(&[0.0, 0.1, 0.4, 0.5, 0.6])).unwrap();
+    let t = read_csv(&path).unwrap();
+    assert_eq!(t.len(), 5);
+    assert_eq!(t.gaps, vec![Gap { before: 2, missing: 2 }]);
+    assert!((t.dt_s - 0.1).abs() < 1e-12, "{}", t.dt_s);
+    // A gap right after the first row does not fool the period either.
+    std::fs::write(&path, e(&[0.0, 0.2, 0.3, 0.4])).unwrap();
+    let t = read_csv(&path).unwrap();
+    assert_eq!(t.gaps, vec![Gap { before: 1, missing: 1 }]);
+    assert!((t.dt_s - 0.1).abs() < 1e-12, "{}", t.dt_s);
+    // Times at the edge of f64 (found by the fuzzer): a span that overflows
+    // still gives a finite period; a step that overflows, or a gap longer than
+    // the estimator can count, is refused at its line.
+    std::fs::write(&path, e(&[-1e308, 0.0, 1e308])).unwrap();
+    let t = read_csv(&path).unwrap();
+    assert!(t.dt_s.is_finite() && (t.dt_s / 1e308 - 1.0).abs() < 1e-12, "{}", t.dt_s);
+    std::fs::write(&path, e(&[-1.5e308, -1.4e308, -1.3e308, 1.5e308])).unwrap();
+    assert!(matches!(read_csv(&path), Err(TraceError::NotUniform { line: 5, .. })));
+    std::fs::write(&path, e(&[0.0, 1e-5, 2e-5, 1e6])).unwrap();
+    assert!(matches!(read_csv(&path), Err(TraceError::NotUniform { line: 5, .. })));
+}
+
+#[test]
+fn text_in_a_further_column_is_kept_as_nan_not_refused() {
+    let path = tmp("text.csv");
+    std::fs::write(
+        &path,
+        "t_s,p_rear_pa,p_front_pa,accel_mps2,operator\n0,1,2,3,anna\n0.1,1,2,3,anna\n0.2,1,2,3,ben\n",
+    )
+    .unwrap();
+    let t = read_csv(&path).unwrap();
+    assert_eq!(t.len(), 3);
+    assert!(t.extra["operator"].iter().all(|v| v.is_nan()));
+}
+
+#[test]
+fn a_line_without_end_is_refused_in_bounded_memory() {
+    let mut text = String::from("t_s,p_rear_pa,p_front_pa,accel_mps2\n0,1,2,3\n");
+    text.extend(std::iter::repeat('7').take(MAX_LINE_BYTES * 4));
+    let e = hammer_trace::trace::read_csv_from(text.as_bytes(), "long.csv")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("long.csv:3: line longer than"), "{e}");
+    // The header too.
+    let e = hammer_trace::trace::read_csv_from(&[b'x'; MAX_LINE_BYTES * 2][..], "h.csv")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("h.csv:1: line longer than"), "{e}");
+}
+
+/// The streamed estimation (what `hammer estimate` runs) gives the very
+/// reports of the in-memory path; a gap flags its cycle and only its cycle.
+#[test]
+fn streamed_estimation_matches_the_in_memory_path_and_flags_gaps() {
+    use hammer_sim::estimation::{open_for_estimation, stream_estimation};
+    let mut cfg = SimConfig::nominal(5.0);
+    cfg.solver.duration_s = 0.4;
+    cfg.effects.apply_spec("coulomb_friction").unwrap();
+    let sim = simulate(&cfg).unwrap();
+    let path = tmp("stream.csv");
+    write_csv(&path, &sim.trace()).unwrap();
+    write_sidecar(&path, &sim.sidecar()).unwrap();
+    let whole = open_for_estimation(&path, &SimConfig::default(), None).unwrap();
+    let in_memory = whole.run().unwrap();
+    let mut streamed = Vec::new();
+    let summary = stream_estimation(&path, &SimConfig::default(), None, |r| streamed.push(r)).unwrap();
+    assert!(in_memory.len() >= 5, "{} cycles", in_memory.len());
+    assert_eq!(streamed, in_memory);
+    assert_eq!(summary.samples as usize, whole.trace.len());
+    assert_eq!(summary.missing_samples, 0);
+
+    // 50 rows cut out in the middle of the third cycle.
+    let mut trace = sim.trace();
+    let t_mid = 0.5 * (in_memory[2].t_impact_s + in_memory[3].t_impact_s);
+    let at = (t_mid / trace.dt_s) as usize;
+    for col in [
+        &mut trace.t_s,
+        &mut trace.p_rear_pa,
+        &mut trace.p_front_pa,
+        &mut trace.accel_mps2,
+    ] {
+        col.drain(at..at + 50);
+    }
+    for col in trace.extra.values_mut() {
+        col.drain(at..at + 50);
+    }
+    let cut = tmp("stream-gap.csv");
+    write_csv(&cut, &trace).unwrap();
+    write_sidecar(&cut, &sim.sidecar()).unwrap();
+    let mut gapped = Vec::new();
+    let summary = stream_estimation(&cut, &SimConfig::default(), None, |r| gapped.push(r)).unwrap();
+    assert_eq!(summary.missing_samples, 50);
+    assert_eq!(gapped.len(), in_memory.len());
+    let dropped = hammer_estimator::Flags::DROPPED_SAMPLES;
+    for (g, r) in gapped.iter().zip(&in_memory) {
+        // Timing stays right across the gap.
+        assert!(
+            (g.t_impact_s - r.t_impact_s).abs() < 1e-9,
+            "{} vs {}",
+            g.t_impact_s,
+            r.t_impact_s
+        );
+        assert_eq!(g.flags.contains(dropped), g.seq == 3, "cycle {}: {:?}", g.seq, g.flags);
+        if !g.flags.contains(dropped) {
+            // Cycles after the gap carry the wear state of one cycle fewer.
+            assert!((g.impact_energy_j - r.impact_energy_j).abs() < 1e-6 * r.impact_energy_j);
+        }
+    }
+    let back = open_for_estimation(&cut, &SimConfig::default(), None).unwrap();
+    assert_eq!(back.run().unwrap(), gapped);
 }

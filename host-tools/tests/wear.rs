@@ -85,6 +85,7 @@ fn constant_friction_stream(cycles_wanted: usize, mut sink: impl FnMut(&[RawSamp
             p_front_pa: m.p_front_pa[i0..i1].to_vec(),
             accel_mps2: m.accel_mps2[i0..i1].to_vec(),
             extra: Default::default(),
+            gaps: Vec::new(),
         };
         sink(&to_codes(&trace, &est_cfg));
         cycles += per_window;

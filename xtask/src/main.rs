@@ -110,6 +110,7 @@ fn ci() -> Result<(), String> {
     let root = root();
     run(&root, "cargo", &["fmt", "--all", "--", "--check"])?;
     run(&root.join("firmware"), "cargo", &["fmt", "--all", "--", "--check"])?;
+    run(&root.join("fuzz"), "cargo", &["fmt", "--all", "--", "--check"])?;
     // The estimator must stay no_std and build for the Cortex-M4F.
     run(
         &root,
@@ -124,21 +125,139 @@ fn ci() -> Result<(), String> {
     if result.is_ok() {
         result = cargo_test(&root, &["test", "-p", "hammer-estimator"], &mut totals);
     }
+    // Fuzzing smoke run: the seeded in-process runner over every target.
+    if result.is_ok() {
+        std::env::set_var("CARGO_TARGET_DIR", root.join("target"));
+        result = cargo_test(
+            &root,
+            &["test", "--release", "--manifest-path", "fuzz/Cargo.toml"],
+            &mut totals,
+        )
+        .and_then(|_| fuzz(&["--execs", "1000000"]));
+    }
     // The closing line CI reads.
     println!("xtask: {} passed, {} failed", totals.0, totals.1);
     result
+}
+
+/// The fuzz crate builds into the workspace's target directory (same
+/// dependencies, same profile: nothing is compiled twice), except under AFL,
+/// whose instrumentation flags need a directory of their own.
+fn fuzz(args: &[&str]) -> Result<(), String> {
+    let root = root();
+    if let Some(i) = args.iter().position(|a| *a == "--afl") {
+        let target = args.get(i + 1).ok_or("--afl needs a target name")?;
+        let minutes: u64 = match args.iter().position(|a| *a == "--minutes") {
+            Some(j) => args
+                .get(j + 1)
+                .and_then(|m| m.parse().ok())
+                .ok_or("--minutes needs a number")?,
+            None => 10,
+        };
+        return afl(target, minutes);
+    }
+    let mut cmd = vec![
+        "run",
+        "--release",
+        "--manifest-path",
+        "fuzz/Cargo.toml",
+        "--bin",
+        "hammer-fuzz",
+        "--",
+        "smoke",
+    ];
+    cmd.extend_from_slice(args);
+    std::env::set_var("CARGO_TARGET_DIR", root.join("target"));
+    run(&root, "cargo", &cmd)
+}
+
+/// A coverage-guided run of one target with AFL++ (installs cargo-afl from
+/// crates.io if missing). Findings land in `fuzz/afl/<target>/`.
+fn afl(target: &str, minutes: u64) -> Result<(), String> {
+    let root = root();
+    let fuzz_dir = root.join("fuzz");
+    let have = Command::new("cargo")
+        .args(["afl", "--version"])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !have {
+        run(&root, "cargo", &["install", "cargo-afl", "--locked"])?;
+    }
+    run(
+        &fuzz_dir,
+        "cargo",
+        &["afl", "build", "--release", "--features", "afl", "--bin", "afl-target"],
+    )?;
+    let corpus = format!("corpus/{target}");
+    let out = format!("afl/{target}");
+    let secs = (minutes * 60).to_string();
+    std::fs::create_dir_all(fuzz_dir.join("afl")).map_err(|e| format!("fuzz/afl: {e}"))?;
+    // No core dumps to wait for and no CPU governor to ask about on a CI machine.
+    std::env::set_var("AFL_I_DONT_CARE_ABOUT_MISSING_CRASHES", "1");
+    std::env::set_var("AFL_SKIP_CPUFREQ", "1");
+    std::env::set_var("AFL_NO_UI", "1");
+    run(
+        &fuzz_dir,
+        "cargo",
+        &[
+            "afl",
+            "fuzz",
+            "-i",
+            &corpus,
+            "-o",
+            &out,
+            "-V",
+            &secs,
+            "--",
+            "target/release/afl-target",
+            target,
+        ],
+    )?;
+    // AFL's own account of the run, for docs/fuzzing.md.
+    let stats_path = fuzz_dir.join(&out).join("default/fuzzer_stats");
+    let stats = std::fs::read_to_string(&stats_path).map_err(|e| format!("{}: {e}", stats_path.display()))?;
+    let field = |k: &str| {
+        stats
+            .lines()
+            .find_map(|l| {
+                l.split_once(':')
+                    .filter(|(n, _)| n.trim() == k)
+                    .map(|(_, v)| v.trim().to_string())
+            })
+            .unwrap_or_else(|| "?".into())
+    };
+    println!(
+        "afl {target}: {} executions in {} s ({} exec/s), corpus {} ({} found), edge coverage {}, {} crashes, {} hangs",
+        field("execs_done"),
+        field("run_time"),
+        field("execs_per_sec"),
+        field("corpus_count"),
+        field("corpus_found"),
+        field("bitmap_cvg"),
+        field("saved_crashes"),
+        field("saved_hangs")
+    );
+    if field("saved_crashes") != "0" {
+        return Err(format!("afl {target}: crashes saved in fuzz/{out}/default/crashes"));
+    }
+    Ok(())
 }
 
 const USAGE: &str = "usage: cargo xtask <command>
   ci              every test: formatting, firmware build, host and emulator tests
   firmware        build both firmware binaries and print their flash and RAM
   size            flash and static RAM of the built firmware binaries
-  bench-firmware  estimator cost on the Cortex-M4 ISA under QEMU (-icount), with sizes";
+  bench-firmware  estimator cost on the Cortex-M4 ISA under QEMU (-icount), with sizes
+  fuzz [--execs N | --minutes M] [--seed S] [--target NAME]
+                  the in-process fuzz runner over every target (CI runs 1,000,000 executions each)
+  fuzz --afl NAME [--minutes M]
+                  a coverage-guided AFL++ run of one target (installs cargo-afl)";
 
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let result = match args.first().map(String::as_str) {
         Some("ci") => ci(),
+        Some("fuzz") => fuzz(&args[1..].iter().map(String::as_str).collect::<Vec<_>>()),
         Some("firmware") => build_firmware(),
         Some("size") => size(),
         Some("bench-firmware") => {

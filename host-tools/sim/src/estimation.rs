@@ -7,7 +7,8 @@ use hammer_estimator::{ChannelCal, ChannelSpec, Config, CycleReport, Estimator, 
 use hammer_trace::config::{check_range, ConfigError};
 use std::path::Path;
 
-use hammer_trace::trace::{read_csv, Trace, TraceError};
+use hammer_trace::rows::{Item, Row, RowReader, Uniform};
+use hammer_trace::trace::{read_csv, Gap, Trace, TraceError};
 use hammer_trace::EstimatorParams;
 
 use crate::params::HammerParams;
@@ -130,31 +131,136 @@ pub fn sensors_for(sidecar: Option<&Sidecar>, fallback: &SensorModel) -> SensorM
         .map_or_else(|| fallback.clone(), |sim| sim.config.sensors.clone())
 }
 
+fn code(cal: &ChannelCal, v: f64) -> u16 {
+    let x = (v as f32 / cal.scale + cal.zero_code).round();
+    if x.is_nan() {
+        0
+    } else {
+        x.clamp(0.0, cal.full_scale_code as f32) as u16
+    }
+}
+
+fn row_codes(c: &Config, r: &Row) -> RawSample {
+    RawSample {
+        rear: code(&c.rear, r.p_rear_pa),
+        front: code(&c.front, r.p_front_pa),
+        accel: code(&c.accel, r.accel_mps2),
+    }
+}
+
 /// Physical values back to the ADC codes they came from.
 pub fn to_codes(trace: &Trace, c: &Config) -> Vec<RawSample> {
-    let code = |cal: &ChannelCal, v: f64| {
-        let x = (v as f32 / cal.scale + cal.zero_code).round();
-        if x.is_nan() {
-            0
-        } else {
-            x.clamp(0.0, cal.full_scale_code as f32) as u16
-        }
-    };
     (0..trace.len())
-        .map(|i| RawSample {
-            rear: code(&c.rear, trace.p_rear_pa[i]),
-            front: code(&c.front, trace.p_front_pa[i]),
-            accel: code(&c.accel, trace.accel_mps2[i]),
+        .map(|i| {
+            let r = Row {
+                t_s: trace.t_s[i],
+                p_rear_pa: trace.p_rear_pa[i],
+                p_front_pa: trace.p_front_pa[i],
+                accel_mps2: trace.accel_mps2[i],
+            };
+            row_codes(c, &r)
         })
         .collect()
 }
 
-pub fn run(samples: &[RawSample], c: Config) -> Result<Vec<CycleReport>, ConfigError> {
-    let mut est = Estimator::new(c).map_err(|e| ConfigError::Invalid {
+fn estimator(c: Config) -> Result<Estimator, ConfigError> {
+    Estimator::new(c).map_err(|e| ConfigError::Invalid {
         field: "estimator".into(),
         message: e.to_string(),
-    })?;
+    })
+}
+
+pub fn run(samples: &[RawSample], c: Config) -> Result<Vec<CycleReport>, ConfigError> {
+    run_with_gaps(samples, &[], c)
+}
+
+/// [`run`] over a trace with rows missing: the estimator is told of each gap
+/// (it flags the cycle the gap falls in and keeps the timing right).
+pub fn run_with_gaps(samples: &[RawSample], gaps: &[Gap], c: Config) -> Result<Vec<CycleReport>, ConfigError> {
+    let mut est = estimator(c)?;
     let mut out = Vec::new();
-    est.push_block(samples, |r| out.push(r));
+    let mut at = 0;
+    for g in gaps {
+        let upto = g.before.min(samples.len());
+        est.push_block(&samples[at..upto], |r| out.push(r));
+        est.push_gap(g.missing.min(u32::MAX as u64) as u32);
+        at = upto;
+    }
+    est.push_block(&samples[at..], |r| out.push(r));
     Ok(out)
+}
+
+impl EstimationInput {
+    /// The estimator over the whole trace, gaps included.
+    pub fn run(&self) -> Result<Vec<CycleReport>, ConfigError> {
+        run_with_gaps(&self.codes, &self.trace.gaps, self.config)
+    }
+}
+
+/// What a streamed estimation went through.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StreamSummary {
+    pub samples: u64,
+    /// Sample periods with no row (gaps in the file's timestamps).
+    pub missing_samples: u64,
+    pub sample_rate_hz: f64,
+    pub supply_bar: Option<f64>,
+}
+
+/// Sample-sets converted and handed to the estimator at a time.
+const STREAM_BLOCK: usize = 4096;
+
+/// The estimator over a trace file of any length in bounded memory: rows are
+/// read, converted to codes and pushed block by block, only the required
+/// columns parsed. Same configuration rules as [`open_for_estimation`];
+/// `on_report` sees each cycle as it closes.
+pub fn stream_estimation(
+    path: &Path,
+    file: &SimConfig,
+    supply_bar: Option<f64>,
+    mut on_report: impl FnMut(CycleReport),
+) -> Result<StreamSummary, OpenError> {
+    let label = path.display().to_string();
+    let f = std::fs::File::open(path).map_err(|error| TraceError::Io {
+        path: label.clone(),
+        error,
+    })?;
+    let rows = RowReader::new(std::io::BufReader::with_capacity(1 << 16, f), &label, false)?;
+    let mut u = Uniform::new(rows)?;
+    let sidecar = read_simulated_sidecar(path)?;
+    let supply_bar = supply_bar.or(sidecar.as_ref().and_then(|s| s.supply_pressure_bar));
+    let sensors = sensors_for(sidecar.as_ref(), &file.sensors);
+    let hammer = sidecar
+        .as_ref()
+        .and_then(|s| s.simulation.as_ref())
+        .map_or(&file.hammer, |s| &s.config.hammer);
+    let config = estimator_config(hammer, &sensors, &file.estimator, 1.0 / u.dt_s(), supply_bar)?;
+    let mut est = estimator(config)?;
+    let mut block = Vec::with_capacity(STREAM_BLOCK);
+    let mut summary = StreamSummary {
+        samples: 0,
+        missing_samples: 0,
+        sample_rate_hz: 1.0 / u.dt_s(),
+        supply_bar,
+    };
+    while let Some(item) = u.next_item()? {
+        match item {
+            Item::Sample(r) => {
+                block.push(row_codes(&config, &r));
+                summary.samples += 1;
+                if block.len() == STREAM_BLOCK {
+                    est.push_block(&block, &mut on_report);
+                    block.clear();
+                }
+            }
+            Item::Gap { missing } => {
+                est.push_block(&block, &mut on_report);
+                block.clear();
+                est.push_gap(missing.min(u32::MAX as u64) as u32);
+                summary.missing_samples += missing;
+            }
+        }
+    }
+    est.push_block(&block, &mut on_report);
+    Ok(summary)
 }

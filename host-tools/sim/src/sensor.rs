@@ -75,8 +75,10 @@ pub struct SensorModel {
 
 impl Default for SensorModel {
     fn default() -> Self {
+        // −1…+10 bar gauge: the vented chambers dip below atmosphere (to
+        // about −9 kPa at 4 bar), which a 0-based range would clip.
         let pressure = SensorChannel {
-            range_min: 0.0,
+            range_min: -1e5,
             range_max: 10e5,
             adc_bits: 12,
             noise_std: 500.0,

@@ -65,6 +65,7 @@ impl Simulation {
             p_front_pa: self.measured.p_front_pa.clone(),
             accel_mps2: self.measured.accel_mps2.clone(),
             extra: Default::default(),
+            gaps: Vec::new(),
         };
         for (name, col) in [
             ("x_m", &t.x_m),

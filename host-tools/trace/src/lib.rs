@@ -5,11 +5,13 @@
 //! Module map:
 //! - [`trace`]: the trace CSV and its JSON sidecar (`docs/trace-format.md`);
 //!   the sidecar's `simulation` object is opaque here (the simulator types it).
+//! - [`rows`]: the CSV read row by row in bounded memory, with the time base and gaps.
 //! - [`config`]: configuration errors that name the field and its range, TOML loading.
 //! - [`estimator_params`]: the `[estimator]` table of the project configuration.
 
 pub mod config;
 pub mod estimator_params;
+pub mod rows;
 pub mod trace;
 
 pub use config::ConfigError;

@@ -8,11 +8,11 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
+use crate::rows::{Item, RowReader, Uniform};
+
 pub const REQUIRED_COLUMNS: [&str; 4] = ["t_s", "p_rear_pa", "p_front_pa", "accel_mps2"];
 pub const SIDECAR_FORMAT: &str = "hammer-trace";
 pub const SIDECAR_VERSION: u32 = 1;
-/// Relative deviation of a sample interval from the mean that is still "uniform".
-const UNIFORM_TOLERANCE: f64 = 1e-3;
 
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Trace {
@@ -21,8 +21,17 @@ pub struct Trace {
     pub p_rear_pa: Vec<f64>,
     pub p_front_pa: Vec<f64>,
     pub accel_mps2: Vec<f64>,
-    /// Any further columns, in file order of their names.
+    /// Any further columns, by name (a non-numeric field reads as NaN).
     pub extra: BTreeMap<String, Vec<f64>>,
+    /// Where rows are missing (whole sample periods with no row), in order.
+    pub gaps: Vec<Gap>,
+}
+
+/// `missing` sample periods with no row just before sample `before`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Gap {
+    pub before: usize,
+    pub missing: u64,
 }
 
 impl Trace {
@@ -67,6 +76,10 @@ pub enum TraceError {
         got_s: f64,
         expected_s: f64,
     },
+    #[error("{path}:{line}: line longer than {max} bytes")]
+    LineTooLong { path: String, line: usize, max: usize },
+    #[error("{path}:{line}: not UTF-8 text")]
+    NotUtf8 { path: String, line: usize },
     #[error("{path}: needs at least 2 samples")]
     TooShort { path: String },
     #[error("{path}: sidecar: {message}")]
@@ -102,101 +115,44 @@ pub fn write_csv(path: &Path, trace: &Trace) -> Result<(), TraceError> {
     w.flush().map_err(io)
 }
 
+/// Reads a whole trace into memory (report and diagnose need it whole;
+/// `hammer estimate` streams with [`crate::rows`] instead).
 pub fn read_csv(path: &Path) -> Result<Trace, TraceError> {
     let p = path.display().to_string();
     let file = File::open(path).map_err(|error| TraceError::Io { path: p.clone(), error })?;
-    let mut lines = BufReader::new(file).lines();
-    let header = match lines.next() {
-        Some(l) => l.map_err(|error| TraceError::Io { path: p.clone(), error })?,
-        None => return Err(TraceError::Empty { path: p }),
-    };
-    let names: Vec<String> = header
-        .trim()
-        .trim_start_matches('\u{feff}')
-        .split(',')
-        .map(|s| s.trim().to_string())
-        .collect();
-    for (i, n) in names.iter().enumerate() {
-        if names[..i].contains(n) {
-            return Err(TraceError::DuplicateColumn {
-                path: p,
-                column: n.clone(),
-            });
+    read_csv_from(BufReader::new(file), &p)
+}
+
+/// [`read_csv`] from any reader; `label` names it in errors.
+pub fn read_csv_from(input: impl BufRead, label: &str) -> Result<Trace, TraceError> {
+    let rows = RowReader::new(input, label, true)?;
+    let extra_names: Vec<String> = rows.extra_names().map(str::to_string).collect();
+    let mut u = Uniform::new(rows)?;
+    let mut trace = Trace::default();
+    let mut extra: Vec<Vec<f64>> = vec![Vec::new(); extra_names.len()];
+    while let Some(item) = u.next_item()? {
+        match item {
+            Item::Gap { missing } => trace.gaps.push(Gap {
+                before: trace.t_s.len(),
+                missing,
+            }),
+            Item::Sample(r) => {
+                trace.t_s.push(r.t_s);
+                trace.p_rear_pa.push(r.p_rear_pa);
+                trace.p_front_pa.push(r.p_front_pa);
+                trace.accel_mps2.push(r.accel_mps2);
+                for (col, v) in extra.iter_mut().zip(u.extra()) {
+                    col.push(*v);
+                }
+            }
         }
     }
-    let mut cols: Vec<Vec<f64>> = vec![Vec::new(); names.len()];
-    let required: Vec<usize> = REQUIRED_COLUMNS
-        .iter()
-        .map(|c| {
-            names
-                .iter()
-                .position(|n| n == c)
-                .ok_or_else(|| TraceError::MissingColumn {
-                    path: p.clone(),
-                    column: c.to_string(),
-                })
-        })
-        .collect::<Result<_, _>>()?;
-    for (k, line) in lines.enumerate() {
-        let line_no = k + 2;
-        let line = line.map_err(|error| TraceError::Io { path: p.clone(), error })?;
-        if line.trim().is_empty() {
-            continue;
-        }
-        let fields: Vec<&str> = line.split(',').collect();
-        if fields.len() != names.len() {
-            return Err(TraceError::FieldCount {
-                path: p,
-                line: line_no,
-                expected: names.len(),
-                found: fields.len(),
-            });
-        }
-        for (j, f) in fields.iter().enumerate() {
-            let v: f64 = f
-                .trim()
-                .parse()
-                .ok()
-                .filter(|v: &f64| v.is_finite() || !required.contains(&j))
-                .ok_or_else(|| TraceError::BadNumber {
-                    path: p.clone(),
-                    line: line_no,
-                    column: names[j].clone(),
-                    text: f.trim().to_string(),
-                })?;
-            cols[j].push(v);
-        }
-    }
-    let t = &cols[required[0]];
-    if t.len() < 2 {
-        return Err(TraceError::TooShort { path: p });
-    }
-    let dt = (t[t.len() - 1] - t[0]) / (t.len() - 1) as f64;
-    for i in 1..t.len() {
-        let d = t[i] - t[i - 1];
-        if !(dt > 0.0) || (d - dt).abs() > UNIFORM_TOLERANCE * dt {
-            return Err(TraceError::NotUniform {
-                path: p,
-                line: i + 2,
-                got_s: d,
-                expected_s: dt,
-            });
-        }
-    }
-    let mut take = |i: usize| std::mem::take(&mut cols[i]);
-    let mut trace = Trace {
-        dt_s: dt,
-        t_s: take(required[0]),
-        p_rear_pa: take(required[1]),
-        p_front_pa: take(required[2]),
-        accel_mps2: take(required[3]),
-        extra: BTreeMap::new(),
-    };
-    for (j, n) in names.iter().enumerate() {
-        if !required.contains(&j) {
-            trace.extra.insert(n.clone(), std::mem::take(&mut cols[j]));
-        }
-    }
+    // The mean interval over the whole file: the most accurate period there is.
+    // (Divided first where the span itself would overflow: times near f64's range.)
+    let (first, last, slots) = (trace.t_s[0], trace.t_s[trace.t_s.len() - 1], u.slots() as f64);
+    let span = last - first;
+    trace.dt_s = if span.is_finite() { span / slots } else { last / slots - first / slots };
+    trace.extra = extra_names.into_iter().zip(extra).collect();
     Ok(trace)
 }
 
@@ -206,14 +162,31 @@ pub fn read_csv(path: &Path) -> Result<Trace, TraceError> {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(bound(deserialize = "S: Deserialize<'de>"))]
 pub struct Sidecar<S = serde_json::Value> {
+    /// Optional when reading: an outside user naturally writes only the operating point.
+    #[serde(default = "default_format")]
     pub format: String,
+    #[serde(default = "default_version")]
     pub version: u32,
     /// Gauge supply pressure: the operating point (null when unknown, e.g. a device capture).
+    #[serde(default)]
     pub supply_pressure_bar: Option<f64>,
     /// Where the trace came from: "simulator", "device", "import", ...
+    #[serde(default = "default_source")]
     pub source: String,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub simulation: Option<S>,
+}
+
+fn default_format() -> String {
+    SIDECAR_FORMAT.into()
+}
+
+fn default_version() -> u32 {
+    SIDECAR_VERSION
+}
+
+fn default_source() -> String {
+    "import".into()
 }
 
 impl<S> Sidecar<S> {
@@ -259,21 +232,24 @@ pub fn read_sidecar_as<S: serde::de::DeserializeOwned>(trace: &Path) -> Result<O
     }
     let p = path.display().to_string();
     let text = std::fs::read_to_string(&path).map_err(|error| TraceError::Io { path: p.clone(), error })?;
-    let s: Sidecar<S> = serde_json::from_str(&text).map_err(|e| TraceError::Sidecar {
-        path: p.clone(),
-        message: e.to_string(),
-    })?;
+    parse_sidecar_as(&text, &p).map(Some)
+}
+
+/// A sidecar from its text; `label` names it in errors.
+pub fn parse_sidecar_as<S: serde::de::DeserializeOwned>(text: &str, label: &str) -> Result<Sidecar<S>, TraceError> {
+    let err = |message: String| TraceError::Sidecar {
+        path: label.to_string(),
+        message,
+    };
+    let s: Sidecar<S> = serde_json::from_str(text).map_err(|e| err(e.to_string()))?;
     if s.format != SIDECAR_FORMAT {
-        return Err(TraceError::Sidecar {
-            path: p,
-            message: format!("format is `{}`, expected `{SIDECAR_FORMAT}`", s.format),
-        });
+        return Err(err(format!("format is `{}`, expected `{SIDECAR_FORMAT}`", s.format)));
     }
     if s.version > SIDECAR_VERSION {
-        return Err(TraceError::Sidecar {
-            path: p,
-            message: format!("version {} is newer than this tool's {SIDECAR_VERSION}", s.version),
-        });
+        return Err(err(format!(
+            "version {} is newer than this tool's {SIDECAR_VERSION}",
+            s.version
+        )));
     }
-    Ok(Some(s))
+    Ok(s)
 }
