@@ -221,14 +221,7 @@ impl Monitor {
                 drift_score: r.drift_score,
             }));
         }
-        let faults = Flags::REAR_SATURATED
-            | Flags::FRONT_SATURATED
-            | Flags::ACCEL_SATURATED
-            | Flags::REAR_STUCK
-            | Flags::FRONT_STUCK
-            | Flags::ACCEL_STUCK
-            | Flags::DISCONNECTED;
-        if r.flags.intersects(faults) {
+        if r.flags.intersects(Flags::SENSOR_FAULTS) {
             out(DeviceMsg::Alarm(Alarm {
                 kind: AlarmKind::SensorFault,
                 cycle_seq: r.seq,

@@ -166,4 +166,11 @@ impl CycleReport {
     pub fn is_valid(&self) -> bool {
         !self.flags.intersects(Flags::INVALIDATING)
     }
+
+    /// True when the record closes a cycle between two impacts, false for a
+    /// no-impact record (a stretch that reached no impact, flagged with the
+    /// channel suspected).
+    pub fn is_cycle(&self) -> bool {
+        !self.flags.contains(Flags::NO_IMPACT)
+    }
 }

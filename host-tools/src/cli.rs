@@ -339,13 +339,20 @@ fn estimate_cmd(args: &EstimateArgs) -> Result<()> {
     // Streamed: an hour of samples takes no more memory than a second.
     let mut reports = Vec::new();
     let summary = hammer_sim::estimation::stream_estimation(&args.trace, &file, args.supply_bar, |r| reports.push(r))?;
-    if reports.is_empty() {
-        bail!(
-            "{}: no impact cycle in {} samples ({:.3} s): no impact reached the estimator's threshold",
+    // No-impact records are printed like cycles (they name the suspected
+    // channel), but a trace with no cycle at all is still an error.
+    let no_cycle = !reports.iter().any(|r| r.is_cycle());
+    let no_cycle_error = || {
+        anyhow::anyhow!(
+            "{}: no impact cycle in {} samples ({:.3} s): no impact reached the estimator's threshold{}",
             args.trace.display(),
             summary.samples,
-            (summary.samples + summary.missing_samples) as f64 / summary.sample_rate_hz
-        );
+            (summary.samples + summary.missing_samples) as f64 / summary.sample_rate_hz,
+            crate::report::no_impact_note(&reports)
+        )
+    };
+    if reports.is_empty() {
+        return Err(no_cycle_error());
     }
     let mut out = std::io::BufWriter::new(std::io::stdout().lock());
     use std::io::Write as _;
@@ -365,6 +372,9 @@ fn estimate_cmd(args: &EstimateArgs) -> Result<()> {
     }
     // A full disk or a closed pipe must not pass for success.
     out.flush().context("writing to standard output")?;
+    if no_cycle {
+        return Err(no_cycle_error());
+    }
     Ok(())
 }
 

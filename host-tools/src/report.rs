@@ -235,14 +235,15 @@ fn analyse(args: &ReportArgs, pb: &ProgressBar) -> Result<Analysis> {
     stage(pb, "estimating");
     let reports = hammer_sim::estimation::run(&input.codes, cfg)?;
     let name = file_name(&args.input);
-    if reports.is_empty() {
+    if !reports.iter().any(|r| r.is_cycle()) {
         bail!(
             "{name}: no complete impact cycle in {} samples ({:.3} s): a cycle needs two impacts \
-             (acceleration below −{} m/s²) at most {} s apart",
+             (acceleration below −{} m/s²) at most {} s apart{}",
             trace.len(),
             trace.len() as f64 * trace.dt_s,
             cfg.impact_threshold_mps2,
-            cfg.max_period_s
+            cfg.max_period_s,
+            no_impact_note(&reports)
         );
     }
     Ok(Analysis {
@@ -1286,4 +1287,22 @@ fn summary_html(s: &Summary, t: Option<TruthSummary>) -> String {
     );
     h.push_str("</table>\n");
     h
+}
+
+/// What the estimator's no-impact records blame, for an error that would
+/// otherwise only say "no cycle".
+pub fn no_impact_note(reports: &[hammer_estimator::CycleReport]) -> String {
+    let flags = reports
+        .iter()
+        .filter(|r| !r.is_cycle())
+        .fold(hammer_estimator::Flags::default(), |f, r| f | r.flags);
+    if reports.is_empty() {
+        String::new()
+    } else {
+        format!(
+            "; {} no-impact record(s) flagged {}",
+            reports.len(),
+            flags.names().collect::<Vec<_>>().join(",")
+        )
+    }
 }

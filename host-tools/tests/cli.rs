@@ -451,8 +451,27 @@ fn output_failures_and_empty_traces_are_errors_not_panics_or_silence() {
     assert_eq!(code, 2, "{stderr}");
     assert!(stderr.contains("sidecar would overwrite the trace"), "{stderr}");
     assert!(!dir.join("x.json").exists());
-    // A quiet trace: no cycle is an error that says so.
+    // A quiet trace (a hammer at rest, sensors with a little noise): no
+    // cycle is an error that says so, and nothing is printed.
     let quiet = dir.join("quiet.csv");
+    let mut text = String::from("t_s,p_rear_pa,p_front_pa,accel_mps2\n");
+    for i in 0..5000 {
+        let k = (i % 3) as f64;
+        text += &format!(
+            "{:.9},{},{},{}\n",
+            i as f64 * 1e-5,
+            1e5 + 300.0 * k,
+            5e4 - 300.0 * k,
+            k - 1.0
+        );
+    }
+    std::fs::write(&quiet, text).unwrap();
+    let (code, stdout, stderr) = hammer(&["estimate", quiet.to_str().unwrap(), "--supply-bar", "4"]);
+    assert_eq!(code, 2, "{stdout}");
+    assert!(stdout.is_empty(), "{stdout}");
+    assert!(stderr.contains("no impact cycle in 5000 samples"), "{stderr}");
+    // Every channel frozen at one value: the stretch is a flagged record that
+    // names the stuck channels, printed, and still no cycle (exit 2).
     let mut text = String::from("t_s,p_rear_pa,p_front_pa,accel_mps2\n");
     for i in 0..5000 {
         text += &format!("{:.9},100000,50000,0\n", i as f64 * 1e-5);
@@ -460,5 +479,12 @@ fn output_failures_and_empty_traces_are_errors_not_panics_or_silence() {
     std::fs::write(&quiet, text).unwrap();
     let (code, stdout, stderr) = hammer(&["estimate", quiet.to_str().unwrap(), "--supply-bar", "4"]);
     assert_eq!(code, 2, "{stdout}");
-    assert!(stderr.contains("no impact cycle in 5000 samples"), "{stderr}");
+    assert!(
+        stdout.contains("accel_stuck") && stdout.contains("no_impact"),
+        "{stdout}"
+    );
+    assert!(
+        stderr.contains("no impact cycle") && stderr.contains("accel_stuck"),
+        "{stderr}"
+    );
 }

@@ -183,11 +183,18 @@ fn bad_input_is_a_clear_error_not_a_panic() {
     let e = err(&bad);
     assert!(e.contains("bad.csv:3") && e.contains("oops"), "{e}");
 
-    // A hammer at rest: samples but no impact.
+    // A hammer at rest: samples (with a little sensor noise) but no impact.
     let idle = dir.join("idle.csv");
     let mut text = String::from("t_s,p_rear_pa,p_front_pa,accel_mps2\n");
     for i in 0..5000 {
-        text.push_str(&format!("{:.6},0,0,0\n", i as f64 * 1e-5));
+        let k = (i % 3) as f64;
+        text.push_str(&format!(
+            "{:.6},{},{},{}\n",
+            i as f64 * 1e-5,
+            300.0 * k,
+            -300.0 * k,
+            k - 1.0
+        ));
     }
     std::fs::write(&idle, text).unwrap();
     let e = err(&idle);

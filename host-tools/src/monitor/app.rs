@@ -14,17 +14,6 @@ pub const HISTORY_CAP: usize = 20_000;
 /// Lines kept in the event panel.
 pub const EVENTS_CAP: usize = 200;
 
-/// The report flags that mean a sensor is faulty (not just a warning).
-pub const SENSOR_FAULTS: Flags = Flags(
-    Flags::REAR_SATURATED.0
-        | Flags::FRONT_SATURATED.0
-        | Flags::ACCEL_SATURATED.0
-        | Flags::REAR_STUCK.0
-        | Flags::FRONT_STUCK.0
-        | Flags::ACCEL_STUCK.0
-        | Flags::DISCONNECTED.0,
-);
-
 /// One valid cycle in the charts.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Point {
@@ -251,8 +240,8 @@ impl View {
             DeviceMsg::Report(r) => {
                 let flags = r.flags();
                 let before = self.last.map_or(Flags(0), |(_, p)| p.flags());
-                if flags.intersects(SENSOR_FAULTS) && !before.intersects(SENSOR_FAULTS) {
-                    let faults = Flags(flags.0 & SENSOR_FAULTS.0);
+                if flags.intersects(Flags::SENSOR_FAULTS) && !before.intersects(Flags::SENSOR_FAULTS) {
+                    let faults = Flags(flags.0 & Flags::SENSOR_FAULTS.0);
                     self.raise(t, format!("SENSOR FAULT at cycle {}: {}", r.seq, flag_list(faults.0)));
                 }
                 if flags.contains(Flags::DRIFT_ALARM) && !before.contains(Flags::DRIFT_ALARM) {
@@ -291,7 +280,7 @@ impl View {
                     }
                 }
                 AlarmKind::SensorFault => {
-                    let faults = Flags(a.flags & SENSOR_FAULTS.0);
+                    let faults = Flags(a.flags & Flags::SENSOR_FAULTS.0);
                     self.raise(
                         t,
                         format!("SENSOR FAULT at cycle {}: {}", a.cycle_seq, flag_list(faults.0)),

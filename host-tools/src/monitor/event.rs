@@ -321,6 +321,6 @@ mod tests {
     fn flags_read_as_names() {
         assert_eq!(flag_list(0), "-");
         assert_eq!(flag_list((1 << 13) | 1), "rear_saturated|drift_alarm");
-        assert_eq!(flag_list(1 << 15), "0x8000");
+        assert_eq!(flag_list(1 << 15), "no_impact");
     }
 }

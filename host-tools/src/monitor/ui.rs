@@ -364,7 +364,7 @@ fn cycle_panel(app: &App, v: &View) -> Paragraph<'static> {
     );
     add("Drift score", num(r.drift_score as f64, 2), "");
     let flags = r.flags();
-    let flag_style = if !valid || flags.intersects(super::app::SENSOR_FAULTS) {
+    let flag_style = if !valid || flags.intersects(Flags::SENSOR_FAULTS) {
         Style::new().fg(Color::Red).bold()
     } else if flags.is_empty() {
         Style::new().fg(Color::Green)

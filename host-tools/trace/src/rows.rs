@@ -375,5 +375,12 @@ fn period(t: impl Iterator<Item = f64>) -> f64 {
     if d.is_empty() {
         return median;
     }
-    d.iter().sum::<f64>() / d.len() as f64
+    let n = d.len() as f64;
+    let sum = d.iter().sum::<f64>();
+    if sum.is_finite() {
+        sum / n
+    } else {
+        // Intervals near f64's range: each divided first, so none overflows.
+        d.iter().map(|x| x / n).sum::<f64>()
+    }
 }
