@@ -38,6 +38,7 @@ fn main() {
             let gen_s = t0.elapsed().as_secs_f64();
             let opts = Options {
                 figures: false,
+                nominal_uncertainty: std::env::var("PRIOR").map_or(0.2, |v| v.parse().unwrap()),
                 ..Options::default()
             };
             let t0 = std::time::Instant::now();

@@ -85,13 +85,17 @@ pub struct Options {
     pub threads: usize,
     /// Keep the waveforms for the figures.
     pub figures: bool,
+    /// Estimate the model-form error of the model-based features from the
+    /// recalibrated nominal model's residual (see [`ModelForm`]); off, the
+    /// floors alone weigh them (a model whose form is the hammer's).
+    pub model_form: bool,
 }
 
 impl Default for Options {
     fn default() -> Self {
         Self {
             floors: Floors::default(),
-            nominal_uncertainty: 0.02,
+            nominal_uncertainty: 0.2,
             max_iterations: 12,
             min_score: 20.0,
             min_explained: 0.5,
@@ -99,6 +103,7 @@ impl Default for Options {
             pair_candidates: 5,
             threads: std::thread::available_parallelism().map_or(2, |n| n.get()),
             figures: true,
+            model_form: true,
         }
     }
 }
@@ -194,6 +199,45 @@ pub struct Shrink {
     pub points: Vec<PointShrink>,
 }
 
+/// The model-form error of one group of model-based features: how much
+/// larger the recalibrated nominal model's residual is than the measurement
+/// noise and floors allow. The group's weights are divided by it, so a model
+/// whose valve or ports differ in form cannot make an effect out of that
+/// difference, and the model-free force balance keeps its full weight.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct ModelForm {
+    pub group: String,
+    /// RMS of the group's whitened residual (1 = within noise and floors).
+    pub factor: f64,
+}
+
+/// A nominal parameter the fit moved: its value and standard deviation
+/// after the fit, and how many prior standard deviations it moved.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Recalibration {
+    pub parameter: String,
+    pub nominal: f64,
+    pub value: f64,
+    pub sd: f64,
+    pub prior_sds: f64,
+    /// Moved beyond one prior standard deviation.
+    pub beyond_prior: bool,
+}
+
+/// What neither the named effects nor the recalibration explain, by
+/// signal × stage: where the model's form differs from the hammer's.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Remainder {
+    pub supply_bar: f64,
+    pub signal: String,
+    pub stage: Stage,
+    /// RMS of the residual after the verdict's model over the signal's RMS in that stage.
+    pub relative_rms: f64,
+    /// The same before (nominal model).
+    pub relative_rms_nominal: f64,
+    pub statement: String,
+}
+
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Report {
     pub tool: String,
@@ -204,6 +248,11 @@ pub struct Report {
     pub effects: Vec<EffectResult>,
     pub pairs: Vec<EffectResult>,
     pub verdict: Verdict,
+    /// The nominal parameters as the verdict's fit left them.
+    pub recalibration: Vec<Recalibration>,
+    /// The unexplained remainder, largest first.
+    pub remainder: Vec<Remainder>,
+    pub model_form: Vec<ModelForm>,
     pub shrink: Shrink,
     pub chi2_nominal: f64,
     pub features_compared: usize,
@@ -311,15 +360,173 @@ impl FitSet<'_> {
         r
     }
 
-    /// The nuisance parameters (in prior standard deviations) that best go with `cand`.
-    fn delta(&self, cand: &Candidate) -> Option<Vec<f64>> {
-        let r = self.residuals(cand)?;
-        let k = self.nuisance.len();
-        Some(r[r.len() - k..].to_vec())
+    /// The model-form factor of every group of model-based features: the
+    /// RMS of `cand`'s whitened, profiled residual over the group, at least 1.
+    fn model_form_factors(&self, cand: &Candidate) -> Vec<f64> {
+        let mut sum = [0.0; MODEL_FORM_GROUPS];
+        let mut n = [0usize; MODEL_FORM_GROUPS];
+        if let Some(r) = self.residuals(cand) {
+            for (i, x) in r.iter().take(self.points.len() * N_FEATURES).enumerate() {
+                if let Some(g) = model_form_group(i % N_FEATURES) {
+                    sum[g] += x * x;
+                    n[g] += 1;
+                }
+            }
+        }
+        (0..MODEL_FORM_GROUPS)
+            .map(|g| (sum[g] / n[g].max(1) as f64).sqrt().max(1.0))
+            .collect()
+    }
+
+    /// Divides each model-based feature's weight by its group's factor.
+    fn inflate(&mut self, factors: &[f64]) {
+        for (p, point) in self.points.iter_mut().enumerate() {
+            for j in 0..N_FEATURES {
+                if let Some(g) = model_form_group(j) {
+                    point.2[j] *= factors[g];
+                    for col in &mut self.nuisance {
+                        col[p * N_FEATURES + j] /= factors[g];
+                    }
+                }
+            }
+        }
+    }
+
+    /// The nominal parameters refitted with `cand`'s effects held:
+    /// Gauss–Newton on the simulator itself, re-linearised at every step,
+    /// each parameter's prior N(0, 1) in units of `h` of its nominal value.
+    /// At a real hammer's ±20 % the model is far from linear, so the
+    /// profile's one linearisation at nominal would overshoot.
+    fn recalibrate(&self, cand: &Candidate, h: f64, steps: usize, threads: usize) -> Option<Recalibrated> {
+        let k = NUISANCE.len();
+        let runner_at = |d: &[f64]| {
+            let mut r = self.runner.clone();
+            for (i, x) in d.iter().enumerate() {
+                *(NUISANCE[i].1)(&mut r.base) *= 1.0 + h * x;
+            }
+            r
+        };
+        let whitened = |d: &[f64]| -> Option<Vec<f64>> {
+            let r = runner_at(d);
+            let mut out = Vec::with_capacity(self.points.len() * N_FEATURES);
+            for (bar, s, sigma) in &self.points {
+                self.sims.fetch_add(1, Ordering::Relaxed);
+                let m = r.features(*bar, cand, None)?;
+                out.extend((0..N_FEATURES).map(|j| residual(m[j], s.mean[j], sigma[j])));
+            }
+            Some(out)
+        };
+        let cost = |r: &[f64], d: &[f64]| r.iter().chain(d).map(|x| x * x).sum::<f64>();
+        // Finite-difference step, in prior standard deviations.
+        const STEP: f64 = 0.25;
+        let mut delta = vec![0.0; k];
+        let mut r = whitened(&delta)?;
+        let mut sd = vec![1.0; k];
+        for _ in 0..steps {
+            let jobs: Vec<usize> = (0..k).collect();
+            let cols = parallel(threads, jobs, &|i| {
+                let mut d = delta.clone();
+                d[i] += STEP;
+                whitened(&d).map(|ri| ri.iter().zip(&r).map(|(a, b)| (a - b) / STEP).collect::<Vec<f64>>())
+            });
+            let cols: Vec<Vec<f64>> = cols.into_iter().map(|c| c.unwrap_or_else(|| vec![0.0; r.len()])).collect();
+            let mut a = vec![vec![0.0; k]; k];
+            let mut b = vec![0.0; k];
+            for i in 0..k {
+                for j in 0..k {
+                    a[i][j] = cols[i].iter().zip(&cols[j]).map(|(x, y)| x * y).sum();
+                }
+                a[i][i] += 1.0;
+                b[i] = -(cols[i].iter().zip(&r).map(|(x, y)| x * y).sum::<f64>() + delta[i]);
+            }
+            sd = (0..k)
+                .map(|i| {
+                    let mut e = vec![0.0; k];
+                    e[i] = 1.0;
+                    super::fit::solve(a.clone(), e).map_or(1.0, |x| x[i].max(0.0).sqrt())
+                })
+                .collect();
+            let Some(step) = super::fit::solve(a, b) else { break };
+            // Halve the step until the cost falls (at most three times).
+            let mut scale = 1.0;
+            let mut moved = false;
+            for _ in 0..3 {
+                let d: Vec<f64> = delta
+                    .iter()
+                    .zip(&step)
+                    .map(|(x, s)| (x + scale * s).clamp(-MAX_PRIOR_SDS, MAX_PRIOR_SDS))
+                    .collect();
+                if let Some(rn) = whitened(&d) {
+                    if cost(&rn, &d) < cost(&r, &delta) {
+                        delta = d;
+                        r = rn;
+                        moved = true;
+                        break;
+                    }
+                }
+                scale *= 0.5;
+            }
+            if !moved {
+                break;
+            }
+        }
+        Some(Recalibrated {
+            runner: runner_at(&delta),
+            delta,
+            sd,
+        })
     }
 
     fn chi2(&self, cand: &Candidate) -> Option<f64> {
         self.residuals(cand).map(|r| r.iter().map(|x| x * x).sum())
+    }
+}
+
+/// The nominal model recalibrated for a candidate.
+struct Recalibrated {
+    runner: ModelRunner,
+    /// Each nuisance parameter's move and standard deviation, in prior standard deviations.
+    delta: Vec<f64>,
+    sd: Vec<f64>,
+}
+
+/// A recalibration stops at this many prior standard deviations: beyond,
+/// the parameter is no longer the hammer's but a stand-in for a form error.
+const MAX_PRIOR_SDS: f64 = 2.5;
+/// Gauss–Newton steps of a recalibration.
+const RECALIBRATION_STEPS: usize = 3;
+
+/// A cell's residual below this share of the signal's RMS is not reported as a remainder.
+const REMAINDER_MIN: f64 = 0.1;
+/// Remainder cells kept in the report.
+const REMAINDER_CELLS: usize = 8;
+
+/// What a residual left in a signal says about the model's form.
+fn form_cause(signal: &str) -> &'static str {
+    match signal {
+        "p_rear_pa" | "p_front_pa" => "the valve or port model differs (or the chamber's thermodynamics)",
+        "accel_mps2" => "the contact, friction or accelerometer model differs",
+        _ => "the forces that drive the motion differ (pressures, friction or contact)",
+    }
+}
+
+/// Groups of model-based features: the period, the impact energy, and each
+/// waveform. The force balance's features are model-free: no group.
+const MODEL_FORM_GROUPS: usize = 2 + WAVE_SIGNALS.len();
+
+fn model_form_group(feature: usize) -> Option<usize> {
+    match feature {
+        PERIOD if std::env::var("MF_ALL").is_ok() => Some(0),
+        ENERGY if std::env::var("MF_ALL").is_ok() => Some(1),
+        j => wave_of(j).map(|(signal, _)| 2 + signal),
+    }
+}
+
+fn model_form_group_name(g: usize) -> &'static str {
+    match g {
+        0 => "period_s",
+        1 => "impact_energy_j",
+        g => WAVE_SIGNALS[g - 2],
     }
 }
 
@@ -548,6 +755,20 @@ pub fn diagnose(
         fs.sims.fetch_add(fs.points.len() * NUISANCE.len(), Ordering::Relaxed);
         fs.nuisance = nuisance;
     }
+    let model_form = if opts.model_form {
+        let factors = fs.model_form_factors(&Candidate::default());
+        fs.inflate(&factors);
+        factors
+            .iter()
+            .enumerate()
+            .map(|(g, &factor)| ModelForm {
+                group: model_form_group_name(g).to_string(),
+                factor,
+            })
+            .collect()
+    } else {
+        Vec::new()
+    };
     let fs = fs;
     let fit_cycles: usize = fs.points.iter().map(|p| p.1.cycles).sum();
     let ln_n = (fit_cycles.max(2) as f64).ln();
@@ -637,28 +858,29 @@ pub fn diagnose(
     // left them (within their prior), against the held-out data. The nominal
     // model recalibrated alone is the control: the shrink must come from the effect.
     let fitted_cand = verdict_cand.as_ref().map(|v| v.candidate.clone());
-    let calibrated = |cand: &Candidate| -> ModelRunner {
-        let mut r = runner.clone();
-        if let Some(delta) = fs.delta(cand) {
-            for (k, d) in delta.iter().enumerate() {
-                *(NUISANCE[k].1)(&mut r.base) *= 1.0 + opts.nominal_uncertainty * d;
-            }
+    let h = opts.nominal_uncertainty;
+    let recalibrated = |cand: &Candidate| -> Option<Recalibrated> {
+        if h > 0.0 {
+            fs.recalibrate(cand, h, RECALIBRATION_STEPS, opts.threads)
+        } else {
+            None
         }
-        r
     };
-    let model_runs = |cand: &Candidate| -> (ModelRunner, Vec<Option<hammer_sim::SimRun>>) {
-        let r = calibrated(cand);
+    let model_runs = |recal: &Option<Recalibrated>, cand: &Candidate| -> (ModelRunner, Vec<Option<hammer_sim::SimRun>>) {
+        let r = recal.as_ref().map_or_else(|| runner.clone(), |x| x.runner.clone());
         let physics = cand.physics();
         let runs = parallel(opts.threads, bars.clone(), &|bar| {
             simulate_truth(&r.config(bar, &physics)).ok()
         });
         (r, runs)
     };
+    let recal_nominal = recalibrated(&nominal);
+    let recal_verdict = fitted_cand.as_ref().and_then(|c| recalibrated(c));
     let (fitted_runner, fitted_runs) = match &fitted_cand {
-        Some(c) => model_runs(c),
+        Some(c) => model_runs(&recal_verdict, c),
         None => (runner.clone(), bars.iter().map(|_| None).collect()),
     };
-    let (recal_runner, recal_runs) = model_runs(&nominal);
+    let (recal_runner, recal_runs) = model_runs(&recal_nominal, &nominal);
     step("held-out check");
     let held_out_points: Vec<f64> = points
         .iter()
@@ -743,8 +965,11 @@ pub fn diagnose(
         points: shrink_points,
     };
 
-    // Where: the gap by signal × stage at every point, nominal model.
+    // Where: the gap by signal × stage at every point, nominal model; and
+    // what is left of it after the verdict's model (recalibrated, with the
+    // named effects): the unexplained remainder.
     let mut where_ = Vec::new();
+    let mut remainder = Vec::new();
     let mut waves = Vec::new();
     for (i, p) in points.iter().enumerate() {
         let Some((tpl, stages)) = template(&nominal_runs_ok[i], &base.hammer) else {
@@ -754,7 +979,37 @@ pub fn diagnose(
         for &k in &p.inputs {
             meas.extend(measured_cycles(&inputs[k].trace, &steady_impacts[k]));
         }
-        for c in breakdown(&tpl, &stages, &meas) {
+        let nominal_cells = breakdown(&tpl, &stages, &meas);
+        let after_run = if fitted_cand.is_some() {
+            fitted_runs[i].as_ref()
+        } else {
+            recal_runs[i].as_ref()
+        };
+        if let Some((after, after_stages)) = after_run.and_then(|r| template(r, &base.hammer)) {
+            for c in breakdown(&after, &after_stages, &meas) {
+                let before = nominal_cells
+                    .iter()
+                    .find(|n| n.signal == c.signal && n.stage == c.stage)
+                    .map_or(f64::NAN, |n| n.relative_rms);
+                if c.relative_rms >= REMAINDER_MIN {
+                    remainder.push(Remainder {
+                        supply_bar: p.supply_bar,
+                        statement: format!(
+                            "{}, {}: {:.0} % of the signal's RMS unexplained; {}",
+                            c.signal,
+                            c.stage.name(),
+                            100.0 * c.relative_rms,
+                            form_cause(&c.signal)
+                        ),
+                        signal: c.signal,
+                        stage: c.stage,
+                        relative_rms: c.relative_rms,
+                        relative_rms_nominal: before,
+                    });
+                }
+            }
+        }
+        for c in nominal_cells {
             where_.push(WhereCell {
                 supply_bar: p.supply_bar,
                 signal: c.signal,
@@ -790,6 +1045,31 @@ pub fn diagnose(
         }
     }
     where_.sort_by(|a, b| b.relative_rms.total_cmp(&a.relative_rms));
+    remainder.sort_by(|a, b| b.relative_rms.total_cmp(&a.relative_rms));
+    remainder.truncate(REMAINDER_CELLS);
+
+    // The recalibration: the nominal parameters as the verdict's fit left them.
+    let recalibration = match if fitted_cand.is_some() { &recal_verdict } else { &recal_nominal } {
+        Some(rc) => {
+            let mut nominal_cfg = base.clone();
+            NUISANCE
+                .iter()
+                .zip(rc.delta.iter().zip(&rc.sd))
+                .map(|((name, field), (&d, &sd))| {
+                    let v0 = *field(&mut nominal_cfg);
+                    Recalibration {
+                        parameter: name.to_string(),
+                        nominal: v0,
+                        value: v0 * (1.0 + h * d),
+                        sd: (v0 * h * sd).abs(),
+                        prior_sds: d,
+                        beyond_prior: d.abs() > 1.0,
+                    }
+                })
+                .collect()
+        }
+        None => Vec::new(),
+    };
 
     let verdict = match &verdict_cand {
         Some(v) => Verdict {
@@ -816,6 +1096,9 @@ pub fn diagnose(
             effects,
             pairs,
             verdict,
+            recalibration,
+            remainder,
+            model_form,
             shrink,
             chi2_nominal,
             features_compared: n_compared,
