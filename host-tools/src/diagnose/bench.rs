@@ -15,6 +15,7 @@ use hammer_sim::effects::{
 use hammer_sim::sensor::Rng;
 use hammer_sim::simulate::simulate;
 use hammer_sim::SimConfig;
+use hammer_variants::{generate, Structure, VariantParams};
 
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct BenchOptions {
@@ -25,6 +26,10 @@ pub struct BenchOptions {
     pub duration_s: f64,
     /// Relative half-width of the uniform jitter of the nominal parameters.
     pub jitter: f64,
+    /// Measurements from the second model family (`hammer-variants`): one or
+    /// two structural variants per case, its parameters jittered by `jitter`.
+    #[serde(default)]
+    pub structural: bool,
 }
 
 impl Default for BenchOptions {
@@ -35,6 +40,7 @@ impl Default for BenchOptions {
             points: vec![4.0, 5.5, 7.0],
             duration_s: 1.0,
             jitter: 0.03,
+            structural: false,
         }
     }
 }
@@ -157,9 +163,51 @@ pub fn generator_config(base: &SimConfig, jitter: f64, rng: &mut Rng) -> SimConf
     c
 }
 
+/// The second family's hammer for a case: one or two of its structural
+/// variants (never none: the base variant still differs from the model in
+/// its flow law and spool) and its uncertain parameters jittered. Mass and
+/// geometry stay, as in [`generator_config`].
+pub fn structural_generator(jitter: f64, rng: &mut Rng) -> (Structure, VariantParams) {
+    let singles = Structure::singles();
+    let first = (rng.next_u64() % singles.len() as u64) as usize;
+    let mut structure = singles[first];
+    if rng.next_u64() % 2 == 0 {
+        let second = (first + 1 + (rng.next_u64() % (singles.len() as u64 - 1)) as usize) % singles.len();
+        structure = structure.with(&singles[second]);
+    }
+    let mut p = VariantParams::default();
+    for field in [
+        &mut p.port_conductance,
+        &mut p.port_critical_ratio,
+        &mut p.port_ramp_m,
+        &mut p.rear_dead_m3,
+        &mut p.front_dead_m3,
+        &mut p.valve_conductance,
+        &mut p.valve_critical_ratio,
+        &mut p.spool_tau_s,
+        &mut p.pilot_rear_m2,
+        &mut p.pilot_front_m2,
+        &mut p.pilot_hysteresis_n,
+        &mut p.polytropic_n,
+        &mut p.hose_length_m,
+        &mut p.inlet_volume_m3,
+        &mut p.contact_stiffness_n_per_m,
+        &mut p.contact_damping_ratio,
+        &mut p.tool_mass_kg,
+        &mut p.feed_force_n,
+        &mut p.workpiece_stiffness_n_per_m,
+    ] {
+        *field *= 1.0 + jitter * (2.0 * rng.uniform() - 1.0);
+    }
+    (structure, p)
+}
+
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct CaseResult {
     pub index: usize,
+    /// The generator's structural variants (structural benchmark only).
+    #[serde(default)]
+    pub variants: Vec<String>,
     pub hidden: Hidden,
     pub hidden_params: serde_json::Value,
     pub named: Vec<String>,
@@ -186,17 +234,24 @@ pub fn run_case(opts: &BenchOptions, index: usize, diag: &Options) -> anyhow::Re
         draw_effect(&mut gen.effects, &name, &mut rng);
     }
     gen.solver.duration_s = opts.duration_s;
+    let structural = opts.structural.then(|| structural_generator(opts.jitter, &mut rng));
     let mut inputs = Vec::new();
     let last = opts.points.len().saturating_sub(1);
     for (k, &bar) in opts.points.iter().enumerate() {
-        let mut c = gen.clone();
-        c.supply.pressure_bar = bar;
-        c.seed = rng.next_u64();
-        let sim = simulate(&c)?;
+        let seed = rng.next_u64();
+        let trace = match &structural {
+            Some((structure, params)) => generate(params, *structure, &gen.effects, bar, opts.duration_s, seed).trace,
+            None => {
+                let mut c = gen.clone();
+                c.supply.pressure_bar = bar;
+                c.seed = seed;
+                simulate(&c)?.trace()
+            }
+        };
         inputs.push(MeasuredInput {
             label: format!("case {index} at {bar} bar"),
             supply_bar: bar,
-            trace: sim.trace(),
+            trace,
             fit: k == 0 || k == last,
         });
     }
@@ -226,6 +281,7 @@ pub fn run_case(opts: &BenchOptions, index: usize, diag: &Options) -> anyhow::Re
     let s = &r.shrink;
     Ok(CaseResult {
         index,
+        variants: structural.map_or_else(Vec::new, |(st, _)| st.variants().into_iter().map(String::from).collect()),
         hidden_params: serde_json::to_value(&gen.effects).unwrap_or_default(),
         hidden,
         named,
@@ -365,7 +421,12 @@ pub fn render(s: &BenchSummary) -> String {
     let o = &s.options;
     let _ = writeln!(
         out,
-        "diagnose-bench: {} cases, seed {}, points {:?} bar (first and last fitted), {:.1} s per trace, jitter ±{:.0} %",
+        "diagnose-bench{}: {} cases, seed {}, points {:?} bar (first and last fitted), {:.1} s per trace, jitter ±{:.0} %",
+        if o.structural {
+            " --structural (generator: hammer-variants, one or two structural variants a case)"
+        } else {
+            " (generator: the simulator, jittered)"
+        },
         s.cases.len(),
         o.seed,
         o.points,

@@ -54,12 +54,18 @@ pub struct BenchArgs {
     /// Length of each generated trace, s.
     #[arg(long, default_value_t = 1.0)]
     pub duration: f64,
-    /// Half-width of the uniform jitter of the generator's nominal parameters.
-    #[arg(long, default_value_t = 0.03)]
-    pub jitter: f64,
+    /// Half-width of the uniform jitter of the generator's nominal parameters
+    /// [default: 0.03, 0.1 with --structural].
+    #[arg(long)]
+    pub jitter: Option<f64>,
     /// Write bench.json (every case) and bench.txt here.
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Measure hammers of the second model family (valve, ports, chambers,
+    /// supply, anvil or sensors differ in form from the diagnosis' model);
+    /// the default jitter becomes ±10 %.
+    #[arg(long)]
+    pub structural: bool,
 }
 
 /// Pairs every `--supply-bar` of the raw command line with the `--measured`
@@ -181,14 +187,16 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
     for &p in &args.points {
         hammer_trace::config::check_range("--points", p, 0.5, 20.0)?;
     }
-    hammer_trace::config::check_range("--jitter", args.jitter, 0.0, 0.5)?;
+    let jitter = args.jitter.unwrap_or(if args.structural { 0.1 } else { 0.03 });
+    hammer_trace::config::check_range("--jitter", jitter, 0.0, 0.5)?;
     hammer_trace::config::check_range("--duration", args.duration, 0.3, 60.0)?;
     let opts = BenchOptions {
         cases: args.cases,
         seed: args.seed,
         points: args.points.clone(),
         duration_s: args.duration,
-        jitter: args.jitter,
+        jitter,
+        structural: args.structural,
     };
     let diag = Options {
         figures: false,

@@ -898,11 +898,12 @@ pub fn diagnose(
             (Some(c), Some(run)) => fitted_runner.features_of_truth(&run.truth, &c.effects),
             _ => None,
         };
-        let fitted = fitted.unwrap_or_else(|| nom.clone());
         let recal = recal_runs[i]
             .as_ref()
             .and_then(|run| recal_runner.features_of_truth(&run.truth, &nominal.effects))
             .unwrap_or_else(|| nom.clone());
+        // With no effect named, the verdict's model is the recalibrated nominal one.
+        let fitted = fitted.unwrap_or_else(|| recal.clone());
         let rms = |m: &[f64]| -> BTreeMap<String, f64> {
             WAVE_SIGNALS
                 .iter()

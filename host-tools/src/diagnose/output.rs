@@ -288,6 +288,8 @@ pub fn markdown(report: &Report, figures: &[String]) -> String {
     line!("{params}");
     line!("```");
     line!();
+    recalibration_md(&mut s, report);
+    remainder_md(&mut s, report);
 
     // Where.
     line!("## Where the gap lies");
@@ -354,7 +356,7 @@ pub fn markdown(report: &Report, figures: &[String]) -> String {
     let sh = &report.shrink;
     line!("## How far it shrinks");
     line!();
-    line!("Mean |simulated − measured| / measured, nominal model → fitted model:");
+    line!("Mean |simulated − measured| / measured, nominal model → recalibrated model with the named effects:");
     line!();
     line!(
         "- impact energy error: {} % → {} %",
@@ -367,7 +369,7 @@ pub fn markdown(report: &Report, figures: &[String]) -> String {
         pct(sh.frequency_error_after)
     );
     line!(
-        "- control, the nominal parameters refitted within their prior and no effect added: impact energy error {} %",
+        "- control, the nominal parameters recalibrated and no effect added: impact energy error {} %",
         pct(sh.impact_energy_error_recalibrated_only)
     );
     line!();
@@ -459,6 +461,79 @@ pub fn markdown(report: &Report, figures: &[String]) -> String {
     s
 }
 
+/// The verdict's second part: the nominal parameters that moved.
+fn recalibration_md(s: &mut String, report: &Report) {
+    macro_rules! line {
+        ($($t:tt)*) => {{ let _ = writeln!(s, $($t)*); }};
+    }
+    line!("### Recalibrated nominal parameters");
+    line!();
+    if report.recalibration.is_empty() {
+        line!("No recalibration (the nominal parameters were held).");
+        line!();
+        return;
+    }
+    line!(
+        "Fitted with the named effects held, each within a prior of ±{} % of its nominal value; **bold**: moved beyond one prior standard deviation.",
+        pct(100.0 * report.options.nominal_uncertainty)
+    );
+    line!();
+    line!("| parameter | nominal | recalibrated | ± | prior sd moved |");
+    line!("|---|---:|---:|---:|---:|");
+    for r in &report.recalibration {
+        let name = if r.beyond_prior {
+            format!("**{}**", r.parameter)
+        } else {
+            r.parameter.clone()
+        };
+        line!(
+            "| {name} | {} | {} | {} | {:+.2} |",
+            num(r.nominal),
+            num(r.value),
+            num(r.sd),
+            r.prior_sds
+        );
+    }
+    line!();
+}
+
+/// The verdict's third part: what neither explains, and where.
+fn remainder_md(s: &mut String, report: &Report) {
+    macro_rules! line {
+        ($($t:tt)*) => {{ let _ = writeln!(s, $($t)*); }};
+    }
+    line!("### Unexplained remainder");
+    line!();
+    if report.remainder.is_empty() {
+        line!("None above 10 % of a signal's RMS in any stage: the model's form matches the hammer's where it was measured.");
+        line!();
+        return;
+    }
+    line!("After the recalibrated model with the named effects, by signal × stage (largest first):");
+    line!();
+    for r in &report.remainder {
+        line!(
+            "- {} bar: {} (nominal model: {} %)",
+            fmt_bar(r.supply_bar),
+            r.statement,
+            pct(100.0 * r.relative_rms_nominal)
+        );
+    }
+    if !report.model_form.is_empty() {
+        let groups: Vec<String> = report
+            .model_form
+            .iter()
+            .map(|m| format!("{} ×{}", m.group, num(m.factor)))
+            .collect();
+        line!();
+        line!(
+            "Model-form factors (the recalibrated nominal model's residual over the noise and floors; these features were weighed down by them, the force balance was not): {}.",
+            groups.join(", ")
+        );
+    }
+    line!();
+}
+
 /// One-screen terminal summary: verdict, top 3 'where' cells, top 3 effects, shrink line.
 pub fn summary(report: &Report) -> String {
     let mut s = String::new();
@@ -477,6 +552,24 @@ pub fn summary(report: &Report) -> String {
     }
     if report.verdict.params.as_object().is_some_and(|o| !o.is_empty()) {
         line!("  params: {}", params_inline(&report.verdict.params));
+    }
+    let moved: Vec<String> = report
+        .recalibration
+        .iter()
+        .filter(|r| r.beyond_prior)
+        .map(|r| format!("{} {} → {} ± {}", r.parameter, num(r.nominal), num(r.value), num(r.sd)))
+        .collect();
+    line!(
+        "recalibrated: {}",
+        if moved.is_empty() {
+            "no nominal parameter beyond its prior".to_string()
+        } else {
+            moved.join("; ")
+        }
+    );
+    match report.remainder.first() {
+        Some(r) => line!("unexplained: {} ({} bar)", r.statement, fmt_bar(r.supply_bar)),
+        None => line!("unexplained: nothing above 10 % of a signal's RMS"),
     }
     if !report.where_.is_empty() {
         line!("where the gap lies:");
@@ -499,8 +592,9 @@ pub fn summary(report: &Report) -> String {
     }
     let sh = &report.shrink;
     line!(
-        "shrink: impact energy error {} % → {} %, frequency error {} % → {} % (held out: {})",
+        "shrink: impact energy error {} % nominal, {} % recalibrated, {} % with the effects; frequency error {} % → {} % (held out: {})",
         pct(sh.impact_energy_error_before),
+        pct(sh.impact_energy_error_recalibrated_only),
         pct(sh.impact_energy_error_after),
         pct(sh.frequency_error_before),
         pct(sh.frequency_error_after),
@@ -897,6 +991,9 @@ mod tests {
                 score: 1234.5,
                 reason: "explains 87 % of the nominal chi2".into(),
             },
+            recalibration: vec![],
+            remainder: vec![],
+            model_form: vec![],
             shrink: Shrink {
                 impact_energy_error_before: 12.34,
                 impact_energy_error_after: 1.23,
