@@ -6,8 +6,8 @@ use std::process::ExitCode;
 use anyhow::{bail, Context, Result};
 use clap::{Args, Parser, Subcommand};
 
-use hammer_sim::simulate::simulate;
 use hammer_sim::SimConfig;
+use hammer_sim::{simulate_to_file, SimulateError};
 use hammer_trace::config::load_toml;
 use hammer_trace::trace::{write_csv, write_sidecar};
 
@@ -202,11 +202,13 @@ pub fn run(cli: Cli) -> Result<()> {
                     out.display()
                 );
             }
-            let sim = simulate(&cfg).context("simulation failed")?;
+            // Streamed: ten minutes of samples take no more memory than a second.
+            let sim = simulate_to_file(&cfg, args.out.as_deref()).map_err(|e| match e {
+                SimulateError::Solver(e) => anyhow::Error::new(e).context("simulation failed"),
+                SimulateError::Output(e) => e.into(),
+            })?;
             out!("{}", sim.summary());
             if let Some(out) = &args.out {
-                write_csv(out, &sim.trace())?;
-                write_sidecar(out, &sim.sidecar())?;
                 outln!(
                     "wrote {} and {}",
                     out.display(),
