@@ -17,7 +17,8 @@ use crate::simulate::{read_simulated_sidecar, Sidecar};
 use crate::SimConfig;
 
 fn cal(ch: &SensorChannel) -> ChannelCal {
-    ChannelCal::from_range(ch.range_min as f32, ch.range_max as f32, ch.adc_bits.min(16) as u8)
+    // Validated to at most ADC_BITS_MAX, so the cast keeps every value.
+    ChannelCal::from_range(ch.range_min as f32, ch.range_max as f32, ch.adc_bits as u8)
 }
 
 /// The estimator's configuration for a trace: hammer and sensors from the
@@ -34,9 +35,7 @@ pub fn estimator_config(
         message: e.to_string(),
     };
     check_range("estimator.coverage_factor", p.coverage_factor, 1.0, 5.0)?;
-    for ch in [&sensors.rear, &sensors.front, &sensors.accel] {
-        check_range("sensors.*.adc_bits", ch.adc_bits as f64, 8.0, 16.0)?;
-    }
+    sensors.validate()?;
     let mut c = Config {
         sample_rate_hz: sample_rate_hz as f32,
         geometry: hammer.geometry(),

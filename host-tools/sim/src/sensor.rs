@@ -48,11 +48,17 @@ impl SensorChannel {
         self.range_min + code as f64 * self.lsb()
     }
 
+    /// `name` is the channel's key under `[sensors]`.
     fn validate(&self, name: &str) -> Result<(), ConfigError> {
         let f = |k: &str| format!("sensors.{name}.{k}");
         check_range(&f("range_min"), self.range_min, -1e9, 1e9)?;
         check_range(&f("range_max"), self.range_max, self.range_min + 1e-9, 1e9)?;
-        check_range(&f("adc_bits"), self.adc_bits as f64, 8.0, 24.0)?;
+        check_range(
+            &f("adc_bits"),
+            self.adc_bits as f64,
+            hammer_estimator::ADC_BITS_MIN as f64,
+            hammer_estimator::ADC_BITS_MAX as f64,
+        )?;
         check_range(&f("noise_std"), self.noise_std, 0.0, 1e9)?;
         check_range(&f("offset"), self.offset, -1e9, 1e9)?;
         check_range(&f("bandwidth_hz"), self.bandwidth_hz, 0.0, 1e7)?;
@@ -348,6 +354,39 @@ mod tests {
         assert_eq!(ch.code(f64::NAN), 0);
         let v = ch.value(ch.code(3.21e5));
         assert!((v - 3.21e5).abs() <= ch.lsb() / 2.0 + 1e-9);
+    }
+
+    /// The simulator writes no trace the estimator would refuse: the same
+    /// resolutions pass both, and a refusal names the key of the config file.
+    #[test]
+    fn adc_resolution_is_refused_where_the_estimator_refuses_it() {
+        for bits in [4, 7, 8, 12, 16, 17, 24, 32] {
+            for ch in ["rear", "front", "accel"] {
+                let mut m = SensorModel::default();
+                match ch {
+                    "rear" => m.rear.adc_bits = bits,
+                    "front" => m.front.adc_bits = bits,
+                    _ => m.accel.adc_bits = bits,
+                }
+                let sim = m.validate();
+                let est = crate::estimation::estimator_config(
+                    &crate::params::HammerParams::default(),
+                    &m,
+                    &Default::default(),
+                    1e5,
+                    None,
+                );
+                assert_eq!(sim.is_ok(), est.is_ok(), "{ch} {bits} bits: {sim:?} vs {est:?}");
+                assert_eq!(sim.is_ok(), (8..=16).contains(&bits), "{ch} {bits}");
+                if let Err(e) = sim {
+                    let msg = e.to_string();
+                    assert!(
+                        msg.contains(&format!("sensors.{ch}.adc_bits = {bits}")) && msg.contains("8 ..= 16"),
+                        "{msg}"
+                    );
+                }
+            }
+        }
     }
 
     #[test]
