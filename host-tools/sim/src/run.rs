@@ -125,9 +125,11 @@ impl TruthSink for TruthTrace {
     }
 }
 
-/// Samples on the output grid of `cfg`, both ends included.
+/// Samples on the output grid of `cfg`, both ends included. The margin is in
+/// samples and must outlast the quotient's rounding at 6e7 samples (600 s at
+/// 10 µs, where an ulp is 7e-9): 1e-9 lost the last sample there.
 pub fn output_len(cfg: &SimConfig) -> usize {
-    (cfg.solver.duration_s / cfg.solver.output_step_s + 1e-9).floor() as usize + 1
+    (cfg.solver.duration_s / cfg.solver.output_step_s + 1e-6).floor() as usize + 1
 }
 
 /// Why a run stopped: the integrator failed, or the sink did.
@@ -623,5 +625,26 @@ impl CycleTracker {
         self.stroke_start = None;
         self.peak_rear_pa = f64::NEG_INFINITY;
         self.peak_front_pa = f64::NEG_INFINITY;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_output_grid_ends_at_the_duration_for_long_runs_too() {
+        let mut cfg = SimConfig::default();
+        for (duration_s, dt_s, n) in [
+            (0.3, 10e-6, 30_001),
+            (0.5, 10e-6, 50_001),
+            (600.0, 10e-6, 60_000_001),
+            (600.0, 1e-6, 600_000_001),
+            (0.0105, 1e-3, 11),
+        ] {
+            cfg.solver.duration_s = duration_s;
+            cfg.solver.output_step_s = dt_s;
+            assert_eq!(output_len(&cfg), n, "{duration_s} s at {dt_s} s");
+        }
     }
 }
