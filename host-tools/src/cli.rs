@@ -140,7 +140,9 @@ pub struct SimulateArgs {
     /// Ideal sensors: no noise, bandwidth, clipping or quantisation.
     #[arg(long)]
     pub ideal_sensors: bool,
-    /// Trace to write (CSV); the sidecar goes beside it with extension .json.
+    /// Trace to write (CSV), row by row as the run goes (memory does not grow
+    /// with --duration; disk does: about 18 MB per simulated second at 10e-6);
+    /// the sidecar goes beside it with extension .json.
     #[arg(long)]
     pub out: Option<PathBuf>,
 }
