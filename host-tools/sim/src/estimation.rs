@@ -364,3 +364,46 @@ pub fn stream_estimation(
     est.push_block(&block, &mut on_report);
     Ok(summary)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Each refusal names the key of the config file it came from, never the
+    /// estimator's internal field.
+    #[test]
+    fn estimator_refusals_name_the_config_keys() {
+        let cases: [(fn(&mut EstimatorParams), &str); 6] = [
+            (
+                |p| p.pressure_gain_uncertainty = 0.9,
+                "estimator.pressure_gain_uncertainty = 0.9",
+            ),
+            (
+                |p| p.accel_offset_uncertainty_mps2 = -1.0,
+                "estimator.accel_offset_uncertainty_mps2 = -1",
+            ),
+            (|p| p.wear_budget_j = 0.0, "estimator.wear_budget_j = 0"),
+            (|p| p.baseline_cycles = 1, "estimator.baseline_cycles = 1"),
+            (|p| p.coverage_factor = 9.0, "estimator.coverage_factor = 9"),
+            (|p| p.max_period_s = 5.0, "estimator.max_period_s: 5 s is longer than"),
+        ];
+        let (h, s) = (HammerParams::default(), SensorModel::default());
+        for (set, want) in cases {
+            let mut p = EstimatorParams::default();
+            set(&mut p);
+            let e = estimator_config(&h, &s, &p, 1e5, None).unwrap_err().to_string();
+            assert!(e.starts_with(want), "{e}");
+        }
+        let e = estimator_config(&h, &s, &EstimatorParams::default(), 500.0, None)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with("sample rate: 500 Hz") && e.ends_with("1000 ..= 1000000 Hz"),
+            "{e}"
+        );
+        let e = estimator_config(&h, &s, &EstimatorParams::default(), 1e5, Some(-0.5))
+            .unwrap_err()
+            .to_string();
+        assert!(e.starts_with("supply pressure: -0.5 bar (--supply-bar"), "{e}");
+    }
+}
