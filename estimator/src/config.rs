@@ -4,6 +4,14 @@
 use crate::geometry::{Geometry, STANDARD_GRAVITY_MPS2};
 use crate::math;
 
+/// Resolutions of the converters the estimator reads. Codes are `u16` (the
+/// samples, the wire format, [`ChannelCal::full_scale_code`]), so 16 bits is
+/// the most; below 8 bits a cycle's pressure swing spans too few codes to fit.
+/// The simulator refuses what falls outside, so it never writes a trace the
+/// estimator cannot read.
+pub const ADC_BITS_MIN: u8 = 8;
+pub const ADC_BITS_MAX: u8 = 16;
+
 /// Linear calibration of one ADC channel: `value = (code − zero_code)·scale`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ChannelCal {

@@ -17,7 +17,7 @@ pub mod report;
 pub mod tare;
 pub mod wear;
 
-pub use config::{ChannelCal, ChannelSpec, Config, ConfigError, WearConfig};
+pub use config::{ChannelCal, ChannelSpec, Config, ConfigError, WearConfig, ADC_BITS_MAX, ADC_BITS_MIN};
 pub use geometry::Geometry;
 pub use report::{CycleReport, Flags};
 pub use wear::{WearState, WearStateError};

@@ -69,10 +69,17 @@ fn bad_arguments_and_configs_name_the_field() {
     let (code, _, err) = hammer(&["simulate", "--effect", "leakage:gap=1e-5"]);
     assert_eq!(code, 2);
     assert!(err.contains("effects.leakage") && err.contains("gap"), "{err}");
+    // A flag's value is refused under the flag's name, not the config key it sets.
     let (code, _, err) = hammer(&["simulate", "--supply-bar", "-3"]);
     assert_eq!(code, 2);
     assert!(
-        err.contains("supply.pressure_bar") && err.contains("out of range"),
+        err.contains("--supply-bar -3 is out of range: allowed 0.5 ..= 20") && !err.contains("pressure_bar"),
+        "{err}"
+    );
+    let (code, _, err) = hammer(&["simulate", "--dt", "1"]);
+    assert_eq!(code, 2);
+    assert!(
+        err.contains("--dt 1 is out of range") && !err.contains("output_step_s"),
         "{err}"
     );
     let (code, _, err) = hammer(&["simulate", "--effect", "gremlins"]);
@@ -88,7 +95,22 @@ fn bad_arguments_and_configs_name_the_field() {
     std::fs::write(&cfg, "[hammer]\npiston_mass_kg = 0.0\n").unwrap();
     let (code, _, err) = hammer(&["simulate", "--config", cfg.to_str().unwrap()]);
     assert_eq!(code, 2);
-    assert!(err.contains("hammer.piston_mass_kg"), "{err}");
+    assert!(
+        err.contains(&format!("{}: hammer.piston_mass_kg = 0", cfg.display())),
+        "{err}"
+    );
+    // The estimator reads codes of at most 16 bits: the simulator refuses more.
+    std::fs::write(
+        &cfg,
+        "[sensors.accel]\nrange_min = -2000.0\nrange_max = 2000.0\nadc_bits = 24\nnoise_std = 1.0\noffset = 0.0\nbandwidth_hz = 2e4\n",
+    )
+    .unwrap();
+    let (code, _, err) = hammer(&["simulate", "--config", cfg.to_str().unwrap()]);
+    assert_eq!(code, 2);
+    assert!(
+        err.contains("sensors.accel.adc_bits = 24 is out of range: allowed 8 ..= 16"),
+        "{err}"
+    );
     std::fs::write(
         &cfg,
         "[effects.valve_delay]\ntau_s = 0.002\n[supply]\npressure_bar = 6\n",
@@ -288,6 +310,18 @@ fn config_check_names_the_field_and_range_or_prints_the_resolved_config() {
         err.contains("estimator.coverage_factor") && err.contains("1 ..= 5"),
         "{err}"
     );
+    // A range whose calibration the estimator cannot use is named by its keys.
+    std::fs::write(
+        &bad,
+        "[sensors.rear]\nrange_min = 1e5\nrange_max = 100001.0\nadc_bits = 12\nnoise_std = 1.0\noffset = 0.0\nbandwidth_hz = 0.0\n",
+    )
+    .unwrap();
+    let (code, _, err) = hammer(&["config", "check", bad.to_str().unwrap()]);
+    assert_eq!(code, 2);
+    assert!(
+        err.contains("sensors.rear.range_min, sensors.rear.range_max") && !err.contains("zero_code"),
+        "{err}"
+    );
     std::fs::write(&bad, "[sensors.rear]\nrange_min = 0.0\n").unwrap();
     let (code, _, err) = hammer(&["config", "check", bad.to_str().unwrap()]);
     assert_eq!(code, 2);
@@ -451,6 +485,14 @@ fn output_failures_and_empty_traces_are_errors_not_panics_or_silence() {
     assert_eq!(code, 2, "{stderr}");
     assert!(stderr.contains("sidecar would overwrite the trace"), "{stderr}");
     assert!(!dir.join("x.json").exists());
+    // The estimator's refusal of an operating point names the flag, in bar.
+    let (code, _, stderr) = hammer(&["estimate", run.to_str().unwrap(), "--supply-bar", "2000"]);
+    assert_eq!(code, 2);
+    assert!(
+        stderr.contains("supply pressure: 2000 bar (--supply-bar") && stderr.contains("0 ..= 1000 bar"),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("supply_pressure_pa"), "{stderr}");
     // A quiet trace (a hammer at rest, sensors with a little noise): no
     // cycle is an error that says so, and nothing is printed.
     let quiet = dir.join("quiet.csv");

@@ -288,11 +288,14 @@ fn sensor_model_quantises_clips_and_adds_the_configured_noise() {
         "clipped {:?} for {impacts} impacts",
         sim.measured.clipped
     );
-    // Noise: against the same chain without noise and with a 24-bit converter,
-    // the spread is the configured σ combined with quantisation (σ² + lsb²/12).
+    // Noise: against the same chain without noise and with the finest converter
+    // the estimator reads (16 bits: its quantisation is 0.01 % of the 12-bit
+    // channel's noise variance), the spread is the configured σ combined with
+    // quantisation (σ² + lsb²/12).
     let mut clean_cfg = SimConfig::nominal(6.0);
     clean_cfg.sensors.rear.noise_std = 0.0;
-    clean_cfg.sensors.rear.adc_bits = 24;
+    clean_cfg.sensors.rear.adc_bits = hammer_estimator::ADC_BITS_MAX as u32;
+    clean_cfg.validate().unwrap();
     let clean = run(&clean_cfg);
     let d: Vec<f64> = (20_000..40_000)
         .map(|i| sim.measured.p_rear_pa[i] - clean.measured.p_rear_pa[i])

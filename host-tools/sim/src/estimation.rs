@@ -4,7 +4,7 @@
 //! all open traces through here.
 
 use hammer_estimator::{ChannelCal, ChannelSpec, Config, CycleReport, Estimator, RawSample};
-use hammer_trace::config::{check_range, ConfigError};
+use hammer_trace::config::ConfigError;
 use std::path::Path;
 
 use hammer_trace::rows::{Item, Row, RowReader, Uniform};
@@ -17,7 +17,8 @@ use crate::simulate::{read_simulated_sidecar, Sidecar};
 use crate::SimConfig;
 
 fn cal(ch: &SensorChannel) -> ChannelCal {
-    ChannelCal::from_range(ch.range_min as f32, ch.range_max as f32, ch.adc_bits.min(16) as u8)
+    // Validated to at most ADC_BITS_MAX, so the cast keeps every value.
+    ChannelCal::from_range(ch.range_min as f32, ch.range_max as f32, ch.adc_bits as u8)
 }
 
 /// The estimator's configuration for a trace: hammer and sensors from the
@@ -29,14 +30,7 @@ pub fn estimator_config(
     sample_rate_hz: f64,
     supply_bar: Option<f64>,
 ) -> Result<Config, ConfigError> {
-    let to_err = |e: hammer_estimator::ConfigError| ConfigError::Invalid {
-        field: "estimator".into(),
-        message: e.to_string(),
-    };
-    check_range("estimator.coverage_factor", p.coverage_factor, 1.0, 5.0)?;
-    for ch in [&sensors.rear, &sensors.front, &sensors.accel] {
-        check_range("sensors.*.adc_bits", ch.adc_bits as f64, 8.0, 16.0)?;
-    }
+    sensors.validate()?;
     let mut c = Config {
         sample_rate_hz: sample_rate_hz as f32,
         geometry: hammer.geometry(),
@@ -72,8 +66,114 @@ pub fn estimator_config(
     c.wear.baseline_cycles = p.baseline_cycles;
     c.wear.cusum_k = p.cusum_k as f32;
     c.wear.cusum_h = p.cusum_h as f32;
-    c.validate().map_err(to_err)?;
+    c.validate().map_err(in_user_terms)?;
     Ok(c)
+}
+
+/// The config-file key each estimator field is built from in
+/// [`estimator_config`]; the estimator's own names mean nothing to a user.
+const ESTIMATOR_FIELD_KEYS: [(&str, &str); 23] = [
+    ("geometry.piston_mass_kg", "hammer.piston_mass_kg"),
+    ("geometry.bore_diameter_m", "hammer.bore_diameter_m"),
+    ("geometry.rod_diameter_m", "hammer.rod_diameter_m"),
+    ("inclination_deg", "hammer.inclination_deg"),
+    ("rear_spec.gain_rel", "estimator.pressure_gain_uncertainty"),
+    ("front_spec.gain_rel", "estimator.pressure_gain_uncertainty"),
+    ("accel_spec.gain_rel", "estimator.accel_gain_uncertainty"),
+    ("rear_spec.offset", "estimator.pressure_offset_uncertainty_pa"),
+    ("front_spec.offset", "estimator.pressure_offset_uncertainty_pa"),
+    ("accel_spec.offset", "estimator.accel_offset_uncertainty_mps2"),
+    ("impact_threshold_mps2", "estimator.impact_threshold_mps2"),
+    ("blank_before_s", "estimator.blank_before_s"),
+    ("blank_after_s", "estimator.blank_after_s"),
+    ("min_period_s", "estimator.min_period_s"),
+    ("max_period_s", "estimator.max_period_s"),
+    ("accel_zero_shift_tau_s", "estimator.accel_zero_shift_tau_s"),
+    ("coverage_factor", "estimator.coverage_factor"),
+    ("residual_correlation_factor", "estimator.residual_correlation_factor"),
+    ("stuck_after_s", "estimator.stuck_after_s"),
+    ("wear.baseline_cycles", "estimator.baseline_cycles"),
+    ("wear.cusum_k", "estimator.cusum_k"),
+    ("wear.cusum_h", "estimator.cusum_h"),
+    ("wear.budget_j", "estimator.wear_budget_j"),
+];
+
+/// An f32 as the shortest decimal that reads back as it (`0.1`, not `0.10000000149011612`).
+fn shortest(v: f32) -> f64 {
+    v.to_string().parse().unwrap_or(v as f64)
+}
+
+/// An estimator refusal re-worded with the key, flag and units the user wrote.
+fn in_user_terms(e: hammer_estimator::ConfigError) -> ConfigError {
+    use hammer_estimator::ConfigError as E;
+    match e {
+        E::OutOfRange { field, value, min, max } => {
+            // Two values no config key holds: they come from a flag or the trace.
+            let derived = match field {
+                "supply_pressure_pa" => Some((
+                    "supply pressure",
+                    "bar (--supply-bar, else the sidecar's supply_pressure_bar)",
+                    "bar",
+                    1e5,
+                )),
+                "sample_rate_hz" => Some((
+                    "sample rate",
+                    "Hz (1 / the trace's sample interval, or 1 / solver.output_step_s)",
+                    "Hz",
+                    1.0,
+                )),
+                _ => None,
+            };
+            if let Some((name, source, unit, per_unit)) = derived {
+                return ConfigError::Invalid {
+                    field: name.into(),
+                    message: format!(
+                        "{} {source} is out of range: allowed {} ..= {} {unit}",
+                        shortest(value) / per_unit,
+                        shortest(min) / per_unit,
+                        shortest(max) / per_unit
+                    ),
+                };
+            }
+            if let Some((channel, what)) = field
+                .split_once('.')
+                .filter(|(_, w)| *w == "zero_code" || *w == "scale")
+            {
+                let meaning = if what == "zero_code" {
+                    "puts zero at ADC code"
+                } else {
+                    "gives a step per ADC code of"
+                };
+                return ConfigError::Invalid {
+                    field: format!("sensors.{channel}.range_min, sensors.{channel}.range_max"),
+                    message: format!(
+                        "the range {meaning} {}, outside what the estimator reads ({} ..= {})",
+                        shortest(value),
+                        shortest(min),
+                        shortest(max)
+                    ),
+                };
+            }
+            let key = ESTIMATOR_FIELD_KEYS
+                .iter()
+                .find(|(f, _)| *f == field)
+                .map_or_else(|| format!("estimator setting {field}"), |(_, k)| k.to_string());
+            ConfigError::OutOfRange {
+                field: key,
+                value: shortest(value),
+                min: shortest(min),
+                max: shortest(max),
+            }
+        }
+        E::PeriodTooLongForMemory { max_period_s, limit_s } => ConfigError::Invalid {
+            field: "estimator.max_period_s".into(),
+            message: format!(
+                "{} s is longer than the {} s the estimator's checkpoint memory holds at this sample rate",
+                shortest(max_period_s),
+                shortest(limit_s)
+            ),
+        },
+    }
 }
 
 /// A trace file opened for the estimator: the samples back as the ADC codes
@@ -263,4 +363,47 @@ pub fn stream_estimation(
     }
     est.push_block(&block, &mut on_report);
     Ok(summary)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Each refusal names the key of the config file it came from, never the
+    /// estimator's internal field.
+    #[test]
+    fn estimator_refusals_name_the_config_keys() {
+        let cases: [(fn(&mut EstimatorParams), &str); 6] = [
+            (
+                |p| p.pressure_gain_uncertainty = 0.9,
+                "estimator.pressure_gain_uncertainty = 0.9",
+            ),
+            (
+                |p| p.accel_offset_uncertainty_mps2 = -1.0,
+                "estimator.accel_offset_uncertainty_mps2 = -1",
+            ),
+            (|p| p.wear_budget_j = 0.0, "estimator.wear_budget_j = 0"),
+            (|p| p.baseline_cycles = 1, "estimator.baseline_cycles = 1"),
+            (|p| p.coverage_factor = 9.0, "estimator.coverage_factor = 9"),
+            (|p| p.max_period_s = 5.0, "estimator.max_period_s: 5 s is longer than"),
+        ];
+        let (h, s) = (HammerParams::default(), SensorModel::default());
+        for (set, want) in cases {
+            let mut p = EstimatorParams::default();
+            set(&mut p);
+            let e = estimator_config(&h, &s, &p, 1e5, None).unwrap_err().to_string();
+            assert!(e.starts_with(want), "{e}");
+        }
+        let e = estimator_config(&h, &s, &EstimatorParams::default(), 500.0, None)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with("sample rate: 500 Hz") && e.ends_with("1000 ..= 1000000 Hz"),
+            "{e}"
+        );
+        let e = estimator_config(&h, &s, &EstimatorParams::default(), 1e5, Some(-0.5))
+            .unwrap_err()
+            .to_string();
+        assert!(e.starts_with("supply pressure: -0.5 bar (--supply-bar"), "{e}");
+    }
 }

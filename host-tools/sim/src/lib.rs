@@ -6,9 +6,9 @@
 //! - [`params`]: every model parameter, [`SimConfig`] (the TOML root of a run);
 //! - [`effects`]: the effect catalogue, all off in the nominal model;
 //! - [`gas`], [`model`]: the equations (`docs/model.md`), [`solver`]: Dormand–Prince 5(4);
-//! - [`run`]: one solution with events, per-cycle truth and balances;
+//! - [`run`]: one solution with events, per-cycle truth and balances, handed to a sink as it is produced;
 //! - [`sensor`]: bandwidth, noise, clipping, quantisation and the sensor-side effects;
-//! - [`simulate`]: a complete simulated measurement as a trace plus sidecar;
+//! - [`simulate`]: a complete simulated measurement as a trace plus sidecar, kept in memory or streamed to disk;
 //! - [`estimation`]: the one path from any trace to the estimator's ADC codes and calibration.
 
 use hammer_trace::config;
@@ -26,4 +26,4 @@ pub mod solver;
 pub use effects::{Effects, EFFECT_NAMES};
 pub use params::SimConfig;
 pub use run::{simulate_truth, CycleTruth, SimRun, TruthTrace};
-pub use simulate::{simulate, Simulation, SimulationInfo};
+pub use simulate::{simulate, simulate_to_file, SimulateError, Simulation, SimulationInfo};

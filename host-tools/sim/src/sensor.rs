@@ -5,7 +5,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::effects::Effects;
-use super::run::{EventRecord, TruthTrace};
+use super::run::{EventRecord, TruthSample, TruthTrace};
 use crate::config::{check_range, ConfigError};
 
 /// One measurement channel from transducer to ADC code. In a config file a
@@ -48,11 +48,17 @@ impl SensorChannel {
         self.range_min + code as f64 * self.lsb()
     }
 
+    /// `name` is the channel's key under `[sensors]`.
     fn validate(&self, name: &str) -> Result<(), ConfigError> {
         let f = |k: &str| format!("sensors.{name}.{k}");
         check_range(&f("range_min"), self.range_min, -1e9, 1e9)?;
         check_range(&f("range_max"), self.range_max, self.range_min + 1e-9, 1e9)?;
-        check_range(&f("adc_bits"), self.adc_bits as f64, 8.0, 24.0)?;
+        check_range(
+            &f("adc_bits"),
+            self.adc_bits as f64,
+            hammer_estimator::ADC_BITS_MIN as f64,
+            hammer_estimator::ADC_BITS_MAX as f64,
+        )?;
         check_range(&f("noise_std"), self.noise_std, 0.0, 1e9)?;
         check_range(&f("offset"), self.offset, -1e9, 1e9)?;
         check_range(&f("bandwidth_hz"), self.bandwidth_hz, 0.0, 1e7)?;
@@ -174,19 +180,145 @@ impl Rng {
     }
 }
 
-/// Offsets left on the accelerometer by each impact: random sign, magnitude
+/// Offset left on the accelerometer by an impact: random sign, magnitude
 /// between 0.5 and 1.5 times the configured amplitude.
-pub fn zero_shift_offsets(amplitude: f64, impacts: &[EventRecord], rng: &mut Rng) -> Vec<(f64, f64)> {
-    impacts
-        .iter()
-        .map(|e| {
-            let sign = if rng.next_u64() & 1 == 0 { 1.0 } else { -1.0 };
-            (e.t_s, sign * amplitude * (0.5 + rng.uniform()))
-        })
-        .collect()
+pub fn zero_shift_offset(amplitude: f64, rng: &mut Rng) -> f64 {
+    let sign = if rng.next_u64() & 1 == 0 { 1.0 } else { -1.0 };
+    sign * amplitude * (0.5 + rng.uniform())
 }
 
-/// Applies the sensor chain to the truth.
+/// One channel's state from sample to sample: its own noise stream, so a
+/// channel's noise does not depend on how long the others ran (a streamed
+/// run draws sample by sample, channel after channel).
+struct ChannelState {
+    alpha: f64,
+    /// Filter output; `None` until the first sample starts it at rest.
+    state: Option<f64>,
+    rng: Rng,
+    clipped: usize,
+}
+
+impl ChannelState {
+    fn new(ch: &SensorChannel, dt_s: f64, seed: u64) -> Self {
+        let alpha = if ch.bandwidth_hz > 0.0 {
+            1.0 - (-2.0 * std::f64::consts::PI * ch.bandwidth_hz * dt_s).exp()
+        } else {
+            1.0
+        };
+        Self {
+            alpha,
+            state: None,
+            rng: Rng::new(seed),
+            clipped: 0,
+        }
+    }
+
+    fn measure(&mut self, ch: &SensorChannel, enabled: bool, x: f64) -> f64 {
+        if !enabled {
+            return x;
+        }
+        let state = self.state.get_or_insert(x + ch.offset);
+        *state += self.alpha * (x + ch.offset - *state);
+        let code = ch.code(*state + ch.noise_std * self.rng.normal());
+        if code == 0 || code == ch.full_scale_code() {
+            self.clipped += 1;
+        }
+        ch.value(code)
+    }
+}
+
+/// An accelerometer offset left by an impact, applied on `first..end` samples.
+struct ZeroShift {
+    t_impact_s: f64,
+    offset_mps2: f64,
+    first: usize,
+    end: usize,
+}
+
+/// The sensor chain applied sample by sample, so it can follow a run as it
+/// is produced; [`measure`] runs it over a whole trace.
+pub struct SensorChain {
+    model: SensorModel,
+    dt_s: f64,
+    gain_rear: f64,
+    gain_front: f64,
+    zero_shift: Option<(f64, f64)>,
+    zero_shift_rng: Rng,
+    shifts: Vec<ZeroShift>,
+    channels: [ChannelState; 3],
+}
+
+impl SensorChain {
+    pub fn new(model: &SensorModel, effects: &Effects, dt_s: f64, seed: u64) -> Self {
+        let (gain_rear, gain_front) = effects
+            .pressure_gain_error
+            .as_ref()
+            .map_or((0.0, 0.0), |g| (g.rear, g.front));
+        let base = seed ^ 0x5EED_5E45_0000_0001;
+        Self {
+            model: model.clone(),
+            dt_s,
+            gain_rear,
+            gain_front,
+            zero_shift: effects.accel_zero_shift.as_ref().map(|z| (z.amplitude_mps2, z.tau_s)),
+            zero_shift_rng: Rng::new(base),
+            shifts: Vec::new(),
+            channels: [
+                ChannelState::new(&model.rear, dt_s, base ^ 0x0000_0000_0000_0100),
+                ChannelState::new(&model.front, dt_s, base ^ 0x0000_0000_0000_0200),
+                ChannelState::new(&model.accel, dt_s, base ^ 0x0000_0000_0000_0300),
+            ],
+        }
+    }
+
+    /// An impact at `t_impact_s`: with `accel_zero_shift` on, the accelerometer
+    /// carries a decaying offset from the first sample at or after it for ~10 τ.
+    pub fn impact(&mut self, t_impact_s: f64) {
+        if let Some((amplitude, tau_s)) = self.zero_shift {
+            let first = (t_impact_s / self.dt_s).ceil() as usize;
+            self.shifts.push(ZeroShift {
+                t_impact_s,
+                offset_mps2: zero_shift_offset(amplitude, &mut self.zero_shift_rng),
+                first,
+                end: first + (10.0 * tau_s / self.dt_s) as usize,
+            });
+        }
+    }
+
+    /// The measured rear, front and accel values of one truth sample.
+    pub fn measure(&mut self, s: &TruthSample) -> [f64; 3] {
+        let mut accel = s.accel_mps2;
+        if let Some((_, tau_s)) = self.zero_shift {
+            self.shifts.retain(|z| z.end > s.index);
+            // Impacts come in time order, so the offsets started so far lead the list.
+            for z in self.shifts.iter().take_while(|z| z.first <= s.index) {
+                accel += z.offset_mps2 * (-(s.t_s - z.t_impact_s) / tau_s).exp();
+            }
+        }
+        let m = &self.model;
+        let [rear, front, acc] = &mut self.channels;
+        [
+            rear.measure(&m.rear, m.enabled, s.p_rear_pa * (1.0 + self.gain_rear)),
+            front.measure(&m.front, m.enabled, s.p_front_pa * (1.0 + self.gain_front)),
+            acc.measure(&m.accel, m.enabled, accel),
+        ]
+    }
+
+    /// Samples at either end of the ADC range so far: rear, front, accel.
+    pub fn clipped(&self) -> [usize; 3] {
+        self.channels.each_ref().map(|c| c.clipped)
+    }
+}
+
+impl Measured {
+    pub fn push(&mut self, m: [f64; 3]) {
+        self.p_rear_pa.push(m[0]);
+        self.p_front_pa.push(m[1]);
+        self.accel_mps2.push(m[2]);
+    }
+}
+
+/// Applies the sensor chain to a whole truth trace.
 pub fn measure(
     model: &SensorModel,
     effects: &Effects,
@@ -194,65 +326,18 @@ pub fn measure(
     impacts: &[EventRecord],
     seed: u64,
 ) -> Measured {
-    let mut rng = Rng::new(seed ^ 0x5EED_5E45_0000_0001);
-    let (g_rear, g_front) = effects
-        .pressure_gain_error
-        .as_ref()
-        .map_or((0.0, 0.0), |g| (g.rear, g.front));
-    let shifts = effects
-        .accel_zero_shift
-        .as_ref()
-        .map(|z| (zero_shift_offsets(z.amplitude_mps2, impacts, &mut rng), z.tau_s));
-
-    let mut accel_in = truth.accel_mps2.clone();
-    if let Some((offsets, tau)) = &shifts {
-        // Superpose decaying offsets; each impact's lasts ~10 τ.
-        for &(t_imp, off) in offsets {
-            let i0 = (t_imp / truth.dt_s).ceil() as usize;
-            let i1 = (i0 + (10.0 * tau / truth.dt_s) as usize).min(accel_in.len());
-            for (i, a) in accel_in.iter_mut().enumerate().take(i1).skip(i0) {
-                *a += off * (-(truth.t_s[i] - t_imp) / tau).exp();
-            }
-        }
+    let mut chain = SensorChain::new(model, effects, truth.dt_s, seed);
+    // Offsets only reach samples at or after their impact, so telling the
+    // chain of every impact first is what a streamed run does too.
+    for e in impacts {
+        chain.impact(e.t_s);
     }
-    let rear_in: Vec<f64> = truth.p_rear_pa.iter().map(|p| p * (1.0 + g_rear)).collect();
-    let front_in: Vec<f64> = truth.p_front_pa.iter().map(|p| p * (1.0 + g_front)).collect();
-
     let mut m = Measured::default();
-    let (p_rear_pa, c0) = channel(&model.rear, model.enabled, &rear_in, truth.dt_s, &mut rng);
-    let (p_front_pa, c1) = channel(&model.front, model.enabled, &front_in, truth.dt_s, &mut rng);
-    let (accel_mps2, c2) = channel(&model.accel, model.enabled, &accel_in, truth.dt_s, &mut rng);
-    m.p_rear_pa = p_rear_pa;
-    m.p_front_pa = p_front_pa;
-    m.accel_mps2 = accel_mps2;
-    m.clipped = [c0, c1, c2];
-    m
-}
-
-fn channel(ch: &SensorChannel, enabled: bool, input: &[f64], dt: f64, rng: &mut Rng) -> (Vec<f64>, usize) {
-    if !enabled {
-        return (input.to_vec(), 0);
+    for i in 0..truth.len() {
+        m.push(chain.measure(&truth.sample(i)));
     }
-    let alpha = if ch.bandwidth_hz > 0.0 {
-        1.0 - (-2.0 * std::f64::consts::PI * ch.bandwidth_hz * dt).exp()
-    } else {
-        1.0
-    };
-    let mut state = input.first().copied().unwrap_or(0.0) + ch.offset;
-    let mut clipped = 0;
-    let top = ch.full_scale_code();
-    let out = input
-        .iter()
-        .map(|&x| {
-            state += alpha * (x + ch.offset - state);
-            let code = ch.code(state + ch.noise_std * rng.normal());
-            if code == 0 || code == top {
-                clipped += 1;
-            }
-            ch.value(code)
-        })
-        .collect();
-    (out, clipped)
+    m.clipped = chain.clipped();
+    m
 }
 
 #[cfg(test)]
@@ -262,13 +347,46 @@ mod tests {
     #[test]
     fn codes_round_trip_and_clip() {
         let ch = SensorModel::default().rear;
-        // The range reaches below atmosphere: a small vacuum is a code, a deep one the rail.
-        assert!(ch.code(-5.0) > 0);
+        // The default range starts at −1 bar gauge.
         assert_eq!(ch.code(-2e5), 0);
+        assert_eq!(ch.code(0.0), 372);
         assert_eq!(ch.code(2e6), 4095);
         assert_eq!(ch.code(f64::NAN), 0);
         let v = ch.value(ch.code(3.21e5));
         assert!((v - 3.21e5).abs() <= ch.lsb() / 2.0 + 1e-9);
+    }
+
+    /// The simulator writes no trace the estimator would refuse: the same
+    /// resolutions pass both, and a refusal names the key of the config file.
+    #[test]
+    fn adc_resolution_is_refused_where_the_estimator_refuses_it() {
+        for bits in [4, 7, 8, 12, 16, 17, 24, 32] {
+            for ch in ["rear", "front", "accel"] {
+                let mut m = SensorModel::default();
+                match ch {
+                    "rear" => m.rear.adc_bits = bits,
+                    "front" => m.front.adc_bits = bits,
+                    _ => m.accel.adc_bits = bits,
+                }
+                let sim = m.validate();
+                let est = crate::estimation::estimator_config(
+                    &crate::params::HammerParams::default(),
+                    &m,
+                    &Default::default(),
+                    1e5,
+                    None,
+                );
+                assert_eq!(sim.is_ok(), est.is_ok(), "{ch} {bits} bits: {sim:?} vs {est:?}");
+                assert_eq!(sim.is_ok(), (8..=16).contains(&bits), "{ch} {bits}");
+                if let Err(e) = sim {
+                    let msg = e.to_string();
+                    assert!(
+                        msg.contains(&format!("sensors.{ch}.adc_bits = {bits}")) && msg.contains("8 ..= 16"),
+                        "{msg}"
+                    );
+                }
+            }
+        }
     }
 
     #[test]

@@ -4,11 +4,15 @@ use std::fmt::Write as _;
 
 use serde::{Deserialize, Serialize};
 
-use crate::run::{simulate_truth, CycleTruth, MassBalance, SimRun};
-use crate::sensor::{measure, Measured};
+use std::path::Path;
+
+use crate::run::{
+    run_model, CycleTruth, EventRecord, MassBalance, RunError, RunSummary, SimRun, TruthSample, TruthSink, TruthTrace,
+};
+use crate::sensor::{Measured, SensorChain};
 use crate::solver::{SolverError, SolverStats};
 use crate::SimConfig;
-use hammer_trace::trace::{read_sidecar_as, Trace, TraceError};
+use hammer_trace::trace::{read_sidecar_as, write_sidecar, CsvWriter, Trace, TraceError};
 
 /// Everything the simulator knows about a trace it wrote: the sidecar's
 /// `simulation` object.
@@ -38,20 +42,160 @@ pub struct Simulation {
     pub measured: Measured,
 }
 
-pub fn simulate(config: &SimConfig) -> Result<Simulation, SolverError> {
-    let run = simulate_truth(config)?;
-    let measured = measure(
+/// Why a simulation streamed to a file stopped.
+#[derive(Debug, thiserror::Error)]
+pub enum SimulateError {
+    #[error(transparent)]
+    Solver(#[from] SolverError),
+    #[error(transparent)]
+    Output(#[from] TraceError),
+}
+
+/// The truth columns a simulated trace carries beside the measured channels,
+/// by their CSV names: the one list both the in-memory trace and the file use.
+const TRUTH_COLUMNS: [(&str, fn(&TruthSample) -> f64); 7] = [
+    ("x_m", |s| s.x_m),
+    ("v_mps", |s| s.v_mps),
+    ("valve_m", |s| s.valve_m),
+    ("p_rear_true_pa", |s| s.p_rear_pa),
+    ("p_front_true_pa", |s| s.p_front_pa),
+    ("accel_true_mps2", |s| s.accel_mps2),
+    ("friction_true_n", |s| s.friction_n),
+];
+
+/// [`TRUTH_COLUMNS`] in the order a trace's columns are written (by name, as
+/// [`Trace::extra`] keeps them).
+fn truth_columns_in_file_order() -> [(&'static str, fn(&TruthSample) -> f64); 7] {
+    let mut c = TRUTH_COLUMNS;
+    c.sort_by_key(|c| c.0);
+    c
+}
+
+/// Where measured samples go: kept in memory or written as trace rows.
+trait MeasuredSink {
+    type Error;
+    fn sample(&mut self, truth: &TruthSample, measured: [f64; 3]) -> Result<(), Self::Error>;
+}
+
+/// The run's samples through the sensor chain into a [`MeasuredSink`].
+struct Measuring<O> {
+    chain: SensorChain,
+    out: O,
+}
+
+impl<O: MeasuredSink> TruthSink for Measuring<O> {
+    type Error = O::Error;
+    fn sample(&mut self, s: &TruthSample) -> Result<(), O::Error> {
+        let m = self.chain.measure(s);
+        self.out.sample(s, m)
+    }
+    fn impact(&mut self, e: &EventRecord) -> Result<(), O::Error> {
+        self.chain.impact(e.t_s);
+        Ok(())
+    }
+}
+
+struct InMemory {
+    truth: TruthTrace,
+    measured: Measured,
+}
+
+impl MeasuredSink for InMemory {
+    type Error = std::convert::Infallible;
+    fn sample(&mut self, truth: &TruthSample, measured: [f64; 3]) -> Result<(), Self::Error> {
+        self.truth.push(truth);
+        self.measured.push(measured);
+        Ok(())
+    }
+}
+
+struct CsvSink {
+    w: CsvWriter,
+    columns: [(&'static str, fn(&TruthSample) -> f64); 7],
+}
+
+impl MeasuredSink for CsvSink {
+    type Error = TraceError;
+    fn sample(&mut self, truth: &TruthSample, m: [f64; 3]) -> Result<(), TraceError> {
+        self.w
+            .row(truth.t_s, m[0], m[1], m[2], self.columns.iter().map(|(_, f)| f(truth)))
+    }
+}
+
+/// Runs `config` through the model and the sensor chain into `out`.
+fn run_measured<O: MeasuredSink>(
+    config: &SimConfig,
+    out: O,
+) -> Result<(RunSummary, O, [usize; 3]), RunError<O::Error>> {
+    let chain = SensorChain::new(
         &config.sensors,
         &config.effects,
-        &run.truth,
-        &run.events.impacts,
+        config.solver.output_step_s,
         config.seed,
     );
+    let mut sink = Measuring { chain, out };
+    let summary = run_model(config, &mut sink)?;
+    let clipped = sink.chain.clipped();
+    Ok((summary, sink.out, clipped))
+}
+
+/// A simulation kept whole in memory (tests, figures, diagnosis).
+pub fn simulate(config: &SimConfig) -> Result<Simulation, SolverError> {
+    let out = InMemory {
+        truth: TruthTrace::with_capacity_for(config),
+        measured: Measured::default(),
+    };
+    let (summary, out, clipped) = run_measured(config, out).map_err(|e| match e {
+        RunError::Solver(e) => e,
+        RunError::Sink(never) => match never {},
+    })?;
+    let mut measured = out.measured;
+    measured.clipped = clipped;
     Ok(Simulation {
         config: config.clone(),
-        run,
+        run: SimRun {
+            truth: out.truth,
+            events: summary.events,
+            cycles: summary.cycles,
+            mass_balance: summary.mass_balance,
+            stats: summary.stats,
+        },
         measured,
     })
+}
+
+/// With no trace to write the samples are dropped as they are made.
+impl<O: MeasuredSink> MeasuredSink for Option<O> {
+    type Error = O::Error;
+    fn sample(&mut self, truth: &TruthSample, measured: [f64; 3]) -> Result<(), O::Error> {
+        self.as_mut().map_or(Ok(()), |o| o.sample(truth, measured))
+    }
+}
+
+/// A simulation streamed as it runs into the trace `out` and its sidecar (or
+/// nowhere): memory stays bounded however long the run, only the cycles are
+/// kept. The files are the ones [`Simulation::trace`] and
+/// [`Simulation::sidecar`] would give for the same config.
+pub fn simulate_to_file(config: &SimConfig, out: Option<&Path>) -> Result<SimulationInfo, SimulateError> {
+    let columns = truth_columns_in_file_order();
+    let names = columns.map(|c| c.0);
+    let sink = match out {
+        Some(path) => Some(CsvSink {
+            w: CsvWriter::create(path, &names)?,
+            columns,
+        }),
+        None => None,
+    };
+    let (summary, sink, clipped) = run_measured(config, sink).map_err(|e| match e {
+        RunError::Solver(e) => SimulateError::Solver(e),
+        RunError::Sink(e) => SimulateError::Output(e),
+    })?;
+    let info = SimulationInfo::new(config, summary.cycles, summary.mass_balance, summary.stats, clipped);
+    if let (Some(sink), Some(path)) = (sink, out) {
+        sink.w.finish()?;
+        write_sidecar(path, &info.sidecar())?;
+    }
+    Ok(info)
 }
 
 impl Simulation {
@@ -67,41 +211,74 @@ impl Simulation {
             extra: Default::default(),
             gaps: Vec::new(),
         };
-        for (name, col) in [
-            ("x_m", &t.x_m),
-            ("v_mps", &t.v_mps),
-            ("valve_m", &t.valve_m),
-            ("p_rear_true_pa", &t.p_rear_pa),
-            ("p_front_true_pa", &t.p_front_pa),
-            ("accel_true_mps2", &t.accel_mps2),
-            ("friction_true_n", &t.friction_n),
-        ] {
-            trace.extra.insert(name.to_string(), col.clone());
+        for (name, f) in TRUTH_COLUMNS {
+            let col = (0..t.len()).map(|i| f(&t.sample(i))).collect();
+            trace.extra.insert(name.to_string(), col);
         }
         trace
     }
 
+    /// What the sidecar records about this run.
+    pub fn info(&self) -> SimulationInfo {
+        SimulationInfo::new(
+            &self.config,
+            self.run.cycles.clone(),
+            self.run.mass_balance,
+            self.run.stats,
+            self.measured.clipped,
+        )
+    }
+
+    pub fn sidecar(&self) -> Sidecar {
+        self.info().sidecar()
+    }
+
+    /// Cycles after the start-up transient (the first 0.1 s and the first two impacts).
+    pub fn steady_cycles(&self) -> &[CycleTruth] {
+        steady(&self.run.cycles)
+    }
+
+    /// A human-readable cycle summary.
+    pub fn summary(&self) -> String {
+        self.info().summary()
+    }
+}
+
+fn steady(c: &[CycleTruth]) -> &[CycleTruth] {
+    let first = c
+        .iter()
+        .position(|c| c.t_impact_s > 0.1 && c.index >= 2)
+        .unwrap_or(c.len());
+    &c[first..]
+}
+
+impl SimulationInfo {
+    fn new(
+        config: &SimConfig,
+        cycles: Vec<CycleTruth>,
+        mass_balance: MassBalance,
+        solver: SolverStats,
+        clipped_samples: [usize; 3],
+    ) -> Self {
+        Self {
+            active_effects: config.effects.active().iter().map(|s| s.to_string()).collect(),
+            config: config.clone(),
+            cycles,
+            mass_balance,
+            solver,
+            clipped_samples,
+        }
+    }
+
     pub fn sidecar(&self) -> Sidecar {
         let mut s = Sidecar::new(Some(self.config.supply.pressure_bar), "simulator");
-        s.simulation = Some(SimulationInfo {
-            active_effects: self.config.effects.active().iter().map(|s| s.to_string()).collect(),
-            config: self.config.clone(),
-            cycles: self.run.cycles.clone(),
-            mass_balance: self.run.mass_balance,
-            solver: self.run.stats,
-            clipped_samples: self.measured.clipped,
-        });
+        s.simulation = Some(self.clone());
         s
     }
 
     /// Cycles after the start-up transient (the first 0.1 s and the first two impacts).
     pub fn steady_cycles(&self) -> &[CycleTruth] {
-        let c = &self.run.cycles;
-        let first = c
-            .iter()
-            .position(|c| c.t_impact_s > 0.1 && c.index >= 2)
-            .unwrap_or(c.len());
-        &c[first..]
+        steady(&self.cycles)
     }
 
     /// A human-readable cycle summary.
@@ -124,7 +301,7 @@ impl Simulation {
             "{:>3} {:>9} {:>8} {:>8} {:>7} {:>7} {:>8} {:>8} {:>8} {:>8} {:>8}",
             "#", "t_imp_s", "v_mps", "E_j", "f_hz", "stroke", "Ffr_s_n", "Ffr_b_n", "Wfr_j", "p1max", "p2max"
         );
-        for c in &self.run.cycles {
+        for c in &self.cycles {
             let _ = writeln!(
                 s,
                 "{:>3} {:>9.5} {:>8.4} {:>8.4} {:>7.3} {:>5.2}mm {:>8.3} {:>8.3} {:>8.4} {:>6.3}b {:>6.3}b",
@@ -156,12 +333,84 @@ impl Simulation {
                 100.0 * mean(|c| c.friction_work_stroke_j) / mean(|c| c.impact_energy_j)
             );
         }
-        let st = &self.run.stats;
+        let st = &self.solver;
         let _ = writeln!(
             s,
             "solver: {} steps ({} rejected, {} stiff), {} restarts, {} rhs evaluations; clipped samples rear/front/accel: {:?}",
-            st.accepted_steps, st.rejected_steps, st.stiff_steps, st.restarts, st.rhs_evaluations, self.measured.clipped
+            st.accepted_steps, st.rejected_steps, st.stiff_steps, st.restarts, st.rhs_evaluations, self.clipped_samples
         );
         s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sensor::measure;
+    use hammer_trace::trace::write_csv;
+
+    fn short_run_with_sensor_effects() -> SimConfig {
+        let mut cfg = SimConfig::nominal(5.0);
+        cfg.solver.duration_s = 0.2;
+        cfg.seed = 11;
+        cfg.effects.apply_spec("accel_zero_shift").unwrap();
+        cfg.effects.apply_spec("pressure_gain_error:rear=0.03").unwrap();
+        cfg.effects.apply_spec("coulomb_friction").unwrap();
+        cfg
+    }
+
+    /// The streamed files are byte for byte what the in-memory path writes.
+    #[test]
+    fn streamed_trace_and_sidecar_equal_the_in_memory_ones() {
+        let cfg = short_run_with_sensor_effects();
+        let dir = std::env::temp_dir().join(format!("hammer-sim-stream-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let (mem, streamed) = (dir.join("mem.csv"), dir.join("streamed.csv"));
+        let sim = simulate(&cfg).unwrap();
+        write_csv(&mem, &sim.trace()).unwrap();
+        write_sidecar(&mem, &sim.sidecar()).unwrap();
+        let info = simulate_to_file(&cfg, Some(&streamed)).unwrap();
+        assert!(info.cycles.len() >= 3 && info.clipped_samples[2] > 0, "{info:?}");
+        assert_eq!(info, sim.info());
+        for ext in ["csv", "json"] {
+            let a = std::fs::read(mem.with_extension(ext)).unwrap();
+            let b = std::fs::read(streamed.with_extension(ext)).unwrap();
+            assert!(a.len() > 1000 && a == b, "{ext} differs");
+        }
+        // Without a file the same run gives the same record.
+        assert_eq!(simulate_to_file(&cfg, None).unwrap(), info);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// The sensor chain over a stored trace is the one that followed the run.
+    #[test]
+    fn measuring_a_stored_truth_repeats_the_streamed_measurement() {
+        let cfg = short_run_with_sensor_effects();
+        let sim = simulate(&cfg).unwrap();
+        let again = measure(
+            &cfg.sensors,
+            &cfg.effects,
+            &sim.run.truth,
+            &sim.run.events.impacts,
+            cfg.seed,
+        );
+        assert_eq!(again.accel_mps2, sim.measured.accel_mps2);
+        assert_eq!(again.p_rear_pa, sim.measured.p_rear_pa);
+        assert_eq!(again.clipped, sim.measured.clipped);
+        // And the zero shift is really there: measured minus truth after an impact.
+        let imp = sim.run.events.impacts[2].t_s;
+        let i = (imp / sim.run.truth.dt_s) as usize + 200;
+        assert!((sim.measured.accel_mps2[i] - sim.run.truth.accel_mps2[i]).abs() > 5.0);
+    }
+
+    /// A write failure ends the run with the path in the error, not a panic.
+    #[test]
+    fn an_unwritable_trace_is_an_error() {
+        let cfg = short_run_with_sensor_effects();
+        let e = simulate_to_file(&cfg, Some(Path::new("/nonexistent-dir/run.csv"))).unwrap_err();
+        assert!(
+            matches!(e, SimulateError::Output(_)) && e.to_string().contains("/nonexistent-dir/run.csv"),
+            "{e}"
+        );
     }
 }

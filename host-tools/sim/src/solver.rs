@@ -99,6 +99,20 @@ pub struct SolverStats {
     pub stiff_steps: u64,
 }
 
+/// The smallest step the integrator takes, s. Absolute, not relative to t:
+/// an event found a picosecond into a step needs a picosecond step at t = 400 s
+/// as much as at t = 0.4 s, and a floor growing with t made long runs fail
+/// with an underflow that short runs never see. It stays above half an ulp of
+/// t for t < 1024 s, so every allowed step advances time (durations are at
+/// most 600 s; see `SolverParams`).
+pub const MIN_STEP_S: f64 = 1e-13;
+
+/// Whether a step of `h_s` from `t_s` is one the integrator can take: at
+/// least [`MIN_STEP_S`] and large enough to move t at all.
+pub fn step_is_representable(t_s: f64, h_s: f64) -> bool {
+    h_s >= MIN_STEP_S && t_s + h_s > t_s
+}
+
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum SolverError {
     #[error("step size underflow at t = {t_s} s (h = {h_s} s)")]
@@ -212,7 +226,7 @@ impl<const N: usize> Dopri5<N> {
             if last {
                 h = t_end - self.t;
             }
-            if !(h > 1e-14 * self.t.abs().max(1e-3)) {
+            if !step_is_representable(self.t, h) {
                 return Err(SolverError::StepUnderflow { t_s: self.t, h_s: h });
             }
             let t = self.t;
@@ -327,6 +341,27 @@ mod tests {
         assert!((s.y[0] - 10f64.cos()).abs() < 1e-7, "{}", s.y[0]);
         assert!(worst_dense < 1e-6, "dense output error {worst_dense}");
         assert!(s.stats.accepted_steps < 2000);
+    }
+
+    /// Late in a long run the solver must take the same tiny steps it takes
+    /// early on (a floor relative to t refused a 2 ps step at t = 500 s).
+    #[test]
+    fn tiny_steps_late_in_a_long_run_do_not_underflow() {
+        let sys = Oscillator;
+        for t0 in [0.5, 500.0, 599.0] {
+            let mut s = Dopri5::new(&sys, t0, [t0.cos(), -t0.sin()], 1e-9, [1e-12; 2], 2, 1e-3);
+            let d = s.step(&sys, t0 + 2e-12).unwrap_or_else(|e| panic!("t0 = {t0}: {e}"));
+            assert_eq!(s.t, t0 + 2e-12);
+            assert!(d.h > 0.0);
+            while s.t < t0 + 1.0 {
+                s.step(&sys, t0 + 1.0).unwrap();
+            }
+            assert!((s.y[0] - (t0 + 1.0).cos()).abs() < 1e-6, "t0 = {t0}: {}", s.y[0]);
+        }
+        assert!(step_is_representable(599.0, 1e-12) && step_is_representable(0.0, 1e-12));
+        // Below the floor, or too small to move t: refused, not looped on.
+        assert!(!step_is_representable(0.0, 1e-14));
+        assert!(!step_is_representable(1e6, 1e-12));
     }
 
     #[test]

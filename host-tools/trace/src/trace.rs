@@ -87,32 +87,93 @@ pub enum TraceError {
 }
 
 pub fn write_csv(path: &Path, trace: &Trace) -> Result<(), TraceError> {
-    let io = |error| TraceError::Io {
-        path: path.display().to_string(),
-        error,
-    };
-    let mut w = BufWriter::new(File::create(path).map_err(io)?);
-    let mut header = REQUIRED_COLUMNS.join(",");
-    for k in trace.extra.keys() {
-        header.push(',');
-        header.push_str(k);
-    }
-    writeln!(w, "{header}").map_err(io)?;
-    let mut line = String::with_capacity(256);
+    let names: Vec<&str> = trace.extra.keys().map(String::as_str).collect();
+    let mut w = CsvWriter::create(path, &names)?;
     for i in 0..trace.len() {
-        line.clear();
-        use std::fmt::Write as _;
-        let _ = write!(
-            line,
-            "{:.9},{},{},{}",
-            trace.t_s[i], trace.p_rear_pa[i], trace.p_front_pa[i], trace.accel_mps2[i]
-        );
-        for col in trace.extra.values() {
-            let _ = write!(line, ",{}", col[i]);
-        }
-        writeln!(w, "{line}").map_err(io)?;
+        w.row(
+            trace.t_s[i],
+            trace.p_rear_pa[i],
+            trace.p_front_pa[i],
+            trace.accel_mps2[i],
+            trace.extra.values().map(|col| col[i]),
+        )?;
     }
-    w.flush().map_err(io)
+    w.finish()
+}
+
+/// A trace CSV written row by row, so a producer that streams (a long
+/// simulation) needs no whole trace in memory; [`write_csv`] goes through it,
+/// so both write the same bytes.
+pub struct CsvWriter {
+    path: String,
+    w: BufWriter<File>,
+    extra_columns: usize,
+    /// Rows written so far (the header is line 1).
+    rows: usize,
+    line: String,
+}
+
+impl CsvWriter {
+    /// Creates `path` and writes the header: the required columns, then `extra` in the order given.
+    pub fn create(path: &Path, extra: &[&str]) -> Result<Self, TraceError> {
+        let p = path.display().to_string();
+        let file = File::create(path).map_err(|error| TraceError::Io { path: p.clone(), error })?;
+        let mut w = Self {
+            path: p,
+            w: BufWriter::new(file),
+            extra_columns: extra.len(),
+            rows: 0,
+            line: String::with_capacity(256),
+        };
+        let mut header = REQUIRED_COLUMNS.join(",");
+        for k in extra {
+            header.push(',');
+            header.push_str(k);
+        }
+        writeln!(w.w, "{header}").map_err(|e| w.io(e))?;
+        Ok(w)
+    }
+
+    fn io(&self, error: std::io::Error) -> TraceError {
+        TraceError::Io {
+            path: self.path.clone(),
+            error,
+        }
+    }
+
+    /// One row; `extra` must hold one value per extra column of the header.
+    pub fn row(
+        &mut self,
+        t_s: f64,
+        p_rear_pa: f64,
+        p_front_pa: f64,
+        accel_mps2: f64,
+        extra: impl IntoIterator<Item = f64>,
+    ) -> Result<(), TraceError> {
+        use std::fmt::Write as _;
+        self.line.clear();
+        let _ = write!(self.line, "{t_s:.9},{p_rear_pa},{p_front_pa},{accel_mps2}");
+        let mut n = 0;
+        for v in extra {
+            let _ = write!(self.line, ",{v}");
+            n += 1;
+        }
+        self.rows += 1;
+        if n != self.extra_columns {
+            return Err(TraceError::FieldCount {
+                path: self.path.clone(),
+                line: self.rows + 1,
+                expected: REQUIRED_COLUMNS.len() + self.extra_columns,
+                found: REQUIRED_COLUMNS.len() + n,
+            });
+        }
+        writeln!(self.w, "{}", self.line).map_err(|e| self.io(e))
+    }
+
+    /// Flushes the buffer: a full disk shows here, not as a silently short file.
+    pub fn finish(mut self) -> Result<(), TraceError> {
+        self.w.flush().map_err(|e| self.io(e))
+    }
 }
 
 /// Reads a whole trace into memory (report and diagnose need it whole;
