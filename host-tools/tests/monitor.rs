@@ -401,9 +401,17 @@ impl Tmux {
 
     /// `q`, then the process must exit 0 and leave the alternate screen.
     fn quit(&self) -> String {
+        self.quit_with(0)
+    }
+
+    /// `q`, then the process must exit with `code` and leave the alternate screen.
+    fn quit_with(&self, code: i32) -> String {
         self.keys("q");
         let s = self.wait_text("EXITED");
-        assert!(s.contains("EXITED 0"), "the dashboard did not exit cleanly:\n{s}");
+        assert!(
+            s.contains(&format!("EXITED {code}")),
+            "the dashboard did not exit with {code}:\n{s}"
+        );
         assert!(!s.contains("Link health"), "the terminal was not restored:\n{s}");
         s
     }
@@ -859,7 +867,9 @@ fn replay_reproduces_the_logged_reports() {
             .stderr(Stdio::piped()),
         );
         let (st, out, err) = r.finish(T);
-        assert!(st.success(), "{err}\n{out}");
+        // The recording holds the corrupted frame: shown, then a failure that names it.
+        assert_eq!(st.code(), Some(2), "{err}\n{out}");
+        assert!(err.contains("damaged recording: 1 bad frame ("), "{err}");
         (out, started.elapsed().as_secs_f64())
     };
     let (fast, fast_s) = replay("0");
@@ -890,7 +900,8 @@ fn replay_reproduces_the_logged_reports() {
     let errors = value_after(&s, "CRC errors").unwrap() + value_after(&s, "COBS errors").unwrap();
     assert_eq!(errors, 1, "{s}");
     assert_eq!(value_after(&s, "Seq gaps"), Some(0), "{s}");
-    tmux.quit();
+    let s = tmux.quit_with(2);
+    assert!(s.contains("damaged recording: 1 bad frame"), "{s}");
     println!(
         "replay test: {:.1} s (recording {recorded_s:.2} s, replay at speed 0 {fast_s:.2} s, at speed 2 {paced_s:.2} s)",
         t0.elapsed().as_secs_f64()

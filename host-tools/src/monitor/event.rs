@@ -65,6 +65,10 @@ pub enum Event {
     FrameError {
         kind: DecodeError,
         total: u64,
+        /// Where the bad frame began in the received byte stream (every
+        /// connection's bytes end to end, as frames.bin records them), so a
+        /// replay can name the spot in the file.
+        stream_offset: u64,
     },
     SeqGap {
         expected: u32,
@@ -160,7 +164,7 @@ pub fn describe(ev: &Event) -> Option<(Severity, String)> {
                  not interpreting its data (update the firmware or the host tools)"
             ),
         ),
-        Event::FrameError { kind, total } => (
+        Event::FrameError { kind, total, .. } => (
             Warn,
             format!(
                 "frame error: {} ({total} frame errors so far)",

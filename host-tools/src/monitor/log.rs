@@ -232,6 +232,13 @@ pub enum FrameFileError {
     Io(#[from] io::Error),
 }
 
+impl<R> FrameReader<R> {
+    /// File offset of the next record (after one, where its bytes ended).
+    pub fn offset(&self) -> u64 {
+        self.offset
+    }
+}
+
 impl<R: Read> FrameReader<R> {
     pub fn new(mut r: R) -> Result<Self, FrameFileError> {
         let mut magic = [0u8; 8];
