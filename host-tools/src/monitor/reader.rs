@@ -273,11 +273,20 @@ struct Reader {
 
 /// The logs first (they must not miss anything), then the screen, which may
 /// lag: it is never waited for, and what it missed is counted.
-fn deliver(logger: &mut Option<Logger>, tx: &SyncSender<Stamped>, ui_dropped: &mut u64, ev: Stamped) {
+fn deliver(logger: &mut Option<Logger>, tx: &SyncSender<Stamped>, ui_dropped: &mut u64, mut ev: Stamped) {
     if let Some(l) = logger {
+        if let Event::Stats(s) = &mut ev.event {
+            s.unlogged = l.unlogged();
+        }
         if let Err(e) = l.event(&ev) {
             give_up_logging(logger, tx, e);
         }
+    }
+    if let Some(news) = logger.as_mut().and_then(Logger::take_news) {
+        let _ = tx.try_send(Stamped {
+            t_us: ev.t_us,
+            event: Event::Note(news),
+        });
     }
     match tx.try_send(ev) {
         Ok(()) => {}
