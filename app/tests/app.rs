@@ -76,9 +76,16 @@ fn reports_are_the_estimators_and_a_capture_reassembles_one_cycle() {
         .windows(got.len())
         .position(|w| w == got.as_slice())
         .expect("capture is a slice of the input") as i64;
-    assert!((start - (closing - period)).abs() <= 1, "start {start}, impact {}", closing - period);
+    assert!(
+        (start - (closing - period)).abs() <= 1,
+        "start {start}, impact {}",
+        closing - period
+    );
     let want = period + hammer_app::monitor::CAPTURE_TAIL as i64;
-    assert!((total as i64 - want).abs() <= 2, "{total} vs one period {period} + tail");
+    assert!(
+        (total as i64 - want).abs() <= 2,
+        "{total} vs one period {period} + tail"
+    );
 }
 
 #[test]

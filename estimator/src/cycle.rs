@@ -135,7 +135,11 @@ impl Calibration {
             zero: [c.rear.zero_code, c.front.zero_code, c.accel.zero_code],
             scale: [c.rear.scale, c.front.scale, c.accel.scale],
             full: [c.rear.full_scale_code, c.front.full_scale_code, c.accel.full_scale_code],
-            bottom_is_fault: [c.rear.value(0) <= VACUUM_GAUGE_PA, c.front.value(0) <= VACUUM_GAUGE_PA, true],
+            bottom_is_fault: [
+                c.rear.value(0) <= VACUUM_GAUGE_PA,
+                c.front.value(0) <= VACUUM_GAUGE_PA,
+                true,
+            ],
         }
     }
 }
@@ -668,13 +672,7 @@ pub fn estimate(
             -d.a2 * 0.5 * t_end * t_end / m,
         ),
         (c.accel_spec.offset, m, -m, 0.0, 0.0),
-        (
-            clip_rear,
-            -d.a1,
-            d.a1,
-            d.a1 * t_end / m,
-            d.a1 * 0.5 * t_end * t_end / m,
-        ),
+        (clip_rear, -d.a1, d.a1, d.a1 * t_end / m, d.a1 * 0.5 * t_end * t_end / m),
         (
             clip_front,
             d.a2,

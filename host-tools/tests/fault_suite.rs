@@ -54,7 +54,10 @@ fn accel_code(cfg: &hammer_estimator::Config, a_mps2: f32) -> u16 {
 fn assert_valid_within_3u(name: &str, reports: &[CycleReport], truth: &[CycleTruth]) {
     for r in reports.iter().filter(|r| r.is_valid()) {
         let Some(t) = truth.iter().find(|c| (c.t_impact_s - r.t_impact_s).abs() < 2e-4) else {
-            panic!("{name}: cycle at {:.4} s reported valid, but no impact happened then", r.t_impact_s);
+            panic!(
+                "{name}: cycle at {:.4} s reported valid, but no impact happened then",
+                r.t_impact_s
+            );
         };
         let e_err = (r.impact_energy_j as f64 - t.impact_energy_j).abs();
         assert!(
@@ -98,7 +101,14 @@ fn clean_run_is_valid_and_within_3u() {
     let run = clean(|_| {});
     let reports = estimate(&run.codes, run.cfg);
     assert!(reports.len() >= 35);
-    assert!(reports.iter().skip(2).all(|r| r.is_valid()), "{:?}", reports.iter().map(|r| r.flags.names().collect::<Vec<_>>()).collect::<Vec<_>>());
+    assert!(
+        reports.iter().skip(2).all(|r| r.is_valid()),
+        "{:?}",
+        reports
+            .iter()
+            .map(|r| r.flags.names().collect::<Vec<_>>())
+            .collect::<Vec<_>>()
+    );
     assert_valid_within_3u("clean", &reports, &run.truth);
 }
 
@@ -144,14 +154,20 @@ fn every_persistent_accelerometer_fault_is_a_sensor_fault_within_one_period() {
         }),
         ("at the positive rail", inject(&run, |_, s| s.accel = full)),
         ("at the negative rail", inject(&run, |_, s| s.accel = 0)),
-        ("at half gain", inject(&run, |_, s| {
-            let a = (s.accel as f32 - cfg.accel.zero_code) * cfg.accel.scale;
-            s.accel = accel_code(&cfg, 0.5 * a);
-        })),
-        ("sign inverted", inject(&run, |_, s| {
-            let a = (s.accel as f32 - cfg.accel.zero_code) * cfg.accel.scale;
-            s.accel = accel_code(&cfg, -a);
-        })),
+        (
+            "at half gain",
+            inject(&run, |_, s| {
+                let a = (s.accel as f32 - cfg.accel.zero_code) * cfg.accel.scale;
+                s.accel = accel_code(&cfg, 0.5 * a);
+            }),
+        ),
+        (
+            "sign inverted",
+            inject(&run, |_, s| {
+                let a = (s.accel as f32 - cfg.accel.zero_code) * cfg.accel.scale;
+                s.accel = accel_code(&cfg, -a);
+            }),
+        ),
     ];
     for (name, codes) in faults {
         let reports = estimate(&codes, cfg);
@@ -165,11 +181,23 @@ fn every_persistent_accelerometer_fault_is_a_sensor_fault_within_one_period() {
             flagged.flags.names().collect::<Vec<_>>()
         );
         // Not a flood: at most a few records per expected period.
-        let during = reports.iter().filter(|r| r.t_impact_s > T_FAULT && r.t_impact_s < T_FAULT + FAULT_S).count();
-        assert!(during as f64 <= 3.0 * FAULT_S / period, "{name}: {during} records in {FAULT_S} s");
+        let during = reports
+            .iter()
+            .filter(|r| r.t_impact_s > T_FAULT && r.t_impact_s < T_FAULT + FAULT_S)
+            .count();
+        assert!(
+            during as f64 <= 3.0 * FAULT_S / period,
+            "{name}: {during} records in {FAULT_S} s"
+        );
         // And the estimator recovers once the fault is gone.
-        let after: Vec<_> = reports.iter().filter(|r| r.t_impact_s > T_FAULT + FAULT_S + 3.0 * period).collect();
-        assert!(after.len() >= 5 && after.iter().all(|r| r.is_valid()), "{name}: no recovery");
+        let after: Vec<_> = reports
+            .iter()
+            .filter(|r| r.t_impact_s > T_FAULT + FAULT_S + 3.0 * period)
+            .collect();
+        assert!(
+            after.len() >= 5 && after.iter().all(|r| r.is_valid()),
+            "{name}: no recovery"
+        );
     }
 }
 
@@ -179,7 +207,10 @@ fn a_chamber_below_atmosphere_is_neither_a_fault_nor_a_bias() {
     let reports = estimate(&run.codes, run.cfg);
     // The default transducers read below atmosphere: the vented chamber's dip is data.
     assert!(run.cfg.rear.value(0) < -0.5e5, "default range reaches below atmosphere");
-    assert!(reports.iter().skip(2).all(|r| !r.flags.intersects(Flags::SENSOR_FAULTS)));
+    assert!(reports
+        .iter()
+        .skip(2)
+        .all(|r| !r.flags.intersects(Flags::SENSOR_FAULTS)));
     assert_valid_within_3u("sub-atmospheric", &reports, &run.truth);
     // With 0–10 bar gauge transducers the dip clips: the cycles that clip
     // carry it in their uncertainty (or are flagged), never a silent bias.
@@ -188,6 +219,9 @@ fn a_chamber_below_atmosphere_is_neither_a_fault_nor_a_bias() {
         c.sensors.front.range_min = 0.0;
     });
     let reports = estimate(&gauge.codes, gauge.cfg);
-    assert!(reports.iter().skip(2).all(|r| !r.flags.contains(Flags::REAR_STUCK)), "a clipped dip is not a stuck sensor");
+    assert!(
+        reports.iter().skip(2).all(|r| !r.flags.contains(Flags::REAR_STUCK)),
+        "a clipped dip is not a stuck sensor"
+    );
     assert_valid_within_3u("clipped dip", &reports, &gauge.truth);
 }

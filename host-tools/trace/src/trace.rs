@@ -151,7 +151,11 @@ pub fn read_csv_from(input: impl BufRead, label: &str) -> Result<Trace, TraceErr
     // (Divided first where the span itself would overflow: times near f64's range.)
     let (first, last, slots) = (trace.t_s[0], trace.t_s[trace.t_s.len() - 1], u.slots() as f64);
     let span = last - first;
-    trace.dt_s = if span.is_finite() { span / slots } else { last / slots - first / slots };
+    trace.dt_s = if span.is_finite() {
+        span / slots
+    } else {
+        last / slots - first / slots
+    };
     trace.extra = extra_names.into_iter().zip(extra).collect();
     Ok(trace)
 }

@@ -6,7 +6,11 @@ fn main() {
     let a: Vec<String> = std::env::args().skip(1).collect();
     let dir = std::path::PathBuf::from(&a[0]);
     std::fs::create_dir_all(&dir).unwrap();
-    let s = if a[1] == "base" { Structure::BASE } else { Structure::singles()[a[1].parse::<usize>().unwrap()] };
+    let s = if a[1] == "base" {
+        Structure::BASE
+    } else {
+        Structure::singles()[a[1].parse::<usize>().unwrap()]
+    };
     let mut e = Effects::default();
     if a[2] == "1" {
         e.coulomb_friction = Some(CoulombFriction::default());
