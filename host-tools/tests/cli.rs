@@ -491,7 +491,12 @@ fn replay_of_a_damaged_recording_shows_the_good_frames_then_fails_naming_the_bad
         board: b"bench".iter().copied().collect(),
         config_hash: 7,
     }));
-    let report = |seq| wire_frame(&DeviceMsg::Report(Report { seq, ..Default::default() }));
+    let report = |seq| {
+        wire_frame(&DeviceMsg::Report(Report {
+            seq,
+            ..Default::default()
+        }))
+    };
     let opened = [&5u64.to_le_bytes()[..], &u32::MAX.to_le_bytes()].concat();
     let clean_part = [hello, report(0), report(1)].concat();
     let mut clean = [&b"HMFRAMES"[..], &opened, &bytes_record(6, &clean_part)].concat();
@@ -525,15 +530,25 @@ fn replay_of_a_damaged_recording_shows_the_good_frames_then_fails_naming_the_bad
     assert!(err.contains(&format!(" at byte {corrupt_at}")), "{err}");
     assert!(err.contains(&format!(" at byte {noise_at}")), "{err}");
     assert!(
-        err.contains(&format!("ends inside a frame ({} bytes from byte {cut_at})", cut.len() / 2 - 1)),
+        err.contains(&format!(
+            "ends inside a frame ({} bytes from byte {cut_at})",
+            cut.len() / 2 - 1
+        )),
         "{err}"
     );
-    assert!(out.contains("damaged recording: 2 bad frames"), "said on screen too:\n{out}");
+    assert!(
+        out.contains("damaged recording: 2 bad frames"),
+        "said on screen too:\n{out}"
+    );
 
     // A garbled end of file: half a record header.
     let garbled_path = dir.join("garbled.bin");
     let end = clean.len();
-    std::fs::write(&garbled_path, [&clean[..end - chunk.len() - 12], &[1, 2, 3, 4, 5]].concat()).unwrap();
+    std::fs::write(
+        &garbled_path,
+        [&clean[..end - chunk.len() - 12], &[1, 2, 3, 4, 5]].concat(),
+    )
+    .unwrap();
     let (code, out, err) = hammer(&["replay", garbled_path.to_str().unwrap(), "--headless", "--speed", "0"]);
     assert_eq!(code, 2, "{err}\n{out}");
     assert_eq!(replay_cycles(&out), [0, 1]);

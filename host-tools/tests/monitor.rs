@@ -945,11 +945,17 @@ fn the_log_size_cap_stops_logging_visibly_and_counts_what_it_kept_out() {
     let (st, out, err) = child.finish(T);
     assert!(st.success(), "{err}\n{out}");
     assert_eq!(report_lines(&out).len(), n as usize, "{out}");
-    assert!(out.contains("logging stopped: the logs reached their size cap of 0.03 MB"), "{out}");
+    assert!(
+        out.contains("logging stopped: the logs reached their size cap of 0.03 MB"),
+        "{out}"
+    );
     assert!(out.contains("not logged (log size cap reached): "), "{out}");
 
     let link = read(&dir.join("link.log"));
-    assert!(link.contains("logging stopped: the logs reached their size cap"), "{link}");
+    assert!(
+        link.contains("logging stopped: the logs reached their size cap"),
+        "{link}"
+    );
     let last = link.lines().last().unwrap();
     let counts: Vec<u64> = last
         .split_once("not logged after the size cap: ")
@@ -975,7 +981,11 @@ fn the_log_size_cap_stops_logging_visibly_and_counts_what_it_kept_out() {
             logged += u64::from(len);
         }
     }
-    assert_eq!(logged + unlogged_bytes, peer.sent, "every received byte is in frames.bin or counted");
+    assert_eq!(
+        logged + unlogged_bytes,
+        peer.sent,
+        "every received byte is in frames.bin or counted"
+    );
     let total: u64 = ["frames.bin", "cycles.csv", "link.log"]
         .iter()
         .map(|f| std::fs::metadata(dir.join(f)).unwrap().len())
@@ -1018,7 +1028,11 @@ fn a_headless_monitor_says_when_reports_stall_and_resume() {
     let out = lines.rest();
     assert!(st.success(), "{err}\n{out}");
     let at = |pred: &dyn Fn(&str) -> bool| -> Vec<usize> {
-        out.lines().enumerate().filter(|(_, l)| pred(l)).map(|(i, _)| i).collect()
+        out.lines()
+            .enumerate()
+            .filter(|(_, l)| pred(l))
+            .map(|(i, _)| i)
+            .collect()
     };
     let alive = at(&|l| l.contains("stall: no reports") && l.contains("link alive"));
     let silent = at(&|l| l.contains("stall: no reports") && l.contains("no frames at all"));

@@ -52,7 +52,10 @@ fn sample_report() -> Report {
 #[test]
 fn golden_frames() {
     assert_eq!(PROTOCOL_VERSION, 1);
-    assert_eq!(hex(&frame(&HostMsg::Hello { protocol_version: 1 })), "000106016922de3600");
+    assert_eq!(
+        hex(&frame(&HostMsg::Hello { protocol_version: 1 })),
+        "000106016922de3600"
+    );
     assert_eq!(hex(&frame(&HostMsg::GetStatus)), "000605021b68a200");
     let block = SampleBlock {
         seq: 3,

@@ -270,10 +270,18 @@ mod tests {
         assert_eq!(s.event(at(5_100), &report(0.05)), None);
         assert_eq!(s.check(at(6_000)), None, "1 s is the least stall");
         // A status frame at 6.0 s: the link is alive.
-        let stats = |frames| Event::Stats(LinkStats { frames, ..Default::default() });
+        let stats = |frames| {
+            Event::Stats(LinkStats {
+                frames,
+                ..Default::default()
+            })
+        };
         s.event(at(6_000), &stats(5));
         let line = s.check(at(6_200)).expect("a stall");
-        assert!(line.contains("no reports for 1.1 s") && line.contains("link alive"), "{line}");
+        assert!(
+            line.contains("no reports for 1.1 s") && line.contains("link alive"),
+            "{line}"
+        );
         assert_eq!(s.check(at(6_400)), None, "once per stall");
         s.event(at(6_500), &stats(5));
         let line = s.check(at(7_100)).expect("the link went silent too");

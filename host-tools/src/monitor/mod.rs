@@ -131,7 +131,9 @@ pub fn run_with(connector: Box<dyn Connector>, args: &MonitorArgs) -> Result<()>
     }
     let max_bytes = (args.log_max_mb * 1e6) as u64;
     let logger = match &args.log {
-        Some(dir) => Some(log::Logger::open(dir, max_bytes).with_context(|| format!("cannot log to {}", dir.display()))?),
+        Some(dir) => {
+            Some(log::Logger::open(dir, max_bytes).with_context(|| format!("cannot log to {}", dir.display()))?)
+        }
         None => None,
     };
     let headless = args.headless || !std::io::stdout().is_terminal();

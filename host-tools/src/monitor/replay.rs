@@ -117,7 +117,9 @@ impl Damage {
             ));
         }
         if let Some((at, len)) = self.unterminated {
-            parts.push(format!("the recording ends inside a frame ({len} bytes from byte {at})"));
+            parts.push(format!(
+                "the recording ends inside a frame ({len} bytes from byte {at})"
+            ));
         }
         if let Some(e) = &self.file_error {
             parts.push(e.clone());
@@ -204,7 +206,9 @@ fn play<R: std::io::Read>(
         last_t = last_t.max(t_us);
         match rec {
             Record::Bytes { t_us, bytes } => {
-                chunks.0.push((ingest.stats().bytes, frames.offset() - bytes.len() as u64));
+                chunks
+                    .0
+                    .push((ingest.stats().bytes, frames.offset() - bytes.len() as u64));
                 ingest.feed(t_us, &bytes, &mut |ev| {
                     if let Event::FrameError {
                         kind, stream_offset, ..
