@@ -91,11 +91,9 @@ impl Stall {
                 self.quiet = Quiet::No;
             }
             Event::Disconnected { .. } => self.connected = false,
-            Event::Stats(s) => {
-                if s.frames != self.frames {
-                    self.frames = s.frames;
-                    self.last_frame = now;
-                }
+            Event::Stats(s) if s.frames != self.frames => {
+                self.frames = s.frames;
+                self.last_frame = now;
             }
             Event::Msg(DeviceMsg::Report(r)) => {
                 let gap = now.duration_since(self.since);
