@@ -47,7 +47,11 @@ fn main() {
                 .report;
             let s = &r.shrink;
             let best = &r.effects[0];
-            let fitted: Vec<String> = best.fitted.iter().map(|p| format!("{}={:.2}", p.key, p.value)).collect();
+            let fitted: Vec<String> = best
+                .fitted
+                .iter()
+                .map(|p| format!("{}={:.2}", p.key, p.value))
+                .collect();
             println!(
                 "{name:<26} hidden {hidden:<17} verdict {:<22} best {} ({:.0} %, score {:.0}) [{}]",
                 r.verdict.effects.join("+"),

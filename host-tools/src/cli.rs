@@ -33,6 +33,7 @@ pub enum Command {
     /// health; auto-reconnects; optional logs (decoded CSV, raw frames).
     Monitor(crate::monitor::MonitorArgs),
     /// Feed a raw-frame log (`frames.bin` from `monitor --log`) back through the dashboard.
+    /// A damaged recording is shown as far as it goes, then exits 2 naming the bad frames' byte offsets.
     Replay(crate::monitor::ReplayArgs),
     /// Ask a device for the raw samples of the next N cycles and write them in
     /// the project's trace format (CSV + sidecar).

@@ -530,3 +530,99 @@ fn output_failures_and_empty_traces_are_errors_not_panics_or_silence() {
         "{stderr}"
     );
 }
+
+/// One frames.bin record of received bytes (the format `hammer monitor --log` writes).
+fn bytes_record(t_us: u64, bytes: &[u8]) -> Vec<u8> {
+    [&t_us.to_le_bytes()[..], &(bytes.len() as u32).to_le_bytes(), bytes].concat()
+}
+
+fn wire_frame(m: &hammer_wire::DeviceMsg) -> Vec<u8> {
+    let mut buf = [0u8; hammer_wire::MAX_FRAME];
+    let n = hammer_wire::encode(m, &mut buf).unwrap();
+    buf[..n].to_vec()
+}
+
+fn replay_cycles(out: &str) -> Vec<u32> {
+    out.lines()
+        .filter_map(|l| l.strip_prefix("cycle "))
+        .map(|l| l.split_whitespace().next().unwrap().parse().unwrap())
+        .collect()
+}
+
+#[test]
+fn replay_of_a_damaged_recording_shows_the_good_frames_then_fails_naming_the_bad_ones() {
+    use hammer_wire::{DeviceInfo, DeviceMsg, Report, PROTOCOL_VERSION};
+    let dir = tmp_dir("replay-damage");
+    let hello = wire_frame(&DeviceMsg::Hello(DeviceInfo {
+        protocol_version: PROTOCOL_VERSION,
+        firmware_version: [1, 2, 3],
+        board: b"bench".iter().copied().collect(),
+        config_hash: 7,
+    }));
+    let report = |seq| {
+        wire_frame(&DeviceMsg::Report(Report {
+            seq,
+            ..Default::default()
+        }))
+    };
+    let opened = [&5u64.to_le_bytes()[..], &u32::MAX.to_le_bytes()].concat();
+    let clean_part = [hello, report(0), report(1)].concat();
+    let mut clean = [&b"HMFRAMES"[..], &opened, &bytes_record(6, &clean_part)].concat();
+    let clean_path = dir.join("clean.bin");
+    std::fs::write(&clean_path, &clean).unwrap();
+    let (code, out, err) = hammer(&["replay", clean_path.to_str().unwrap(), "--headless", "--speed", "0"]);
+    assert_eq!(code, 0, "{err}\n{out}");
+    assert_eq!(replay_cycles(&out), [0, 1]);
+    assert!(!out.contains("damaged") && !err.contains("damaged"), "{err}\n{out}");
+
+    // A second chunk: a report with a flipped byte, a good one, line noise, a
+    // good one, and a report cut off by the end of the recording.
+    let mut corrupt = report(2);
+    let mid = corrupt.len() / 2;
+    corrupt[mid] = corrupt[mid].wrapping_add(1).max(1);
+    let noise = [0x55u8; 7];
+    let cut = report(5);
+    let chunk = [&corrupt[..], &report(3), &noise, &report(4), &cut[..cut.len() / 2]].concat();
+    let chunk_at = clean.len() as u64 + 12;
+    clean.extend_from_slice(&bytes_record(7, &chunk));
+    let damaged_path = dir.join("damaged.bin");
+    std::fs::write(&damaged_path, &clean).unwrap();
+    let (code, out, err) = hammer(&["replay", damaged_path.to_str().unwrap(), "--headless", "--speed", "0"]);
+    assert_eq!(code, 2, "{err}\n{out}");
+    assert_eq!(replay_cycles(&out), [0, 1, 3, 4], "the good frames are shown:\n{out}");
+    // A bad frame begins after its leading delimiter.
+    let corrupt_at = chunk_at + 1;
+    let noise_at = chunk_at + (corrupt.len() + report(3).len()) as u64;
+    let cut_at = noise_at + (noise.len() + report(4).len()) as u64 + 1;
+    assert!(err.contains("damaged recording: 2 bad frames"), "{err}");
+    assert!(err.contains(&format!(" at byte {corrupt_at}")), "{err}");
+    assert!(err.contains(&format!(" at byte {noise_at}")), "{err}");
+    assert!(
+        err.contains(&format!(
+            "ends inside a frame ({} bytes from byte {cut_at})",
+            cut.len() / 2 - 1
+        )),
+        "{err}"
+    );
+    assert!(
+        out.contains("damaged recording: 2 bad frames"),
+        "said on screen too:\n{out}"
+    );
+
+    // A garbled end of file: half a record header.
+    let garbled_path = dir.join("garbled.bin");
+    let end = clean.len();
+    std::fs::write(
+        &garbled_path,
+        [&clean[..end - chunk.len() - 12], &[1, 2, 3, 4, 5]].concat(),
+    )
+    .unwrap();
+    let (code, out, err) = hammer(&["replay", garbled_path.to_str().unwrap(), "--headless", "--speed", "0"]);
+    assert_eq!(code, 2, "{err}\n{out}");
+    assert_eq!(replay_cycles(&out), [0, 1]);
+    assert!(
+        err.contains(&format!("cut short at byte {}", end - chunk.len() - 12)),
+        "{err}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

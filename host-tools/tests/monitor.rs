@@ -80,6 +80,8 @@ struct Peer<S: Read + Write = TcpStream> {
     stream: S,
     dec: Decoder<MAX_FRAME>,
     hellos: u32,
+    /// Bytes written to the dashboard.
+    sent: u64,
 }
 
 fn listen() -> (TcpListener, u16) {
@@ -116,6 +118,7 @@ impl<S: Read + Write> Peer<S> {
             stream,
             dec: Decoder::new(),
             hellos: 0,
+            sent: 0,
         }
     }
 
@@ -180,6 +183,7 @@ impl<S: Read + Write> Peer<S> {
 
     fn raw(&mut self, bytes: &[u8]) {
         self.stream.write_all(bytes).unwrap();
+        self.sent += bytes.len() as u64;
     }
 
     /// Reports at a hammer's pace (about 25 a second).
@@ -401,9 +405,17 @@ impl Tmux {
 
     /// `q`, then the process must exit 0 and leave the alternate screen.
     fn quit(&self) -> String {
+        self.quit_with(0)
+    }
+
+    /// `q`, then the process must exit with `code` and leave the alternate screen.
+    fn quit_with(&self, code: i32) -> String {
         self.keys("q");
         let s = self.wait_text("EXITED");
-        assert!(s.contains("EXITED 0"), "the dashboard did not exit cleanly:\n{s}");
+        assert!(
+            s.contains(&format!("EXITED {code}")),
+            "the dashboard did not exit with {code}:\n{s}"
+        );
         assert!(!s.contains("Link health"), "the terminal was not restored:\n{s}");
         s
     }
@@ -859,7 +871,9 @@ fn replay_reproduces_the_logged_reports() {
             .stderr(Stdio::piped()),
         );
         let (st, out, err) = r.finish(T);
-        assert!(st.success(), "{err}\n{out}");
+        // The recording holds the corrupted frame: shown, then a failure that names it.
+        assert_eq!(st.code(), Some(2), "{err}\n{out}");
+        assert!(err.contains("damaged recording: 1 bad frame ("), "{err}");
         (out, started.elapsed().as_secs_f64())
     };
     let (fast, fast_s) = replay("0");
@@ -890,11 +904,144 @@ fn replay_reproduces_the_logged_reports() {
     let errors = value_after(&s, "CRC errors").unwrap() + value_after(&s, "COBS errors").unwrap();
     assert_eq!(errors, 1, "{s}");
     assert_eq!(value_after(&s, "Seq gaps"), Some(0), "{s}");
-    tmux.quit();
+    let s = tmux.quit_with(2);
+    assert!(s.contains("damaged recording: 1 bad frame"), "{s}");
     println!(
         "replay test: {:.1} s (recording {recorded_s:.2} s, replay at speed 0 {fast_s:.2} s, at speed 2 {paced_s:.2} s)",
         t0.elapsed().as_secs_f64()
     );
+}
+
+/// A flood of reports into logs capped at 30 kB: logging stops at the cap,
+/// says so, and every received byte and report is logged or counted.
+#[test]
+fn the_log_size_cap_stops_logging_visibly_and_counts_what_it_kept_out() {
+    let f = fixture();
+    let dir = tmp_dir("log-cap");
+    let (listener, port) = listen();
+    let n = 400;
+    let child = spawn(
+        hammer(&[
+            "monitor",
+            "--port",
+            &format!("tcp:127.0.0.1:{port}"),
+            "--log",
+            dir.to_str().unwrap(),
+            "--log-max-mb",
+            "0.03",
+            "--headless",
+            "--exit-after-reports",
+            &n.to_string(),
+        ])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped()),
+    );
+    let mut peer = Peer::accept(&listener);
+    peer.handshake(PROTOCOL_VERSION);
+    for seq in 0..n {
+        let r = f.reports[seq as usize % f.reports.len()];
+        peer.send(&DeviceMsg::Report(Report { seq, ..r }));
+    }
+    let (st, out, err) = child.finish(T);
+    assert!(st.success(), "{err}\n{out}");
+    assert_eq!(report_lines(&out).len(), n as usize, "{out}");
+    assert!(
+        out.contains("logging stopped: the logs reached their size cap of 0.03 MB"),
+        "{out}"
+    );
+    assert!(out.contains("not logged (log size cap reached): "), "{out}");
+
+    let link = read(&dir.join("link.log"));
+    assert!(
+        link.contains("logging stopped: the logs reached their size cap"),
+        "{link}"
+    );
+    let last = link.lines().last().unwrap();
+    let counts: Vec<u64> = last
+        .split_once("not logged after the size cap: ")
+        .unwrap_or_else(|| panic!("no final count: {link}"))
+        .1
+        .split(", ")
+        .map(|p| p.split(' ').next().unwrap().parse().unwrap())
+        .collect();
+    let (unlogged_bytes, unlogged_reports) = (counts[0], counts[1]);
+    assert!(unlogged_reports > 0, "{link}");
+    assert_eq!(
+        csv_reports(&dir).len() as u64 + unlogged_reports,
+        u64::from(n),
+        "every report is in cycles.csv or counted"
+    );
+    let bin = std::fs::read(dir.join("frames.bin")).unwrap();
+    let (mut at, mut logged) = (8, 0u64);
+    while at < bin.len() {
+        let len = u32::from_le_bytes(bin[at + 8..at + 12].try_into().unwrap());
+        at += 12;
+        if len < 0xFFFF_FFFE {
+            at += len as usize;
+            logged += u64::from(len);
+        }
+    }
+    assert_eq!(
+        logged + unlogged_bytes,
+        peer.sent,
+        "every received byte is in frames.bin or counted"
+    );
+    let total: u64 = ["frames.bin", "cycles.csv", "link.log"]
+        .iter()
+        .map(|f| std::fs::metadata(dir.join(f)).unwrap().len())
+        .sum();
+    assert!(total <= 30_000 + 600, "{total} bytes of logs under a 30 kB cap");
+}
+
+/// A headless monitor says when reports stop (link alive, then silent) and
+/// when they come back, once each.
+#[test]
+fn a_headless_monitor_says_when_reports_stall_and_resume() {
+    let f = fixture();
+    let (listener, port) = listen();
+    let mut child = spawn(
+        hammer(&[
+            "monitor",
+            "--port",
+            &format!("tcp:127.0.0.1:{port}"),
+            "--headless",
+            "--exit-after-reports",
+            "6",
+        ])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped()),
+    );
+    let mut lines = Lines::of(&mut child);
+    let mut peer = Peer::accept(&listener);
+    peer.handshake(PROTOCOL_VERSION);
+    peer.reports(&f.reports[..3]);
+    // Status only, for 1.8 s: the link is alive, the hammer is not.
+    for _ in 0..6 {
+        peer.send(&status(10, 0, 0));
+        std::thread::sleep(Duration::from_millis(300));
+    }
+    lines.wait("the stall", 1, |l| l.contains("stall: no reports"));
+    // Then nothing at all.
+    std::thread::sleep(Duration::from_millis(1600));
+    peer.reports(&f.reports[3..6]);
+    let (st, _, err) = child.finish(T);
+    let out = lines.rest();
+    assert!(st.success(), "{err}\n{out}");
+    let at = |pred: &dyn Fn(&str) -> bool| -> Vec<usize> {
+        out.lines()
+            .enumerate()
+            .filter(|(_, l)| pred(l))
+            .map(|(i, _)| i)
+            .collect()
+    };
+    let alive = at(&|l| l.contains("stall: no reports") && l.contains("link alive"));
+    let silent = at(&|l| l.contains("stall: no reports") && l.contains("no frames at all"));
+    let resumed = at(&|l| l.contains("reports resumed after"));
+    let cycle = |seq: u32| at(&|l| l.starts_with(&format!("cycle {seq:>6} ")))[0];
+    assert_eq!((alive.len(), silent.len(), resumed.len()), (1, 1, 1), "{out}");
+    assert!(cycle(f.reports[2].seq) < alive[0], "{out}");
+    assert!(alive[0] < silent[0] && silent[0] < resumed[0], "{out}");
+    assert!(resumed[0] < cycle(f.reports[4].seq), "{out}");
 }
 
 #[test]

@@ -1,4 +1,4 @@
-//! Framing: postcard + CRC-32 + COBS + 0x00, and a decoder that survives garbage.
+//! Framing: 0x00 + COBS(postcard + CRC-32) + 0x00, and a decoder that survives garbage.
 
 use serde::de::DeserializeOwned;
 use serde::Serialize;
@@ -12,20 +12,31 @@ pub enum EncodeError {
     TooLarge,
 }
 
+/// Largest postcard body a frame carries: with the CRC, COBS's overhead and
+/// both delimiters it is exactly [`MAX_FRAME`] bytes on the wire.
+const MAX_BODY: usize = MAX_FRAME - 8;
+const _: () = assert!(cobs::max_encoded_len(MAX_BODY + 4) + 2 == MAX_FRAME);
+
 /// Writes one complete frame of `msg` into `out`; returns its length.
+///
+/// The frame starts with a delimiter as well as ending with one: line noise
+/// (or a frame cut short) before it then ends at that 0x00 as a bad frame of
+/// its own instead of merging with this one. Between back-to-back frames the
+/// two delimiters make an empty frame, which every decoder ignores.
 pub fn encode<T: Serialize>(msg: &T, out: &mut [u8]) -> Result<usize, EncodeError> {
     let mut raw = [0u8; MAX_FRAME];
-    let body = postcard::to_slice(msg, &mut raw[..MAX_FRAME - 8]).map_err(|_| EncodeError::TooLarge)?;
+    let body = postcard::to_slice(msg, &mut raw[..MAX_BODY]).map_err(|_| EncodeError::TooLarge)?;
     let n = body.len();
     let crc = hammer_estimator::wear::crc32(&raw[..n]);
     raw[n..n + 4].copy_from_slice(&crc.to_le_bytes());
     let limit = out.len().min(MAX_FRAME);
-    if cobs::max_encoded_len(n + 4) + 1 > limit {
+    if cobs::max_encoded_len(n + 4) + 2 > limit {
         return Err(EncodeError::TooLarge);
     }
-    let m = cobs::encode(&raw[..n + 4], &mut out[..limit - 1]).ok_or(EncodeError::TooLarge)?;
-    out[m] = 0;
-    Ok(m + 1)
+    out[0] = 0;
+    let m = cobs::encode(&raw[..n + 4], &mut out[1..limit - 1]).ok_or(EncodeError::TooLarge)?;
+    out[m + 1] = 0;
+    Ok(m + 2)
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

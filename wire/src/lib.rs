@@ -1,8 +1,9 @@
 //! The wire protocol shared by the firmware and the host tools, `no_std`.
 //!
-//! A frame is `COBS(postcard(message) ‖ CRC-32(postcard bytes)) ‖ 0x00`: the
-//! UART has no integrity check of its own, COBS makes `0x00` a frame boundary
-//! to resynchronise on after garbage. postcard is not self-describing, so any
+//! A frame is `0x00 ‖ COBS(postcard(message) ‖ CRC-32(postcard bytes)) ‖ 0x00`:
+//! the UART has no integrity check of its own, COBS makes `0x00` a frame
+//! boundary to resynchronise on after garbage, and the leading `0x00` ends
+//! any garbage before a frame so that the frame itself survives. postcard is not self-describing, so any
 //! change to a message's fields changes the bytes: [`PROTOCOL_VERSION`] is
 //! exchanged in the handshake, and golden byte snapshots in the tests make an
 //! accidental change fail CI. Policy: `docs/wire-protocol.md`.
@@ -17,9 +18,12 @@ pub mod msg;
 pub use frame::{encode, DecodeError, Decoder, DecoderStats, EncodeError};
 pub use msg::*;
 
-/// Bumped on every change of any message's layout or meaning.
+/// Bumped on every change of any message's layout or meaning. Not bumped for
+/// the leading delimiter: decoders of either framing read the other's frames
+/// (an extra 0x00 is an empty frame, which they ignore), so a bump would only
+/// make hosts and devices refuse each other needlessly.
 pub const PROTOCOL_VERSION: u16 = 1;
-/// Largest frame on the wire, delimiter included. Bounds every buffer.
+/// Largest frame on the wire, both delimiters included. Bounds every buffer.
 pub const MAX_FRAME: usize = 400;
 /// Sample-sets per `Samples` or `Capture` block.
 pub const BLOCK_SAMPLES: usize = 32;

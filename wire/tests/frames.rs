@@ -46,30 +46,34 @@ fn sample_report() -> Report {
 }
 
 /// The bytes of these frames are the protocol. If a test here fails, the
-/// wire format changed: bump PROTOCOL_VERSION, update docs/wire-protocol.md,
-/// and only then update the snapshot.
+/// wire format changed: bump PROTOCOL_VERSION (unless, like the leading
+/// delimiter, decoders of both versions still read each other's frames),
+/// update docs/wire-protocol.md, and only then update the snapshot.
 #[test]
 fn golden_frames() {
     assert_eq!(PROTOCOL_VERSION, 1);
-    assert_eq!(hex(&frame(&HostMsg::Hello { protocol_version: 1 })), "0106016922de3600");
-    assert_eq!(hex(&frame(&HostMsg::GetStatus)), "0605021b68a200");
+    assert_eq!(
+        hex(&frame(&HostMsg::Hello { protocol_version: 1 })),
+        "000106016922de3600"
+    );
+    assert_eq!(hex(&frame(&HostMsg::GetStatus)), "000605021b68a200");
     let block = SampleBlock {
         seq: 3,
         samples: heapless::Vec::from_slice(&[[1, 2, 4095], [0, 65535, 2048]]).unwrap(),
     };
     assert_eq!(
         hex(&frame(&HostMsg::Samples(block))),
-        "080903020102ff1f0affff0380102979e9e100"
+        "00080903020102ff1f0affff0380102979e9e100"
     );
     assert_eq!(
         hex(&frame(&DeviceMsg::Report(sample_report()))),
-        "030107010101010107e03f1283403d0103aa410103244101032041010328410103803f0103c03f0103c03f010320400103304001036040010388400101023e0101023e0103603f0101063e3333333d04ab9f4804966148010101010103c4400107803f8096184b0101010780101b7be5f800"
+        "00030107010101010107e03f1283403d0103aa410103244101032041010328410103803f0103c03f0103c03f010320400103304001036040010388400101023e0101023e0103603f0101063e3333333d04ab9f4804966148010101010103c4400107803f8096184b0101010780101b7be5f800"
     );
     let rej = DeviceMsg::Rejected {
         command: CommandKind::Unknown,
         reason: RejectReason::CorruptFrame,
     };
-    assert_eq!(hex(&frame(&rej)), "08080a0439a4d00c00");
+    assert_eq!(hex(&frame(&rej)), "0008080a0439a4d00c00");
 }
 
 #[test]
@@ -129,12 +133,12 @@ fn the_decoder_resynchronises_after_garbage_and_counts_it() {
     stream.push(0);
     stream.extend_from_slice(&good);
     let mut corrupt = good.clone();
-    corrupt[1] ^= 0x40; // one flipped bit
+    corrupt[2] ^= 0x40; // one flipped bit
     stream.extend_from_slice(&corrupt);
     stream.extend_from_slice(&[0xAA; 1000]); // an oversized run
     stream.push(0);
-    stream.extend_from_slice(&good[..good.len() / 2]); // truncated frame…
-    stream.extend_from_slice(&good); // …swallowed into the next one: one bad frame, then nothing lost after
+    stream.extend_from_slice(&good[..good.len() / 2]); // truncated frame: a bad frame of its own…
+    stream.extend_from_slice(&good); // …ended by the next one's leading delimiter, which survives
     stream.extend_from_slice(&good);
     let mut d = Decoder::<MAX_FRAME>::new();
     let mut ok = 0;
@@ -147,12 +151,83 @@ fn the_decoder_resynchronises_after_garbage_and_counts_it() {
             None => {}
         }
     }
-    assert_eq!(ok, 2);
+    assert_eq!(ok, 3);
     assert_eq!(bad, 4);
     let s = d.stats;
-    assert_eq!(s.frames, 2);
+    assert_eq!(s.frames, 3);
     assert_eq!(s.oversize, 1);
     assert_eq!(s.cobs_errors + s.crc_errors + s.message_errors, 3);
+}
+
+/// xorshift64: a reproducible noise source without another dependency.
+struct Rng(u64);
+
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        self.0
+    }
+
+    fn below(&mut self, n: u64) -> u64 {
+        self.next() % n
+    }
+}
+
+/// Line noise right before a frame: the frame must survive every time, the
+/// noise must be counted as one bad frame, and every byte must be accounted
+/// for. Without the leading delimiter the same streams lose every such frame.
+#[test]
+fn the_frame_right_after_line_noise_survives() {
+    const TRIALS: usize = 20_000;
+    let msgs = [
+        HostMsg::GetStatus,
+        HostMsg::Hello { protocol_version: 1 },
+        HostMsg::Tare { samples: 4096 },
+        HostMsg::Samples(SampleBlock {
+            seq: 9,
+            samples: heapless::Vec::from_slice(&[[7, 4095, 2048]; BLOCK_SAMPLES]).unwrap(),
+        }),
+    ];
+    let frames: Vec<Vec<u8>> = msgs.iter().map(frame).collect();
+    let mut rng = Rng(0x9E37_79B9_7F4A_7C15);
+    let mut d = Decoder::<MAX_FRAME>::new();
+    let mut legacy = Decoder::<MAX_FRAME>::new();
+    let (mut survived, mut legacy_survived, mut noise_bytes, mut frame_bytes) = (0, 0, 0u32, 0u32);
+    for _ in 0..TRIALS {
+        let noise: Vec<u8> = (0..1 + rng.below(64)).map(|_| 1 + rng.below(255) as u8).collect();
+        let k = rng.below(msgs.len() as u64) as usize;
+        let f = &frames[k];
+        noise_bytes += noise.len() as u32;
+        frame_bytes += f.len() as u32;
+        let mut got = Vec::new();
+        for &b in noise.iter().chain(f) {
+            if let Some(r) = d.push::<HostMsg>(b) {
+                got.push(r);
+            }
+        }
+        assert_eq!(got.len(), 2, "noise {noise:02x?} then frame {k}: {got:?}");
+        assert!(got[0].is_err(), "noise decoded as a frame: {noise:02x?}");
+        if got[1].as_ref() == Ok(&msgs[k]) {
+            survived += 1;
+        }
+        // The same stream in the old framing: no leading delimiter.
+        for &b in noise.iter().chain(&f[1..]) {
+            if let Some(Ok(m)) = legacy.push::<HostMsg>(b) {
+                legacy_survived += u32::from(m == msgs[k]);
+            }
+        }
+    }
+    assert_eq!(survived, TRIALS, "frames decoded right after noise");
+    assert_eq!(legacy_survived, 0, "the old framing loses them all");
+    let s = d.stats;
+    assert_eq!(s.frames as usize, TRIALS);
+    assert_eq!((s.cobs_errors + s.crc_errors + s.message_errors) as usize, TRIALS);
+    assert_eq!(s.oversize, 0);
+    // Every byte is noise (discarded) or a good frame's, none of them double-counted.
+    assert_eq!(s.discarded_bytes, noise_bytes, "exactly the noise is discarded");
+    assert!(frame_bytes as usize > 2 * TRIALS);
 }
 
 #[test]

@@ -37,8 +37,10 @@ fn decode_all<T: DeserializeOwned + Serialize>(data: &[u8], variant: fn(&T) -> u
                     &data[start..]
                 };
                 let original: Vec<u8> = frame.iter().copied().chain((i == data.len()).then_some(0)).collect();
+                // `original` starts after the previous delimiter, which was
+                // this frame's leading one (or the start of the input).
                 assert_eq!(
-                    &buf[..n],
+                    &buf[1..n],
                     &original[..],
                     "a decoded frame is its message's canonical encoding"
                 );

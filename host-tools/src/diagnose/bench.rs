@@ -281,7 +281,9 @@ pub fn run_case(opts: &BenchOptions, index: usize, diag: &Options) -> anyhow::Re
     let s = &r.shrink;
     Ok(CaseResult {
         index,
-        variants: structural.map_or_else(Vec::new, |(st, _)| st.variants().into_iter().map(String::from).collect()),
+        variants: structural.map_or_else(Vec::new, |(st, _)| {
+            st.variants().into_iter().map(String::from).collect()
+        }),
         hidden_params: serde_json::to_value(&gen.effects).unwrap_or_default(),
         hidden,
         named,

@@ -429,7 +429,10 @@ impl FitSet<'_> {
                 d[i] += STEP;
                 whitened(&d).map(|ri| ri.iter().zip(&r).map(|(a, b)| (a - b) / STEP).collect::<Vec<f64>>())
             });
-            let cols: Vec<Vec<f64>> = cols.into_iter().map(|c| c.unwrap_or_else(|| vec![0.0; r.len()])).collect();
+            let cols: Vec<Vec<f64>> = cols
+                .into_iter()
+                .map(|c| c.unwrap_or_else(|| vec![0.0; r.len()]))
+                .collect();
             let mut a = vec![vec![0.0; k]; k];
             let mut b = vec![0.0; k];
             for i in 0..k {
@@ -866,14 +869,15 @@ pub fn diagnose(
             None
         }
     };
-    let model_runs = |recal: &Option<Recalibrated>, cand: &Candidate| -> (ModelRunner, Vec<Option<hammer_sim::SimRun>>) {
-        let r = recal.as_ref().map_or_else(|| runner.clone(), |x| x.runner.clone());
-        let physics = cand.physics();
-        let runs = parallel(opts.threads, bars.clone(), &|bar| {
-            simulate_truth(&r.config(bar, &physics)).ok()
-        });
-        (r, runs)
-    };
+    let model_runs =
+        |recal: &Option<Recalibrated>, cand: &Candidate| -> (ModelRunner, Vec<Option<hammer_sim::SimRun>>) {
+            let r = recal.as_ref().map_or_else(|| runner.clone(), |x| x.runner.clone());
+            let physics = cand.physics();
+            let runs = parallel(opts.threads, bars.clone(), &|bar| {
+                simulate_truth(&r.config(bar, &physics)).ok()
+            });
+            (r, runs)
+        };
     let recal_nominal = recalibrated(&nominal);
     let recal_verdict = fitted_cand.as_ref().and_then(|c| recalibrated(c));
     let (fitted_runner, fitted_runs) = match &fitted_cand {
@@ -1050,7 +1054,11 @@ pub fn diagnose(
     remainder.truncate(REMAINDER_CELLS);
 
     // The recalibration: the nominal parameters as the verdict's fit left them.
-    let recalibration = match if fitted_cand.is_some() { &recal_verdict } else { &recal_nominal } {
+    let recalibration = match if fitted_cand.is_some() {
+        &recal_verdict
+    } else {
+        &recal_nominal
+    } {
         Some(rc) => {
             let mut nominal_cfg = base.clone();
             NUISANCE

@@ -1160,7 +1160,10 @@ mod tests {
         let s = summary(&report());
         assert!(s.starts_with("verdict: coulomb_friction"));
         assert!(s.contains("1. rear pressure in stroke_closed at 4 bar"));
-        assert!(s.contains("impact energy error 12.3 % nominal, 7.5 % recalibrated, 1.2 % with the effects"), "{s}");
+        assert!(
+            s.contains("impact energy error 12.3 % nominal, 7.5 % recalibrated, 1.2 % with the effects"),
+            "{s}"
+        );
         assert!(s.contains("  params: force_n=2.30\n"), "{s}");
         assert!(s.contains("recalibrated: no nominal parameter beyond its prior"), "{s}");
         assert!(s.contains("unexplained: nothing above 10 %"), "{s}");

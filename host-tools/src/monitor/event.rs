@@ -28,6 +28,9 @@ pub struct LinkStats {
     /// Messages dropped before the handshake told whether they can be read.
     pub unhandshaken_dropped: u64,
     pub last_frame_us: Option<u64>,
+    /// What the log size cap kept out of the logs (filled in by the reader,
+    /// which owns the logger).
+    pub unlogged: super::log::Unlogged,
 }
 
 impl LinkStats {
@@ -65,6 +68,10 @@ pub enum Event {
     FrameError {
         kind: DecodeError,
         total: u64,
+        /// Where the bad frame began in the received byte stream (every
+        /// connection's bytes end to end, as frames.bin records them), so a
+        /// replay can name the spot in the file.
+        stream_offset: u64,
     },
     SeqGap {
         expected: u32,
@@ -160,7 +167,7 @@ pub fn describe(ev: &Event) -> Option<(Severity, String)> {
                  not interpreting its data (update the firmware or the host tools)"
             ),
         ),
-        Event::FrameError { kind, total } => (
+        Event::FrameError { kind, total, .. } => (
             Warn,
             format!(
                 "frame error: {} ({total} frame errors so far)",
@@ -321,6 +328,7 @@ mod tests {
     fn flags_read_as_names() {
         assert_eq!(flag_list(0), "-");
         assert_eq!(flag_list((1 << 13) | 1), "rear_saturated|drift_alarm");
+        // Every bit has a name now (no_impact took the last one).
         assert_eq!(flag_list(1 << 15), "no_impact");
     }
 }

@@ -16,6 +16,18 @@
 //! Existing files are appended to (a second run adds a new connection to
 //! frames.bin). Everything is flushed every [`FLUSH_EVERY`] and on each
 //! disconnect, so a crash loses at most that much.
+//!
+//! Size cap (`--log-max-mb`, [`DEFAULT_MAX_MB`] by default, over the three
+//! files together, what they held before included): a device flooding the
+//! link filled 774 MB in 20 s. When the next write would pass the cap,
+//! logging *stops* rather than rotating: frames.bin stays one replayable
+//! recording from its start, and nothing already logged is deleted. The stop
+//! is never silent: link.log gets a line saying so (written past the cap),
+//! from then on what is not logged is counted ([`Unlogged`]: received bytes,
+//! reports, link.log lines), the counts ride in the link statistics the
+//! dashboard and headless output show, and a last line in link.log gives
+//! the totals when the monitor stops. The two notice lines are the only
+//! bytes past the cap.
 
 use std::fs::{File, OpenOptions};
 use std::io::{self, BufWriter, Read, Write};
@@ -31,6 +43,8 @@ pub const OPENED: u32 = 0xFFFF_FFFF;
 pub const LOST: u32 = 0xFFFF_FFFE;
 pub const MAX_CHUNK: u32 = 1 << 20;
 pub const FLUSH_EVERY: Duration = Duration::from_millis(500);
+/// Default size cap of the three log files together, in MB (10^6 bytes).
+pub const DEFAULT_MAX_MB: f64 = 256.0;
 
 pub const CYCLES_HEADER: &str = "host_time,host_unix_s,seq,t_impact_s,period_s,frequency_hz,friction_n,\
 friction_stroke_n,friction_backhaul_n,friction_uncertainty_n,friction_stroke_uncertainty_n,\
@@ -52,6 +66,17 @@ pub enum Record {
     Marker { t_us: u64, marker: Marker },
 }
 
+/// What the size cap kept out of the logs.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Unlogged {
+    /// Received bytes not in frames.bin.
+    pub bytes: u64,
+    /// Reports not in cycles.csv.
+    pub reports: u64,
+    /// Lines not in link.log.
+    pub lines: u64,
+}
+
 pub struct Logger {
     dir: PathBuf,
     cycles: BufWriter<File>,
@@ -59,36 +84,49 @@ pub struct Logger {
     frames: BufWriter<File>,
     last_flush: Instant,
     frame_errors: Limiter,
+    max_bytes: u64,
+    /// What the three files hold, counting what they held before.
+    size_bytes: u64,
+    capped: bool,
+    /// The cap notice, until the reader has passed it on to the screen.
+    news: Option<String>,
+    unlogged: Unlogged,
 }
 
-fn append(path: &Path) -> io::Result<(File, bool)> {
+fn append(path: &Path) -> io::Result<(File, u64)> {
     let f = OpenOptions::new().create(true).append(true).open(path)?;
-    let fresh = f.metadata()?.len() == 0;
-    Ok((f, fresh))
+    let len = f.metadata()?.len();
+    Ok((f, len))
 }
 
 impl Logger {
-    pub fn open(dir: &Path) -> io::Result<Self> {
+    /// Logs into `dir` until the three files hold `max_bytes` together.
+    pub fn open(dir: &Path, max_bytes: u64) -> io::Result<Self> {
         std::fs::create_dir_all(dir)?;
-        let (cycles, fresh) = append(&dir.join("cycles.csv"))?;
-        let mut cycles = BufWriter::new(cycles);
-        if fresh {
-            writeln!(cycles, "{CYCLES_HEADER}")?;
-        }
-        let (frames, fresh) = append(&dir.join("frames.bin"))?;
-        let mut frames = BufWriter::with_capacity(64 * 1024, frames);
-        if fresh {
-            frames.write_all(MAGIC)?;
-        }
-        let (link, _) = append(&dir.join("link.log"))?;
+        let (cycles, cycles_len) = append(&dir.join("cycles.csv"))?;
+        let (frames, frames_len) = append(&dir.join("frames.bin"))?;
+        let (link, link_len) = append(&dir.join("link.log"))?;
         let mut l = Self {
             dir: dir.to_path_buf(),
-            cycles,
+            cycles: BufWriter::new(cycles),
             link: BufWriter::new(link),
-            frames,
+            frames: BufWriter::with_capacity(64 * 1024, frames),
             last_flush: Instant::now(),
             frame_errors: Limiter::new(20),
+            max_bytes,
+            size_bytes: cycles_len + frames_len + link_len,
+            capped: false,
+            news: None,
+            unlogged: Unlogged::default(),
         };
+        let t = super::event::now_us();
+        // Without its header a file is unreadable: the header or nothing.
+        if cycles_len == 0 && l.admit(t, CYCLES_HEADER.len() as u64 + 1)? {
+            writeln!(l.cycles, "{CYCLES_HEADER}")?;
+        }
+        if frames_len == 0 && l.admit(t, MAGIC.len() as u64)? {
+            l.frames.write_all(MAGIC)?;
+        }
         l.line(
             super::event::now_us(),
             &format!("monitor started, hammer {}", env!("CARGO_PKG_VERSION")),
@@ -101,8 +139,43 @@ impl Logger {
         &self.dir
     }
 
+    /// What the cap has kept out so far.
+    pub fn unlogged(&self) -> Unlogged {
+        self.unlogged
+    }
+
+    /// The cap notice, once, for the screen.
+    pub fn take_news(&mut self) -> Option<String> {
+        self.news.take()
+    }
+
+    /// Whether `n` more bytes fit under the cap; the first refusal stops
+    /// logging and says so in link.log.
+    fn admit(&mut self, t_us: u64, n: u64) -> io::Result<bool> {
+        if self.capped {
+            return Ok(false);
+        }
+        if self.size_bytes + n <= self.max_bytes {
+            self.size_bytes += n;
+            return Ok(true);
+        }
+        self.capped = true;
+        let text = format!(
+            "logging stopped: the logs reached their size cap of {} MB (--log-max-mb); \
+             from here on received bytes, reports and link events are counted, not logged",
+            self.max_bytes as f64 / 1e6
+        );
+        writeln!(self.link, "{} {text}", rfc3339(t_us))?;
+        self.news = Some(text);
+        Ok(false)
+    }
+
     pub fn raw(&mut self, t_us: u64, bytes: &[u8]) -> io::Result<()> {
         for chunk in bytes.chunks(MAX_CHUNK as usize) {
+            if !self.admit(t_us, 12 + chunk.len() as u64)? {
+                self.unlogged.bytes += chunk.len() as u64;
+                continue;
+            }
             self.frames.write_all(&t_us.to_le_bytes())?;
             self.frames.write_all(&(chunk.len() as u32).to_le_bytes())?;
             self.frames.write_all(chunk)?;
@@ -110,7 +183,11 @@ impl Logger {
         Ok(())
     }
 
+    /// Markers carry no data: past the cap they go unrecorded (and uncounted).
     pub fn marker(&mut self, t_us: u64, m: Marker) -> io::Result<()> {
+        if !self.admit(t_us, 12)? {
+            return Ok(());
+        }
         self.frames.write_all(&t_us.to_le_bytes())?;
         let code = match m {
             Marker::Opened => OPENED,
@@ -120,13 +197,25 @@ impl Logger {
     }
 
     fn line(&mut self, t_us: u64, text: &str) -> io::Result<()> {
-        writeln!(self.link, "{} {text}", rfc3339(t_us))
+        let line = format!("{} {text}\n", rfc3339(t_us));
+        if !self.admit(t_us, line.len() as u64)? {
+            self.unlogged.lines += 1;
+            return Ok(());
+        }
+        self.link.write_all(line.as_bytes())
     }
 
     /// Reports go to cycles.csv, news to link.log.
     pub fn event(&mut self, ev: &Stamped) -> io::Result<()> {
         match &ev.event {
-            Event::Msg(DeviceMsg::Report(r)) => writeln!(self.cycles, "{}", csv_row(ev.t_us, r)),
+            Event::Msg(DeviceMsg::Report(r)) => {
+                let row = csv_row(ev.t_us, r);
+                if !self.admit(ev.t_us, row.len() as u64 + 1)? {
+                    self.unlogged.reports += 1;
+                    return Ok(());
+                }
+                writeln!(self.cycles, "{row}")
+            }
             Event::FrameError { .. } => match self.frame_errors.allow(ev.t_us) {
                 Some(held) => {
                     if held > 0 {
@@ -171,7 +260,19 @@ impl Logger {
 impl Drop for Logger {
     fn drop(&mut self) {
         let t = super::event::now_us();
-        let _ = self.line(t, "monitor stopped");
+        if !self.capped {
+            let _ = self.line(t, "monitor stopped");
+        } else {
+            let u = self.unlogged;
+            let _ = writeln!(
+                self.link,
+                "{} monitor stopped; not logged after the size cap: {} received bytes, {} reports, {} link.log lines",
+                rfc3339(t),
+                u.bytes,
+                u.reports,
+                u.lines
+            );
+        }
         let _ = self.flush();
     }
 }
@@ -230,6 +331,13 @@ pub enum FrameFileError {
     Truncated { offset: u64 },
     #[error(transparent)]
     Io(#[from] io::Error),
+}
+
+impl<R> FrameReader<R> {
+    /// File offset of the next record (after one, where its bytes ended).
+    pub fn offset(&self) -> u64 {
+        self.offset
+    }
 }
 
 impl<R: Read> FrameReader<R> {
@@ -295,7 +403,7 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("hammer-monitor-log-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
         {
-            let mut l = Logger::open(&dir).unwrap();
+            let mut l = Logger::open(&dir, 1 << 20).unwrap();
             l.marker(5, Marker::Opened).unwrap();
             l.raw(6, b"abc").unwrap();
             l.marker(7, Marker::Lost).unwrap();
@@ -336,6 +444,60 @@ mod tests {
         ));
         let header = std::fs::read_to_string(dir.join("cycles.csv")).unwrap();
         assert_eq!(header.trim_end(), CYCLES_HEADER);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn the_size_cap_stops_logging_says_so_and_counts_what_it_kept_out() {
+        let dir = std::env::temp_dir().join(format!("hammer-monitor-log-cap-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let cap = 4_000;
+        let u = {
+            let mut l = Logger::open(&dir, cap).unwrap();
+            assert_eq!(l.take_news(), None);
+            for i in 0..100 {
+                l.raw(i, &[0xAB; 100]).unwrap();
+            }
+            let report = Stamped {
+                t_us: 200,
+                event: Event::Msg(DeviceMsg::Report(Report::default())),
+            };
+            l.event(&report).unwrap();
+            l.line(201, "a link event").unwrap();
+            let news = l.take_news().expect("the cap is news");
+            assert!(news.contains("size cap of 0.004 MB"), "{news}");
+            assert_eq!(l.take_news(), None, "once");
+            l.unlogged()
+        };
+        assert_eq!((u.reports, u.lines), (1, 1));
+        let bin = std::fs::read(dir.join("frames.bin")).unwrap();
+        let mut r = FrameReader::new(&bin[..]).unwrap();
+        let mut logged = 0;
+        while let Some(rec) = r.next_record().unwrap() {
+            if let Record::Bytes { bytes, .. } = rec {
+                logged += bytes.len() as u64;
+            }
+        }
+        assert_eq!(logged + u.bytes, 100 * 100, "every received byte is logged or counted");
+        let link = std::fs::read_to_string(dir.join("link.log")).unwrap();
+        let notices: usize = link
+            .lines()
+            .filter(|l| l.contains("logging stopped") || l.contains("not logged after the size cap"))
+            .map(|l| l.len() + 1)
+            .sum();
+        let total: u64 = ["frames.bin", "cycles.csv", "link.log"]
+            .iter()
+            .map(|f| std::fs::metadata(dir.join(f)).unwrap().len())
+            .sum();
+        assert!(total <= cap + notices as u64, "{total} bytes under a cap of {cap}");
+        assert!(total > cap - 200, "the cap is used, {total} bytes");
+        assert!(
+            link.contains(&format!(
+                "not logged after the size cap: {} received bytes, 1 reports, 1 link.log lines",
+                u.bytes
+            )),
+            "{link}"
+        );
         let _ = std::fs::remove_dir_all(&dir);
     }
 

@@ -57,6 +57,11 @@ pub struct MonitorArgs {
     /// `hammer replay`). Created if missing; existing files are appended to.
     #[arg(long, value_name = "DIR")]
     pub log: Option<PathBuf>,
+    /// Size cap of the three log files together, in MB (10^6 bytes), what
+    /// they held before included. At the cap logging stops, says so in
+    /// link.log and on screen, and counts what it no longer logs.
+    #[arg(long, value_name = "MB", default_value_t = log::DEFAULT_MAX_MB)]
+    pub log_max_mb: f64,
     /// Seconds of history in the charts.
     #[arg(long, default_value_t = 300.0)]
     pub history_s: f64,
@@ -74,6 +79,7 @@ impl Default for MonitorArgs {
         Self {
             port: "auto".into(),
             log: None,
+            log_max_mb: log::DEFAULT_MAX_MB,
             history_s: 300.0,
             headless: false,
             exit_after_reports: None,
@@ -120,8 +126,14 @@ pub fn run_with(connector: Box<dyn Connector>, args: &MonitorArgs) -> Result<()>
             args.history_s
         );
     }
+    if !(args.log_max_mb.is_finite() && args.log_max_mb > 0.0) {
+        bail!("--log-max-mb must be a positive number of MB, not {}", args.log_max_mb);
+    }
+    let max_bytes = (args.log_max_mb * 1e6) as u64;
     let logger = match &args.log {
-        Some(dir) => Some(log::Logger::open(dir).with_context(|| format!("cannot log to {}", dir.display()))?),
+        Some(dir) => {
+            Some(log::Logger::open(dir, max_bytes).with_context(|| format!("cannot log to {}", dir.display()))?)
+        }
         None => None,
     };
     let headless = args.headless || !std::io::stdout().is_terminal();

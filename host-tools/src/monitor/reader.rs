@@ -44,6 +44,9 @@ pub struct Ingest {
     last_seq: Option<u32>,
     lost_at_us: Option<u64>,
     opened_before: bool,
+    /// Stream offset just after the last delimiter: where the frame now being
+    /// received began.
+    frame_start: u64,
 }
 
 impl Default for Ingest {
@@ -62,6 +65,7 @@ impl Ingest {
             last_seq: None,
             lost_at_us: None,
             opened_before: false,
+            frame_start: 0,
         }
     }
 
@@ -73,10 +77,22 @@ impl Ingest {
         self.handshake
     }
 
+    /// Stream offset where the frame now being received began.
+    pub fn frame_start(&self) -> u64 {
+        self.frame_start
+    }
+
+    /// Bytes of a frame that has begun but not ended yet (at the end of a
+    /// recording: a frame that never ended).
+    pub fn pending_bytes(&self) -> u64 {
+        self.stats.bytes - self.frame_start
+    }
+
     /// A new connection: a fresh decoder (a frame cut by the disconnect must
     /// not swallow the first new one) and a new handshake; counters go on.
     pub fn opened(&mut self, t_us: u64, port: String, emit: &mut dyn FnMut(Stamped)) {
         self.dec = Decoder::new();
+        self.frame_start = self.stats.bytes;
         self.handshake = Handshake::Pending;
         self.held.clear();
         if self.opened_before {
@@ -115,8 +131,9 @@ impl Ingest {
 
     /// Bytes as they arrived at `t_us`.
     pub fn feed(&mut self, t_us: u64, bytes: &[u8], emit: &mut dyn FnMut(Stamped)) {
+        let first = self.stats.bytes;
         self.stats.bytes += bytes.len() as u64;
-        for &b in bytes {
+        for (i, &b) in bytes.iter().enumerate() {
             match self.dec.push::<DeviceMsg>(b) {
                 None => {}
                 Some(Ok(m)) => {
@@ -135,9 +152,16 @@ impl Ingest {
                     let total = self.stats.frame_errors();
                     emit(Stamped {
                         t_us,
-                        event: Event::FrameError { kind, total },
+                        event: Event::FrameError {
+                            kind,
+                            total,
+                            stream_offset: self.frame_start,
+                        },
                     });
                 }
+            }
+            if b == 0 {
+                self.frame_start = first + i as u64 + 1;
             }
         }
         emit(Stamped {
@@ -249,11 +273,20 @@ struct Reader {
 
 /// The logs first (they must not miss anything), then the screen, which may
 /// lag: it is never waited for, and what it missed is counted.
-fn deliver(logger: &mut Option<Logger>, tx: &SyncSender<Stamped>, ui_dropped: &mut u64, ev: Stamped) {
+fn deliver(logger: &mut Option<Logger>, tx: &SyncSender<Stamped>, ui_dropped: &mut u64, mut ev: Stamped) {
     if let Some(l) = logger {
+        if let Event::Stats(s) = &mut ev.event {
+            s.unlogged = l.unlogged();
+        }
         if let Err(e) = l.event(&ev) {
             give_up_logging(logger, tx, e);
         }
+    }
+    if let Some(news) = logger.as_mut().and_then(Logger::take_news) {
+        let _ = tx.try_send(Stamped {
+            t_us: ev.t_us,
+            event: Event::Note(news),
+        });
     }
     match tx.try_send(ev) {
         Ok(()) => {}

@@ -1,5 +1,10 @@
 //! `hammer replay`: a recorded frames.bin through the same decoding core and
 //! the same dashboard, paced by the recorded host times.
+//!
+//! A damaged recording (bad frames, a frame that never ended, a cut-short or
+//! garbled file) is still shown as far as it goes, but the command then fails
+//! (exit 2) saying how many frames were bad and at which byte of the file: a
+//! script that replays recordings must not take a damaged one for a clean one.
 
 use std::fs::File;
 use std::io::{BufReader, IsTerminal};
@@ -10,9 +15,10 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
+use hammer_wire::DecodeError;
 
 use super::app::App;
-use super::event::{Event, Stamped};
+use super::event::{decode_error_name, Event, Stamped};
 use super::log::{FrameReader, Marker, Record};
 use super::reader::Ingest;
 use super::{ReplayArgs, UiOptions};
@@ -61,8 +67,86 @@ pub fn run(args: &ReplayArgs) -> Result<()> {
     let result = super::show(&mut app, &rx, opts);
     stop.store(true, Ordering::Relaxed);
     drop(rx);
-    let _ = player.join();
-    result
+    let damage = player.join().unwrap_or_else(|_| Damage {
+        file_error: Some("the replay thread panicked".into()),
+        ..Damage::default()
+    });
+    result?;
+    match damage.summary() {
+        Some(text) => bail!("{}: {text}", path.display()),
+        None => Ok(()),
+    }
+}
+
+/// Bad frames whose offsets are listed; the rest are only counted.
+const LISTED: usize = 5;
+
+/// What was wrong with a recording, with file offsets.
+#[derive(Debug, Default)]
+pub struct Damage {
+    pub bad_frames: u64,
+    /// (file offset of the bad frame's first byte, why), the first [`LISTED`].
+    pub first: Vec<(u64, DecodeError)>,
+    /// (file offset, length) of a frame the recording ends in the middle of.
+    pub unterminated: Option<(u64, u64)>,
+    /// The file itself is damaged (a garbled record, a cut-short end).
+    pub file_error: Option<String>,
+}
+
+impl Damage {
+    /// One sentence for the user, or `None` for a clean recording.
+    pub fn summary(&self) -> Option<String> {
+        let mut parts = Vec::new();
+        if self.bad_frames > 0 {
+            let listed: Vec<String> = self
+                .first
+                .iter()
+                .map(|(at, kind)| format!("{} at byte {at}", decode_error_name(*kind)))
+                .collect();
+            let more = self.bad_frames - self.first.len() as u64;
+            parts.push(format!(
+                "{} bad frame{} ({}{})",
+                self.bad_frames,
+                if self.bad_frames == 1 { "" } else { "s" },
+                listed.join(", "),
+                if more > 0 {
+                    format!(", {more} more")
+                } else {
+                    String::new()
+                }
+            ));
+        }
+        if let Some((at, len)) = self.unterminated {
+            parts.push(format!(
+                "the recording ends inside a frame ({len} bytes from byte {at})"
+            ));
+        }
+        if let Some(e) = &self.file_error {
+            parts.push(e.clone());
+        }
+        (!parts.is_empty()).then(|| format!("damaged recording: {}", parts.join("; ")))
+    }
+}
+
+/// Where each recorded chunk's bytes sit in the file, from the decoder's
+/// current frame on: maps stream offsets (which is what the decoder knows)
+/// to file offsets (which is what a user can look at).
+#[derive(Default)]
+struct Chunks(Vec<(u64, u64)>);
+
+impl Chunks {
+    fn file_offset(&self, stream_offset: u64) -> u64 {
+        match self.0.iter().rev().find(|(s, _)| *s <= stream_offset) {
+            Some((s, f)) => f + (stream_offset - s),
+            None => 0,
+        }
+    }
+
+    /// Keeps only the chunks a frame that began at `frame_start` can lie in.
+    fn forget_before(&mut self, frame_start: u64) {
+        let keep = self.0.iter().rposition(|(s, _)| *s <= frame_start).unwrap_or(0);
+        self.0.drain(..keep);
+    }
 }
 
 /// Reads the records and emits their events, in time. Blocks on a full
@@ -73,8 +157,10 @@ fn play<R: std::io::Read>(
     speed: f64,
     tx: &SyncSender<Stamped>,
     stop: &AtomicBool,
-) {
+) -> Damage {
     let mut ingest = Ingest::new();
+    let mut damage = Damage::default();
+    let mut chunks = Chunks::default();
     let mut emit = |ev: Stamped| {
         let _ = tx.send(ev);
     };
@@ -84,7 +170,7 @@ fn play<R: std::io::Read>(
     let mut last_t = 0u64;
     loop {
         if stop.load(Ordering::Relaxed) {
-            return;
+            return damage;
         }
         let rec = match frames.next_record() {
             Ok(Some(r)) => r,
@@ -94,6 +180,7 @@ fn play<R: std::io::Read>(
                     t_us: last_t,
                     event: Event::Note(format!("replay stopped: {e}")),
                 });
+                damage.file_error = Some(e.to_string());
                 break;
             }
         };
@@ -107,7 +194,7 @@ fn play<R: std::io::Read>(
             }
             while let Some(left) = due.checked_sub(start.elapsed()) {
                 if stop.load(Ordering::Relaxed) {
-                    return;
+                    return damage;
                 }
                 if left.is_zero() {
                     break;
@@ -118,7 +205,24 @@ fn play<R: std::io::Read>(
         prev_t = Some(t_us);
         last_t = last_t.max(t_us);
         match rec {
-            Record::Bytes { t_us, bytes } => ingest.feed(t_us, &bytes, &mut emit),
+            Record::Bytes { t_us, bytes } => {
+                chunks
+                    .0
+                    .push((ingest.stats().bytes, frames.offset() - bytes.len() as u64));
+                ingest.feed(t_us, &bytes, &mut |ev| {
+                    if let Event::FrameError {
+                        kind, stream_offset, ..
+                    } = ev.event
+                    {
+                        damage.bad_frames += 1;
+                        if damage.first.len() < LISTED {
+                            damage.first.push((chunks.file_offset(stream_offset), kind));
+                        }
+                    }
+                    emit(ev)
+                });
+                chunks.forget_before(ingest.frame_start());
+            }
             Record::Marker {
                 t_us,
                 marker: Marker::Opened,
@@ -134,8 +238,18 @@ fn play<R: std::io::Read>(
             ),
         }
     }
+    if ingest.pending_bytes() > 0 {
+        damage.unterminated = Some((chunks.file_offset(ingest.frame_start()), ingest.pending_bytes()));
+    }
+    if let Some(text) = damage.summary() {
+        emit(Stamped {
+            t_us: last_t,
+            event: Event::Note(text),
+        });
+    }
     emit(Stamped {
         t_us: last_t,
         event: Event::End,
     });
+    damage
 }

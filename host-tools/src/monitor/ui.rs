@@ -426,6 +426,18 @@ fn link_panel(app: &App, v: &View) -> Paragraph<'static> {
             ],
         ),
     ];
+    let u = &s.unlogged;
+    if *u != Default::default() {
+        lines.push(Line::from(Span::styled(
+            format!(
+                "Log cap reached: not logged {} received, {} reports, {} lines",
+                bytes(u.bytes),
+                u.reports,
+                u.lines
+            ),
+            Style::new().fg(Color::Red).bold(),
+        )));
+    }
     match v.status {
         Some((t, st)) => {
             let load = st.cpu_load_permille as f64 / 10.0;
