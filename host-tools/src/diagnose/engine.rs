@@ -513,24 +513,18 @@ fn form_cause(signal: &str) -> &'static str {
     }
 }
 
-/// Groups of model-based features: the period, the impact energy, and each
-/// waveform. The force balance's features are model-free: no group.
-const MODEL_FORM_GROUPS: usize = 2 + WAVE_SIGNALS.len();
+/// Groups of model-based features whose weight the model's form limits:
+/// one per waveform. The period and the impact energy keep their floors
+/// (the recalibration must meet them), and the force balance's features
+/// are model-free.
+const MODEL_FORM_GROUPS: usize = WAVE_SIGNALS.len();
 
 fn model_form_group(feature: usize) -> Option<usize> {
-    match feature {
-        PERIOD if std::env::var("MF_ALL").is_ok() => Some(0),
-        ENERGY if std::env::var("MF_ALL").is_ok() => Some(1),
-        j => wave_of(j).map(|(signal, _)| 2 + signal),
-    }
+    wave_of(feature).map(|(signal, _)| signal)
 }
 
 fn model_form_group_name(g: usize) -> &'static str {
-    match g {
-        0 => "period_s",
-        1 => "impact_energy_j",
-        g => WAVE_SIGNALS[g - 2],
-    }
+    WAVE_SIGNALS[g]
 }
 
 /// Missing on the model side where the measurement has it: a clear miss.

@@ -1,0 +1,136 @@
+//! The diagnosis on hammers whose form differs from its model's: traces from
+//! the second model family (`hammer-variants`: its own valve, port, chamber,
+//! supply, anvil and sensor laws, written apart from the simulator). The
+//! paper's scenario (friction hidden, 4 / 5.5 / 7 bar, fitted at 4 and 7) and
+//! a no-effect control.
+
+use hammer_host::diagnose::engine::{diagnose, MeasuredInput, Options, Report};
+use hammer_sim::effects::Effects;
+use hammer_sim::SimConfig;
+use hammer_variants::structure::{ChamberLaw, PortLaw};
+use hammer_variants::{generate, Structure, VariantParams};
+
+fn measure(structure: Structure, effects: &Effects) -> Vec<MeasuredInput> {
+    [4.0, 5.5, 7.0]
+        .iter()
+        .enumerate()
+        .map(|(k, &bar)| MeasuredInput {
+            label: format!("{bar} bar"),
+            supply_bar: bar,
+            trace: generate(&VariantParams::default(), structure, effects, bar, 1.0, 31 + k as u64).trace,
+            fit: bar != 5.5,
+        })
+        .collect()
+}
+
+fn run(inputs: &[MeasuredInput]) -> Report {
+    let opts = Options {
+        figures: false,
+        ..Options::default()
+    };
+    diagnose(inputs, &SimConfig::default(), &opts, &|_, _, _| {})
+        .unwrap()
+        .report
+}
+
+fn print(r: &Report) {
+    let s = &r.shrink;
+    println!(
+        "verdict {:?} ({}); energy error {:.2} % nominal, {:.2} % recalibrated, {:.2} % with the effects; frequency {:.2} % -> {:.2} %",
+        r.verdict.effects,
+        r.verdict.reason,
+        s.impact_energy_error_before,
+        s.impact_energy_error_recalibrated_only,
+        s.impact_energy_error_after,
+        s.frequency_error_before,
+        s.frequency_error_after
+    );
+    println!("  {} nominal parameters recalibrated", r.recalibration.len());
+    for p in &s.points {
+        println!(
+            "  {} bar: energy measured {:.3} J, nominal {:.3}, recalibrated {:.3}, with the effects {:.3}",
+            p.supply_bar,
+            p.impact_energy_measured_j,
+            p.impact_energy_nominal_j,
+            p.impact_energy_recalibrated_j,
+            p.impact_energy_fitted_j
+        );
+    }
+    for m in r.recalibration.iter().filter(|m| m.beyond_prior) {
+        println!(
+            "  recalibrated {} {:.4e} -> {:.4e} ± {:.1e}",
+            m.parameter, m.nominal, m.value, m.sd
+        );
+    }
+    for m in &r.remainder {
+        println!("  remainder at {} bar: {}", m.supply_bar, m.statement);
+    }
+}
+
+/// Polytropic chambers (heat exchange the model does not have): with the
+/// friction, the friction-blind nominal model misses the energy by about 20 %.
+const POLYTROPIC: Structure = Structure {
+    chambers: ChamberLaw::Polytropic,
+    ..Structure::BASE
+};
+
+/// Ramped ports on top: the nominal parameters can no longer bend the model
+/// to the hammer, and the report must say where it differs.
+const DIFFERENT: Structure = Structure {
+    chambers: ChamberLaw::Polytropic,
+    ports: PortLaw::SmoothRamp,
+    ..Structure::BASE
+};
+
+#[test]
+fn paper_friction_is_named_on_a_hammer_of_another_form() {
+    let mut friction = Effects::default();
+    friction.apply_spec("coulomb_friction").unwrap();
+    let r = run(&measure(POLYTROPIC, &friction));
+    print(&r);
+    assert_eq!(r.verdict.effects, vec!["coulomb_friction"], "{}", r.verdict.reason);
+    // The paper's 10.27 N at 4 bar and 16.7 N at 7, pinned by the force
+    // balance (model-free) although the model's valve and ports are wrong.
+    let f = |k: &str| r.effects[0].fitted.iter().find(|p| p.key.ends_with(k)).unwrap().value;
+    let (low, high) = (f("friction_at_low_n"), f("friction_at_high_n"));
+    println!("friction {low:.2} N at 4 bar, {high:.2} N at 7 bar");
+    assert!((low - 10.27).abs() < 0.10 * 10.27, "{low}");
+    assert!((high - 16.7).abs() < 0.10 * 16.7, "{high}");
+    // Held-out 5.5 bar: the recalibrated model with the friction either
+    // closes the impact-energy gap at least threefold, or the report says
+    // where the model's form keeps it open (the nine nominal parameters
+    // cannot stand in for every law of another hammer).
+    let s = &r.shrink;
+    let closed = s.impact_energy_error_after * 3.0 <= s.impact_energy_error_before;
+    assert!(
+        closed || r.remainder.first().is_some_and(|c| c.relative_rms >= 0.1),
+        "{} -> {} and no remainder located",
+        s.impact_energy_error_before,
+        s.impact_energy_error_after
+    );
+}
+
+#[test]
+fn a_hammer_of_another_form_without_an_effect_gets_none_and_a_located_remainder() {
+    let r = run(&measure(DIFFERENT, &Effects::default()));
+    print(&r);
+    assert_eq!(r.verdict.effects, vec!["none"], "{}", r.verdict.reason);
+    // What the report owes the user instead: the nominal model's miss, the
+    // recalibration that closes part of it, and where the rest lies.
+    assert!(
+        r.shrink.impact_energy_error_before > 5.0,
+        "{}",
+        r.shrink.impact_energy_error_before
+    );
+    assert_eq!(r.recalibration.len(), 9);
+    assert!(
+        r.recalibration.iter().any(|m| m.beyond_prior) || !r.remainder.is_empty(),
+        "neither a recalibration nor a remainder"
+    );
+    let top = r.remainder.first().expect("a located remainder");
+    assert!(
+        top.relative_rms >= 0.1 && top.statement.contains("unexplained"),
+        "{top:?}"
+    );
+    assert!(r.model_form.iter().any(|m| m.factor > 1.0), "{:?}", r.model_form);
+}
