@@ -447,6 +447,74 @@ fn diagnose_bench_small_run() {
     assert_eq!(json["cases"].as_array().unwrap().len(), 12);
 }
 
+/// The structural benchmark's first twelve cases (hammers of the second
+/// model family, one or two structural variants each, parameters ±10 %):
+/// the effects the model-free force balance pins are named right with their
+/// magnitude within 15 %, the controls stay `none`, and nothing is named
+/// that was not hidden (the diagnosis says `none` rather than guess where
+/// the model's form hides an effect). Full run: docs/diagnose-bench/structural.
+#[test]
+fn diagnose_bench_structural_small_run() {
+    let dir = tmp_dir("sbench");
+    let (code, stdout, err) = hammer(&[
+        "diagnose-bench",
+        "--structural",
+        "--cases",
+        "12",
+        "--seed",
+        "7",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    println!("{stdout}");
+    assert!(stdout.contains("--structural (generator: hammer-variants"));
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("bench.json")).unwrap()).unwrap();
+    let cases = json["cases"].as_array().unwrap();
+    assert_eq!(cases.len(), 12);
+    let mut force_balance_named = 0;
+    for c in cases {
+        assert!(!c["variants"].as_array().unwrap().is_empty(), "{c}");
+        let hidden: Vec<String> = match &c["hidden"] {
+            serde_json::Value::String(s) if s == "None" => vec![],
+            h => h
+                .as_object()
+                .unwrap()
+                .values()
+                .flat_map(|v| match v {
+                    serde_json::Value::String(s) => vec![s.clone()],
+                    v => v
+                        .as_array()
+                        .unwrap()
+                        .iter()
+                        .map(|x| x.as_str().unwrap().to_string())
+                        .collect(),
+                })
+                .collect(),
+        };
+        let named: Vec<String> = c["named"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x.as_str().unwrap().to_string())
+            .collect();
+        assert!(
+            named.iter().all(|n| hidden.contains(n)),
+            "named {named:?}, hidden {hidden:?}"
+        );
+        if hidden.len() == 1
+            && ["coulomb_friction", "viscous_friction", "pressure_gain_error"].contains(&hidden[0].as_str())
+        {
+            assert_eq!(named, hidden, "a force-balance effect missed");
+            let e = c["param_errors"][&hidden[0]].as_f64().unwrap();
+            assert!(e <= 0.15, "{}: {e}", hidden[0]);
+            force_balance_named += 1;
+        }
+    }
+    assert!(force_balance_named >= 3, "{force_balance_named}");
+}
+
 /// Standard output that cannot be written is an error, never a panic or a
 /// silent success; a trace with no impact is an error as in `report`.
 #[test]
