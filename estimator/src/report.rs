@@ -39,18 +39,11 @@ impl Flags {
     pub const NO_IMPACT: Flags = Flags(1 << 15);
 
     pub const INVALIDATING: Flags = Flags(
-        Self::REAR_SATURATED.0
-            | Self::FRONT_SATURATED.0
-            | Self::ACCEL_SATURATED.0
-            | Self::REAR_STUCK.0
-            | Self::FRONT_STUCK.0
-            | Self::ACCEL_STUCK.0
-            | Self::DISCONNECTED.0
+        Self::SENSOR_FAULTS.0
             | Self::DROPPED_SAMPLES.0
             | Self::NO_REVERSAL.0
             | Self::IMPLAUSIBLE.0
             | Self::OVERFLOW.0
-            | Self::ACCEL_FAULT.0
             | Self::NO_IMPACT.0,
     );
 

@@ -205,14 +205,7 @@ pub fn open_for_estimation(
     supply_bar: Option<f64>,
 ) -> Result<EstimationInput, OpenError> {
     let trace = read_csv(path)?;
-    let sidecar = read_simulated_sidecar(path)?;
-    let supply_bar = supply_bar.or(sidecar.as_ref().and_then(|s| s.supply_pressure_bar));
-    let sensors = sensors_for(sidecar.as_ref(), &file.sensors);
-    let hammer = sidecar
-        .as_ref()
-        .and_then(|s| s.simulation.as_ref())
-        .map_or(&file.hammer, |s| &s.config.hammer);
-    let config = estimator_config(hammer, &sensors, &file.estimator, 1.0 / trace.dt_s, supply_bar)?;
+    let (sidecar, supply_bar, config) = config_for(path, file, supply_bar, 1.0 / trace.dt_s)?;
     let codes = to_codes(&trace, &config);
     Ok(EstimationInput {
         trace,
@@ -221,6 +214,25 @@ pub fn open_for_estimation(
         config,
         codes,
     })
+}
+
+/// The sidecar of the trace at `path`, the operating point (the caller's,
+/// else the sidecar's) and the estimator configuration that reads it.
+fn config_for(
+    path: &Path,
+    file: &SimConfig,
+    supply_bar: Option<f64>,
+    sample_rate_hz: f64,
+) -> Result<(Option<Sidecar>, Option<f64>, Config), OpenError> {
+    let sidecar = read_simulated_sidecar(path)?;
+    let supply_bar = supply_bar.or(sidecar.as_ref().and_then(|s| s.supply_pressure_bar));
+    let sensors = sensors_for(sidecar.as_ref(), &file.sensors);
+    let hammer = sidecar
+        .as_ref()
+        .and_then(|s| s.simulation.as_ref())
+        .map_or(&file.hammer, |s| &s.config.hammer);
+    let config = estimator_config(hammer, &sensors, &file.estimator, sample_rate_hz, supply_bar)?;
+    Ok((sidecar, supply_bar, config))
 }
 
 /// The sensor chain a trace was recorded with: from its sidecar when the
@@ -327,14 +339,7 @@ pub fn stream_estimation(
     })?;
     let rows = RowReader::new(std::io::BufReader::with_capacity(1 << 16, f), &label, false)?;
     let mut u = Uniform::new(rows)?;
-    let sidecar = read_simulated_sidecar(path)?;
-    let supply_bar = supply_bar.or(sidecar.as_ref().and_then(|s| s.supply_pressure_bar));
-    let sensors = sensors_for(sidecar.as_ref(), &file.sensors);
-    let hammer = sidecar
-        .as_ref()
-        .and_then(|s| s.simulation.as_ref())
-        .map_or(&file.hammer, |s| &s.config.hammer);
-    let config = estimator_config(hammer, &sensors, &file.estimator, 1.0 / u.dt_s(), supply_bar)?;
+    let (_, supply_bar, config) = config_for(path, file, supply_bar, 1.0 / u.dt_s())?;
     let mut est = estimator(config)?;
     let mut block = Vec::with_capacity(STREAM_BLOCK);
     let mut summary = StreamSummary {
