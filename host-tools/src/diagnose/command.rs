@@ -68,6 +68,10 @@ pub struct BenchArgs {
     /// the default jitter becomes ±10 %.
     #[arg(long)]
     pub structural: bool,
+    /// Instead of cases: the catalogue's isolability matrix from the model
+    /// alone (each effect at its default in the model, every effect fitted).
+    #[arg(long, conflicts_with = "structural")]
+    pub isolability: bool,
 }
 
 /// Pairs every `--supply-bar` of the raw command line with the `--measured`
@@ -189,6 +193,9 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
     for &p in &args.points {
         hammer_trace::config::check_range("--points", p, 0.5, 20.0)?;
     }
+    if args.isolability {
+        return isolability(args);
+    }
     let jitter = args.jitter.unwrap_or(if args.structural { 0.1 } else { 0.03 });
     hammer_trace::config::check_range("--jitter", jitter, 0.0, 0.5)?;
     hammer_trace::config::check_range("--duration", args.duration, 0.3, 60.0)?;
@@ -227,6 +234,25 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         std::fs::write(&json, serde_json::to_string_pretty(&s)?)
             .with_context(|| format!("writing {}", json.display()))?;
         let txt = dir.join("bench.txt");
+        std::fs::write(&txt, &text).with_context(|| format!("writing {}", txt.display()))?;
+    }
+    Ok(())
+}
+
+fn isolability(args: &BenchArgs) -> Result<()> {
+    let diag = Options {
+        figures: false,
+        ..Options::default()
+    };
+    let rows = super::isolability::matrix(&args.points, args.duration, &diag)?;
+    let text = super::isolability::render(&rows);
+    print!("{text}");
+    if let Some(dir) = &args.out {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        let json = dir.join("isolability.json");
+        std::fs::write(&json, serde_json::to_string_pretty(&rows)?)
+            .with_context(|| format!("writing {}", json.display()))?;
+        let txt = dir.join("isolability.txt");
         std::fs::write(&txt, &text).with_context(|| format!("writing {}", txt.display()))?;
     }
     Ok(())

@@ -9,6 +9,7 @@ pub mod engine;
 pub mod features;
 pub mod fit;
 pub mod gap;
+pub mod isolability;
 pub mod model;
 pub mod output;
 pub mod stages;
