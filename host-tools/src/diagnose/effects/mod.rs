@@ -1,0 +1,153 @@
+//! The diagnosis behaviour of each catalogued effect, one file per effect:
+//! the free parameters the fit moves and how they set the catalogue's
+//! parameters, start values, the evidence sentence, and the benchmark's
+//! random draw and magnitude error.
+//!
+//! [`DIAGNOSIS`] lists them in the simulator's catalogue order
+//! ([`hammer_sim::effects::REGISTRY`]); its length is the registry's, so an
+//! effect without a diagnosis does not compile. Nothing else in the diagnosis
+//! names an effect.
+
+use std::marker::PhantomData;
+
+use super::engine::FitSet;
+use super::fit::ParamSpec;
+use hammer_sim::effects::{
+    AccelZeroShift, CoulombFriction, Effect, Effects, HeatTransfer, Leakage, PressureGainError, SupplyRestriction,
+    ValveDelay, ViscousFriction, N_EFFECTS,
+};
+use hammer_sim::sensor::Rng;
+
+mod accel_zero_shift;
+mod coulomb_friction;
+mod heat_transfer;
+mod leakage;
+mod pressure_gain_error;
+mod supply_restriction;
+mod valve_delay;
+mod viscous_friction;
+
+/// Every effect's diagnosis, in catalogue order.
+pub(super) static DIAGNOSIS: [&dyn DiagnosisEntry; N_EFFECTS] = [
+    &Entry::<CoulombFriction>(PhantomData),
+    &Entry::<ViscousFriction>(PhantomData),
+    &Entry::<Leakage>(PhantomData),
+    &Entry::<ValveDelay>(PhantomData),
+    &Entry::<HeatTransfer>(PhantomData),
+    &Entry::<SupplyRestriction>(PhantomData),
+    &Entry::<AccelZeroShift>(PhantomData),
+    &Entry::<PressureGainError>(PhantomData),
+];
+
+/// The diagnosis of effect `name`.
+pub(super) fn diagnosis(name: &str) -> Option<&'static dyn DiagnosisEntry> {
+    DIAGNOSIS.iter().copied().find(|d| d.name() == name)
+}
+
+pub(super) fn between(rng: &mut Rng, lo: f64, hi: f64) -> f64 {
+    lo + (hi - lo) * rng.uniform()
+}
+
+pub(super) fn rel(a: f64, b: f64) -> f64 {
+    ((a - b) / b).abs()
+}
+
+/// How the diagnosis fits, explains and benchmarks a catalogued effect.
+pub(super) trait Diagnosed: Effect {
+    /// The free parameters the diagnosis fits. Every other key keeps its
+    /// default (documented in docs/diagnosis.md).
+    fn free_params(distinct_pressures: usize) -> Vec<ParamSpec>;
+
+    /// The effect with fitted values `theta`; `pressures` are the lowest and
+    /// highest supply pressures of the fit set, bar.
+    fn from_fit(theta: &[f64], pressures: (f64, f64)) -> Self;
+
+    /// Start values from what the measurement shows directly; by default the
+    /// catalogue's defaults (the range's low end for a key it lacks).
+    fn start_values(_fs: &FitSet, specs: &[ParamSpec]) -> Vec<f64> {
+        let v = serde_json::to_value(Self::default()).unwrap_or_default();
+        specs
+            .iter()
+            .map(|s| v.get(s.key).and_then(|x| x.as_f64()).unwrap_or(s.lo))
+            .collect()
+    }
+
+    /// Its signature in the measurement's force balance, if it has one.
+    fn evidence(_fs: &FitSet) -> Option<String> {
+        None
+    }
+
+    /// A random magnitude over the range a bench would meet.
+    fn draw(rng: &mut Rng) -> Self;
+
+    /// Relative error of a fitted magnitude against the truth.
+    fn magnitude_error(truth: &Self, fitted: &Self, points: &[f64]) -> f64;
+}
+
+/// A registry entry: a [`Diagnosed`] effect seen without its type.
+pub(super) trait DiagnosisEntry: Sync {
+    fn name(&self) -> &'static str;
+    fn free_params(&self, distinct_pressures: usize) -> Vec<ParamSpec>;
+    fn apply(&self, effects: &mut Effects, theta: &[f64], pressures: (f64, f64));
+    fn start_values(&self, fs: &FitSet) -> Vec<f64>;
+    fn evidence(&self, fs: &FitSet) -> Option<String>;
+    fn draw(&self, effects: &mut Effects, rng: &mut Rng);
+    /// `fitted` is the effect's catalogue parameters as in report.json.
+    fn magnitude_error(&self, truth: &Effects, fitted: &serde_json::Value, points: &[f64]) -> Option<f64>;
+}
+
+struct Entry<T>(PhantomData<fn() -> T>);
+
+impl<T: Diagnosed> DiagnosisEntry for Entry<T> {
+    fn name(&self) -> &'static str {
+        T::NAME
+    }
+    fn free_params(&self, distinct_pressures: usize) -> Vec<ParamSpec> {
+        T::free_params(distinct_pressures)
+    }
+    fn apply(&self, effects: &mut Effects, theta: &[f64], pressures: (f64, f64)) {
+        *T::slot(effects) = Some(T::from_fit(theta, pressures));
+    }
+    fn start_values(&self, fs: &FitSet) -> Vec<f64> {
+        T::start_values(fs, &T::free_params(fs.distinct))
+    }
+    fn evidence(&self, fs: &FitSet) -> Option<String> {
+        T::evidence(fs)
+    }
+    fn draw(&self, effects: &mut Effects, rng: &mut Rng) {
+        *T::slot(effects) = Some(T::draw(rng));
+    }
+    fn magnitude_error(&self, truth: &Effects, fitted: &serde_json::Value, points: &[f64]) -> Option<f64> {
+        let fitted: T = serde_json::from_value(fitted.clone()).ok()?;
+        Some(T::magnitude_error(T::get(truth)?, &fitted, points))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use hammer_sim::effects::REGISTRY;
+
+    #[test]
+    fn the_diagnosis_follows_the_catalogue_order() {
+        let names: Vec<&str> = DIAGNOSIS.iter().map(|d| d.name()).collect();
+        let catalogue: Vec<&str> = REGISTRY.iter().map(|e| e.name()).collect();
+        assert_eq!(names, catalogue);
+    }
+
+    #[test]
+    fn free_params_are_catalogue_keys_or_documented_reparametrisations() {
+        for d in DIAGNOSIS {
+            let e = hammer_sim::effects::entry(d.name()).unwrap();
+            for distinct in [1, 2] {
+                let specs = d.free_params(distinct);
+                assert!(!specs.is_empty(), "{}", d.name());
+                let theta: Vec<f64> = specs.iter().map(|s| 0.5 * (s.lo + s.hi)).collect();
+                let mut effects = Effects::default();
+                d.apply(&mut effects, &theta, (4.0, 7.0));
+                assert_eq!(effects.active(), vec![d.name()]);
+                assert!(e.is_on(&effects));
+            }
+        }
+    }
+}
