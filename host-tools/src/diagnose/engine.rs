@@ -15,7 +15,7 @@ use std::sync::Mutex;
 
 use serde::{Deserialize, Serialize};
 
-use super::effects::diagnosis;
+use super::effects::{diagnosis, pressure_reading_factors};
 use super::features::{
     feature_name, steady_from, summarize, wave_index, wave_of, CycleFeatures, Extractor, Signals, Summary, BINS,
     ENERGY, F_BACKHAUL, F_STROKE, GAIN_FRONT, GAIN_REAR, N_FEATURES, PERIOD, VISCOUS, WAVE_SIGNALS, ZERO_SHIFT_SQ,
@@ -1053,12 +1053,12 @@ pub fn diagnose(
                 .as_ref()
                 .and_then(|r| template(r, &base.hammer))
                 .map(|(mut f, _)| {
-                    if let Some(g) = fitted_cand
-                        .as_ref()
-                        .and_then(|c| c.effects.pressure_gain_error.as_ref())
-                    {
-                        f.p_rear_pa.iter_mut().for_each(|x| *x *= 1.0 + g.rear);
-                        f.p_front_pa.iter_mut().for_each(|x| *x *= 1.0 + g.front);
+                    if let Some(c) = &fitted_cand {
+                        let (f1, f2) = pressure_reading_factors(&c.effects);
+                        if f1 != 1.0 || f2 != 1.0 {
+                            f.p_rear_pa.iter_mut().for_each(|x| *x *= f1);
+                            f.p_front_pa.iter_mut().for_each(|x| *x *= f2);
+                        }
                     }
                     f
                 });

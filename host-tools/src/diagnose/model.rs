@@ -3,8 +3,8 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::effects::diagnosis;
-use super::features::{summarize, Extractor, Signals, N_FEATURES, ZERO_SHIFT_SQ};
+use super::effects::{diagnosis, pressure_reading_factors, shift_expected_features};
+use super::features::{summarize, Extractor, Signals, N_FEATURES};
 use super::fit::ParamSpec;
 use hammer_sim::effects::Effects;
 use hammer_sim::run::TruthTrace;
@@ -118,15 +118,12 @@ impl ModelRunner {
 
     /// Features of a simulated solution seen through the candidate's sensor effects.
     pub fn features_of_truth(&self, truth: &TruthTrace, effects: &Effects) -> Option<Vec<f64>> {
-        let (g1, g2) = effects
-            .pressure_gain_error
-            .as_ref()
-            .map_or((0.0, 0.0), |g| (g.rear, g.front));
+        let (f1, f2) = pressure_reading_factors(effects);
         let scaled;
-        let (p1, p2): (&[f64], &[f64]) = if g1 != 0.0 || g2 != 0.0 {
+        let (p1, p2): (&[f64], &[f64]) = if f1 != 1.0 || f2 != 1.0 {
             scaled = (
-                truth.p_rear_pa.iter().map(|p| p * (1.0 + g1)).collect::<Vec<_>>(),
-                truth.p_front_pa.iter().map(|p| p * (1.0 + g2)).collect::<Vec<_>>(),
+                truth.p_rear_pa.iter().map(|p| p * f1).collect::<Vec<_>>(),
+                truth.p_front_pa.iter().map(|p| p * f2).collect::<Vec<_>>(),
             );
             (&scaled.0, &scaled.1)
         } else {
@@ -148,11 +145,7 @@ impl ModelRunner {
             return None;
         }
         let mut mean = summarize(&cycles).mean;
-        // The zero shift's sign is random per impact: its expected effect on
-        // the corrected waveforms is nil, on the squared amplitude E[u²]·A².
-        if let Some(z) = &effects.accel_zero_shift {
-            mean[ZERO_SHIFT_SQ] += ZERO_SHIFT_SQ_FACTOR * z.amplitude_mps2 * z.amplitude_mps2;
-        }
+        shift_expected_features(effects, &mut mean);
         debug_assert_eq!(mean.len(), N_FEATURES);
         Some(mean)
     }

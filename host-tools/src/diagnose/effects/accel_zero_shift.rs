@@ -42,6 +42,12 @@ impl Diagnosed for AccelZeroShift {
         ))
     }
 
+    /// Its sign is random per impact: its expected effect on the corrected
+    /// waveforms is nil, on the squared amplitude E[u²]·A².
+    fn shift_expected_features(&self, mean: &mut [f64]) {
+        mean[ZERO_SHIFT_SQ] += ZERO_SHIFT_SQ_FACTOR * self.amplitude_mps2 * self.amplitude_mps2;
+    }
+
     fn draw(rng: &mut Rng) -> Self {
         AccelZeroShift {
             amplitude_mps2: between(rng, 10.0, 40.0),

@@ -44,6 +44,20 @@ pub(super) fn diagnosis(name: &str) -> Option<&'static dyn DiagnosisEntry> {
     DIAGNOSIS.iter().copied().find(|d| d.name() == name)
 }
 
+/// The factors the sensor effects put on the rear and front pressure
+/// readings (1 without one).
+pub(in crate::diagnose) fn pressure_reading_factors(effects: &Effects) -> (f64, f64) {
+    DIAGNOSIS.iter().fold((1.0, 1.0), |(a, b), d| {
+        let (x, y) = d.pressure_reading_factors(effects);
+        (a * x, b * y)
+    })
+}
+
+/// Adds the sensor effects' expected contributions to a model's mean features.
+pub(in crate::diagnose) fn shift_expected_features(effects: &Effects, mean: &mut [f64]) {
+    DIAGNOSIS.iter().for_each(|d| d.shift_expected_features(effects, mean));
+}
+
 pub(super) fn between(rng: &mut Rng, lo: f64, hi: f64) -> f64 {
     lo + (hi - lo) * rng.uniform()
 }
@@ -77,6 +91,16 @@ pub(super) trait Diagnosed: Effect {
         None
     }
 
+    /// A sensor effect on the pressure readings: the factors on the rear and
+    /// front channels (reading = factor·true).
+    fn pressure_reading_factors(&self) -> (f64, f64) {
+        (1.0, 1.0)
+    }
+
+    /// A sensor effect's expected contribution to the model's mean features
+    /// (what the extractor cannot see in an ideal, noiseless solution).
+    fn shift_expected_features(&self, _mean: &mut [f64]) {}
+
     /// A random magnitude over the range a bench would meet.
     fn draw(rng: &mut Rng) -> Self;
 
@@ -91,6 +115,8 @@ pub(super) trait DiagnosisEntry: Sync {
     fn apply(&self, effects: &mut Effects, theta: &[f64], pressures: (f64, f64));
     fn start_values(&self, fs: &FitSet) -> Vec<f64>;
     fn evidence(&self, fs: &FitSet) -> Option<String>;
+    fn pressure_reading_factors(&self, effects: &Effects) -> (f64, f64);
+    fn shift_expected_features(&self, effects: &Effects, mean: &mut [f64]);
     fn draw(&self, effects: &mut Effects, rng: &mut Rng);
     /// `fitted` is the effect's catalogue parameters as in report.json.
     fn magnitude_error(&self, truth: &Effects, fitted: &serde_json::Value, points: &[f64]) -> Option<f64>;
@@ -113,6 +139,14 @@ impl<T: Diagnosed> DiagnosisEntry for Entry<T> {
     }
     fn evidence(&self, fs: &FitSet) -> Option<String> {
         T::evidence(fs)
+    }
+    fn pressure_reading_factors(&self, effects: &Effects) -> (f64, f64) {
+        T::get(effects).map_or((1.0, 1.0), |e| e.pressure_reading_factors())
+    }
+    fn shift_expected_features(&self, effects: &Effects, mean: &mut [f64]) {
+        if let Some(e) = T::get(effects) {
+            e.shift_expected_features(mean);
+        }
     }
     fn draw(&self, effects: &mut Effects, rng: &mut Rng) {
         *T::slot(effects) = Some(T::draw(rng));

@@ -30,6 +30,10 @@ impl Diagnosed for PressureGainError {
         ))
     }
 
+    fn pressure_reading_factors(&self) -> (f64, f64) {
+        (1.0 + self.rear, 1.0 + self.front)
+    }
+
     fn draw(rng: &mut Rng) -> Self {
         let mut g = || {
             let s = if rng.next_u64() & 1 == 0 { 1.0 } else { -1.0 };
