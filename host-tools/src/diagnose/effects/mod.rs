@@ -169,6 +169,34 @@ mod tests {
         assert_eq!(names, catalogue);
     }
 
+    /// docs/diagnosis.md's effect tables (free parameters, bench ranges) list
+    /// the registry, in order.
+    #[test]
+    fn diagnosis_md_tables_list_the_registry() {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../docs/diagnosis.md");
+        let md = std::fs::read_to_string(path).unwrap();
+        let mut tables = 0;
+        let mut lines = md.lines().peekable();
+        while let Some(line) = lines.next() {
+            if !line.starts_with("| effect |") {
+                continue;
+            }
+            tables += 1;
+            let mut names = Vec::new();
+            while let Some(row) = lines.next_if(|l| l.starts_with('|')) {
+                if let Some(name) = row.split('|').nth(1).map(str::trim).filter(|c| c.starts_with('`')) {
+                    names.push(name.trim_matches('`'));
+                }
+            }
+            let catalogue: Vec<&str> = REGISTRY.iter().map(|e| e.name()).collect();
+            assert_eq!(names, catalogue, "docs/diagnosis.md, table under `{line}`");
+        }
+        assert_eq!(
+            tables, 2,
+            "docs/diagnosis.md: the free-parameter and bench-range tables"
+        );
+    }
+
     #[test]
     fn free_params_are_catalogue_keys_or_documented_reparametrisations() {
         for d in DIAGNOSIS {
