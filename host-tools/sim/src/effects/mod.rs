@@ -109,7 +109,7 @@ impl<T: Effect> EffectEntry for Entry<T> {
 /// Declares the catalogue: `name: Type` per effect, in catalogue order (the
 /// order fixes the benchmark's case plan). The module `name.rs` holds `Type`.
 macro_rules! catalogue {
-    ($($name:ident: $ty:ident),* $(,)?) => {
+    ($d:tt $($name:ident: $ty:ident),* $(,)?) => {
         $(
             mod $name;
             pub use $name::$ty;
@@ -134,6 +134,16 @@ macro_rules! catalogue {
         /// Every effect, in catalogue order.
         pub static REGISTRY: [&dyn EffectEntry; N_EFFECTS] = [$(&Entry::<$ty>(PhantomData)),*];
 
+        /// Calls the macro `m` with the catalogue, `m! { name: path::to::Type, ... }`
+        /// in catalogue order: a crate above the simulator (the diagnosis)
+        /// declares one item per effect without repeating the list.
+        #[macro_export]
+        macro_rules! with_catalogue {
+            ($d m:ident) => {
+                $d m! { $($name: $crate::effects::$ty),* }
+            };
+        }
+
         /// The active effects: `None` is off.
         #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
         #[serde(deny_unknown_fields, default)]
@@ -146,7 +156,9 @@ macro_rules! catalogue {
     };
 }
 
+// The leading `$` is passed through to `with_catalogue!`, a macro the list defines.
 catalogue! {
+    $
     coulomb_friction: CoulombFriction,
     viscous_friction: ViscousFriction,
     leakage: Leakage,

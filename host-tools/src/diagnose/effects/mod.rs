@@ -4,40 +4,29 @@
 //! random draw and magnitude error.
 //!
 //! [`DIAGNOSIS`] lists them in the simulator's catalogue order
-//! ([`hammer_sim::effects::REGISTRY`]); its length is the registry's, so an
-//! effect without a diagnosis does not compile. Nothing else in the diagnosis
-//! names an effect.
+//! ([`hammer_sim::effects::REGISTRY`]), generated from the same list
+//! (`hammer_sim::with_catalogue!`): an effect without a diagnosis file does not
+//! compile. Nothing else in the diagnosis names an effect.
 
 use std::marker::PhantomData;
 
 use super::engine::FitSet;
 use super::fit::ParamSpec;
-use hammer_sim::effects::{
-    AccelZeroShift, CoulombFriction, Effect, Effects, HeatTransfer, Leakage, PressureGainError, SupplyRestriction,
-    ValveDelay, ViscousFriction, N_EFFECTS,
-};
+use hammer_sim::effects::{Effect, Effects, N_EFFECTS};
 use hammer_sim::sensor::Rng;
 
-mod accel_zero_shift;
-mod coulomb_friction;
-mod heat_transfer;
-mod leakage;
-mod pressure_gain_error;
-mod supply_restriction;
-mod valve_delay;
-mod viscous_friction;
+/// One module per effect (`NAME.rs`, an `impl Diagnosed`), and [`DIAGNOSIS`],
+/// from the simulator's catalogue list.
+macro_rules! diagnosis_catalogue {
+    ($($name:ident: $ty:path),* $(,)?) => {
+        $(mod $name;)*
 
-/// Every effect's diagnosis, in catalogue order.
-pub(super) static DIAGNOSIS: [&dyn DiagnosisEntry; N_EFFECTS] = [
-    &Entry::<CoulombFriction>(PhantomData),
-    &Entry::<ViscousFriction>(PhantomData),
-    &Entry::<Leakage>(PhantomData),
-    &Entry::<ValveDelay>(PhantomData),
-    &Entry::<HeatTransfer>(PhantomData),
-    &Entry::<SupplyRestriction>(PhantomData),
-    &Entry::<AccelZeroShift>(PhantomData),
-    &Entry::<PressureGainError>(PhantomData),
-];
+        /// Every effect's diagnosis, in catalogue order.
+        pub(super) static DIAGNOSIS: [&dyn DiagnosisEntry; N_EFFECTS] = [$(&Entry::<$ty>(PhantomData)),*];
+    };
+}
+
+hammer_sim::with_catalogue!(diagnosis_catalogue);
 
 /// The diagnosis of effect `name`.
 pub(super) fn diagnosis(name: &str) -> Option<&'static dyn DiagnosisEntry> {
