@@ -6,8 +6,8 @@ use std::process::ExitCode;
 use anyhow::{bail, Context, Result};
 use clap::{Args, Parser, Subcommand};
 
-use hammer_sim::SimConfig;
 use hammer_sim::{simulate_to_file, SimulateError};
+use hammer_sim::{SimConfig, EFFECT_NAMES};
 use hammer_trace::config::{load_toml, ConfigError};
 use hammer_trace::trace::{write_csv, write_sidecar};
 
@@ -112,6 +112,14 @@ pub struct EstimateArgs {
     pub format: Format,
 }
 
+/// `--effect`'s help: the catalogue's names, from the registry.
+fn effect_help() -> String {
+    format!(
+        "Switch an effect on: NAME or NAME:key=value,... (repeatable). Effects: {}",
+        EFFECT_NAMES.join(", ")
+    )
+}
+
 #[derive(Args, Debug)]
 #[command(allow_negative_numbers = true)]
 pub struct SimulateArgs {
@@ -121,10 +129,8 @@ pub struct SimulateArgs {
     /// Simulated time, s (default 0.5, the paper's run length).
     #[arg(long)]
     pub duration: Option<f64>,
-    /// Switch an effect on: NAME or NAME:key=value,... (repeatable). Effects:
-    /// coulomb_friction, viscous_friction, leakage, valve_delay, heat_transfer,
-    /// supply_restriction, accel_zero_shift, pressure_gain_error.
-    #[arg(long = "effect", value_name = "SPEC")]
+    // Help from the registry: `effect_help`.
+    #[arg(long = "effect", value_name = "SPEC", help = effect_help())]
     pub effects: Vec<String>,
     /// Seed of the sensor noise (same seed, same trace).
     #[arg(long)]

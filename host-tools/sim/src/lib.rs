@@ -23,7 +23,7 @@ pub mod sensor;
 pub mod simulate;
 pub mod solver;
 
-pub use effects::{Effects, EFFECT_NAMES};
+pub use effects::{Effects, EFFECT_NAMES, REGISTRY};
 pub use params::SimConfig;
 pub use run::{simulate_truth, CycleTruth, SimRun, TruthTrace};
 pub use simulate::{simulate, simulate_to_file, SimulateError, Simulation, SimulationInfo};

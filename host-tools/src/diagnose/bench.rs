@@ -7,11 +7,9 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
+use super::effects::diagnosis;
 use super::engine::{diagnose, MeasuredInput, Options};
-use hammer_sim::effects::{
-    AccelZeroShift, CoulombFriction, Effects, HeatTransfer, Leakage, PressureGainError, SupplyRestriction, ValveDelay,
-    ViscousFriction, EFFECT_NAMES,
-};
+use hammer_sim::effects::{Effects, EFFECT_NAMES};
 use hammer_sim::sensor::Rng;
 use hammer_sim::simulate::simulate;
 use hammer_sim::SimConfig;
@@ -71,78 +69,28 @@ impl Hidden {
     }
 }
 
-/// The case plan: eight single effects, two controls and two pairs in every
-/// twelve cases, so a short run still covers the catalogue.
+/// The case plan: every single effect of the catalogue, two controls and two
+/// pairs in every `EFFECT_NAMES.len() + 4` cases (twelve for the eight
+/// effects), so a short run still covers the catalogue.
 pub fn hidden_for(index: usize, rng: &mut Rng) -> Hidden {
-    match index % 12 {
-        k @ 0..=7 => Hidden::One(EFFECT_NAMES[(k + index / 12) % 8].to_string()),
-        8 | 9 => Hidden::None,
+    let n = EFFECT_NAMES.len();
+    let period = n + 4;
+    match index % period {
+        k if k < n => Hidden::One(EFFECT_NAMES[(k + index / period) % n].to_string()),
+        k if k < n + 2 => Hidden::None,
         _ => {
-            let a = (rng.next_u64() % 8) as usize;
-            let b = (a + 1 + (rng.next_u64() % 7) as usize) % 8;
+            let a = (rng.next_u64() % n as u64) as usize;
+            let b = (a + 1 + (rng.next_u64() % (n as u64 - 1)) as usize) % n;
             let (a, b) = (a.min(b), a.max(b));
             Hidden::Two(EFFECT_NAMES[a].to_string(), EFFECT_NAMES[b].to_string())
         }
     }
 }
 
-fn between(rng: &mut Rng, lo: f64, hi: f64) -> f64 {
-    lo + (hi - lo) * rng.uniform()
-}
-
-/// A random magnitude over the range a bench would meet.
+/// A random magnitude over the range a bench would meet (see [`super::effects`]).
 pub fn draw_effect(effects: &mut Effects, name: &str, rng: &mut Rng) {
-    match name {
-        "coulomb_friction" => {
-            let s = between(rng, 0.5, 1.5);
-            let d = CoulombFriction::default();
-            effects.coulomb_friction = Some(CoulombFriction {
-                f0_n: d.f0_n * s,
-                k_n_per_bar: d.k_n_per_bar * s,
-                ..d
-            });
-        }
-        "viscous_friction" => {
-            effects.viscous_friction = Some(ViscousFriction {
-                c_n_s_per_m: between(rng, 1.0, 5.0),
-            })
-        }
-        "leakage" => {
-            effects.leakage = Some(Leakage {
-                gap_m: between(rng, 12e-6, 35e-6),
-                ..Default::default()
-            })
-        }
-        "valve_delay" => {
-            effects.valve_delay = Some(ValveDelay {
-                tau_s: between(rng, 0.4e-3, 2.5e-3),
-            })
-        }
-        "heat_transfer" => {
-            effects.heat_transfer = Some(HeatTransfer {
-                h_w_per_m2_k: between(rng, 200.0, 1500.0),
-            })
-        }
-        "supply_restriction" => {
-            effects.supply_restriction = Some(SupplyRestriction {
-                orifice_diameter_m: between(rng, 1.5e-3, 2.5e-3),
-                ..Default::default()
-            })
-        }
-        "accel_zero_shift" => {
-            effects.accel_zero_shift = Some(AccelZeroShift {
-                amplitude_mps2: between(rng, 10.0, 40.0),
-                ..Default::default()
-            })
-        }
-        "pressure_gain_error" => {
-            let mut g = || {
-                let s = if rng.next_u64() & 1 == 0 { 1.0 } else { -1.0 };
-                s * between(rng, 0.01, 0.05)
-            };
-            effects.pressure_gain_error = Some(PressureGainError { rear: g(), front: g() })
-        }
-        _ => {}
+    if let Some(d) = diagnosis(name) {
+        d.draw(effects, rng);
     }
 }
 
@@ -300,31 +248,9 @@ pub fn run_case(opts: &BenchOptions, index: usize, diag: &Options) -> anyhow::Re
 }
 
 /// Relative error of the fitted magnitude: friction force over the points,
-/// the one parameter otherwise, the worse of the two gains.
+/// the one parameter otherwise, the worse of the two gains (see [`super::effects`]).
 fn magnitude_error(truth: &Effects, name: &str, fitted: &serde_json::Value, points: &[f64]) -> Option<f64> {
-    let f = |k: &str| fitted.get(k).and_then(|v| v.as_f64());
-    let rel = |a: f64, b: f64| ((a - b) / b).abs();
-    Some(match name {
-        "coulomb_friction" => {
-            let t = truth.coulomb_friction.as_ref()?;
-            let (f0, k) = (f("f0_n")?, f("k_n_per_bar")?);
-            points.iter().map(|&p| rel(f0 + k * p, t.force_n(p))).sum::<f64>() / points.len().max(1) as f64
-        }
-        "viscous_friction" => rel(f("c_n_s_per_m")?, truth.viscous_friction.as_ref()?.c_n_s_per_m),
-        "leakage" => rel(f("gap_m")?, truth.leakage.as_ref()?.gap_m),
-        "valve_delay" => rel(f("tau_s")?, truth.valve_delay.as_ref()?.tau_s),
-        "heat_transfer" => rel(f("h_w_per_m2_k")?, truth.heat_transfer.as_ref()?.h_w_per_m2_k),
-        "supply_restriction" => rel(
-            f("orifice_diameter_m")?,
-            truth.supply_restriction.as_ref()?.orifice_diameter_m,
-        ),
-        "accel_zero_shift" => rel(f("amplitude_mps2")?, truth.accel_zero_shift.as_ref()?.amplitude_mps2),
-        "pressure_gain_error" => {
-            let t = truth.pressure_gain_error.as_ref()?;
-            rel(f("rear")?, t.rear).max(rel(f("front")?, t.front))
-        }
-        _ => return None,
-    })
+    diagnosis(name)?.magnitude_error(truth, fitted, points)
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize)]

@@ -15,13 +15,14 @@ use std::sync::Mutex;
 
 use serde::{Deserialize, Serialize};
 
+use super::effects::{diagnosis, pressure_reading_factors};
 use super::features::{
     feature_name, steady_from, summarize, wave_index, wave_of, CycleFeatures, Extractor, Signals, Summary, BINS,
     ENERGY, F_BACKHAUL, F_STROKE, GAIN_FRONT, GAIN_REAR, N_FEATURES, PERIOD, VISCOUS, WAVE_SIGNALS, ZERO_SHIFT_SQ,
 };
 use super::fit::{levenberg_marquardt, FitResult};
 use super::gap::{breakdown, measured_cycles, normalized, template, CycleSignals};
-use super::model::{apply, catalogue_params, free_params, Candidate, ModelRunner, NUISANCE, ZERO_SHIFT_SQ_FACTOR};
+use super::model::{apply, catalogue_params, free_params, Candidate, ModelRunner, NUISANCE};
 use super::stages::Stage;
 use hammer_sim::effects::{Effects, EFFECT_NAMES};
 use hammer_sim::run::TruthTrace;
@@ -304,12 +305,13 @@ struct Point {
 }
 
 /// The fit set's data and its weights, shared by every effect's fit.
-struct FitSet<'a> {
-    runner: &'a ModelRunner,
+pub(super) struct FitSet<'a> {
+    pub(super) runner: &'a ModelRunner,
     points: Vec<(f64, Summary, Vec<f64>)>, // bar, summary, sigma
-    nominal_truth: Vec<TruthTrace>,
-    pressures: (f64, f64),
-    distinct: usize,
+    pub(super) nominal_truth: Vec<TruthTrace>,
+    /// Lowest and highest supply pressure of the fit set, bar.
+    pub(super) pressures: (f64, f64),
+    pub(super) distinct: usize,
     sims: AtomicUsize,
     /// Whitened sensitivities of the fit features to each nuisance parameter
     /// (per unit of its prior standard deviation), concatenated over points.
@@ -317,6 +319,27 @@ struct FitSet<'a> {
 }
 
 impl FitSet<'_> {
+    /// Mean of feature `j` over the fit points.
+    pub(super) fn avg(&self, j: usize) -> f64 {
+        self.points.iter().map(|p| p.1.mean[j]).sum::<f64>() / self.points.len().max(1) as f64
+    }
+
+    /// Mean of feature `j` at the fit point at `bar` (0 without one).
+    pub(super) fn mean_at(&self, bar: f64, j: usize) -> f64 {
+        self.points
+            .iter()
+            .find(|p| (p.0 - bar).abs() < 1e-9)
+            .map_or(0.0, |p| p.1.mean[j])
+    }
+
+    /// Mean of feature `j` over the fit points and its standard error.
+    pub(super) fn mean_se(&self, j: usize) -> (f64, f64) {
+        let n = self.points.len().max(1) as f64;
+        let m = self.points.iter().map(|p| p.1.mean[j]).sum::<f64>() / n;
+        let se = (self.points.iter().map(|p| p.2[j] * p.2[j]).sum::<f64>()).sqrt() / n;
+        (m, se)
+    }
+
     fn residuals(&self, cand: &Candidate) -> Option<Vec<f64>> {
         let mut r = Vec::with_capacity(self.points.len() * N_FEATURES);
         for ((bar, s, sigma), truth) in self.points.iter().zip(&self.nominal_truth) {
@@ -1024,12 +1047,12 @@ pub fn diagnose(
                 .as_ref()
                 .and_then(|r| template(r, &base.hammer))
                 .map(|(mut f, _)| {
-                    if let Some(g) = fitted_cand
-                        .as_ref()
-                        .and_then(|c| c.effects.pressure_gain_error.as_ref())
-                    {
-                        f.p_rear_pa.iter_mut().for_each(|x| *x *= 1.0 + g.rear);
-                        f.p_front_pa.iter_mut().for_each(|x| *x *= 1.0 + g.front);
+                    if let Some(c) = &fitted_cand {
+                        let (f1, f2) = pressure_reading_factors(&c.effects);
+                        if f1 != 1.0 || f2 != 1.0 {
+                            f.p_rear_pa.iter_mut().for_each(|x| *x *= f1);
+                            f.p_front_pa.iter_mut().for_each(|x| *x *= f2);
+                        }
                     }
                     f
                 });
@@ -1140,41 +1163,7 @@ fn mean_cycle(meas: &[CycleSignals], len: usize) -> CycleSignals {
 
 /// Start values from what the measurement shows directly.
 fn start_values(fs: &FitSet, name: &str) -> Vec<f64> {
-    let mean_at = |bar: f64, j: usize| {
-        fs.points
-            .iter()
-            .find(|p| (p.0 - bar).abs() < 1e-9)
-            .map_or(0.0, |p| p.1.mean[j])
-    };
-    let avg = |j: usize| fs.points.iter().map(|p| p.1.mean[j]).sum::<f64>() / fs.points.len().max(1) as f64;
-    let friction = |bar: f64| (0.5 * (mean_at(bar, F_STROKE) + mean_at(bar, F_BACKHAUL))).max(0.1);
-    let specs = free_params(name, fs.distinct);
-    match name {
-        "coulomb_friction" => specs
-            .iter()
-            .enumerate()
-            .map(|(i, _)| friction(if i == 0 { fs.pressures.0 } else { fs.pressures.1 }))
-            .collect(),
-        "viscous_friction" => vec![avg(VISCOUS).max(0.05)],
-        "pressure_gain_error" => vec![avg(GAIN_REAR), avg(GAIN_FRONT)],
-        "accel_zero_shift" => {
-            let nominal_zs = fs
-                .nominal_truth
-                .first()
-                .and_then(|t| fs.runner.features_of_truth(t, &Effects::default()))
-                .map_or(0.0, |f| f[ZERO_SHIFT_SQ]);
-            vec![((avg(ZERO_SHIFT_SQ) - nominal_zs).max(0.0) / ZERO_SHIFT_SQ_FACTOR).sqrt()]
-        }
-        _ => {
-            let mut e = Effects::default();
-            e.apply_spec(name).ok();
-            let v = catalogue_params(&e, name);
-            specs
-                .iter()
-                .map(|s| v.get(s.key).and_then(|x| x.as_f64()).unwrap_or(s.lo))
-                .collect()
-        }
-    }
+    diagnosis(name).map_or_else(Vec::new, |d| d.start_values(fs))
 }
 
 /// Fits `names` together (one or two effects); `init` overrides start values.
@@ -1260,47 +1249,10 @@ fn fit_effects(
 /// What in the measurement the effect matched: its signature in the force
 /// balance, and the features whose gap it closed most.
 fn evidence(fs: &FitSet, names: &[&str], cand: &Candidate) -> Vec<String> {
-    let mut out = Vec::new();
-    let mean = |j: usize| {
-        let n = fs.points.len().max(1) as f64;
-        let m = fs.points.iter().map(|p| p.1.mean[j]).sum::<f64>() / n;
-        let se = (fs.points.iter().map(|p| p.2[j] * p.2[j]).sum::<f64>()).sqrt() / n;
-        (m, se)
-    };
-    for name in names {
-        let line = match *name {
-            "coulomb_friction" => {
-                let (s, ss) = mean(F_STROKE);
-                let (b, sb) = mean(F_BACKHAUL);
-                let (g, sg) = mean(GAIN_REAR);
-                format!(
-                    "force balance: an offset opposing the motion, {s:.2} ± {ss:.2} N in the stroke and {b:.2} ± {sb:.2} N in the backhaul (it flips sign with the direction of motion); nothing proportional to the rear chamber force (γ = {g:.4} ± {sg:.4}), which a pressure gain error would leave"
-                )
-            }
-            "viscous_friction" => {
-                let (c, sc) = mean(VISCOUS);
-                format!("force balance: a force growing with the speed, {c:.2} ± {sc:.2} N·s/m, not a constant offset")
-            }
-            "pressure_gain_error" => {
-                let (g1, s1) = mean(GAIN_REAR);
-                let (g2, s2) = mean(GAIN_FRONT);
-                format!(
-                    "force balance: a force proportional to the chamber forces, rear {g1:+.4} ± {s1:.4}, front {g2:+.4} ± {s2:.4}, that does not flip with the direction of motion"
-                )
-            }
-            "accel_zero_shift" => {
-                let (z, _) = mean(ZERO_SHIFT_SQ);
-                format!(
-                    "force balance: an acceleration offset of random sign decaying from each impact, RMS {:.1} m/s²",
-                    z.max(0.0).sqrt()
-                )
-            }
-            _ => String::new(),
-        };
-        if !line.is_empty() {
-            out.push(line);
-        }
-    }
+    let mut out: Vec<String> = names
+        .iter()
+        .filter_map(|name| diagnosis(name).and_then(|d| d.evidence(fs)))
+        .collect();
     // The features whose gap the candidate closed most, grouped by signal and stage.
     let nominal = Candidate::default();
     let mut gains: BTreeMap<String, f64> = BTreeMap::new();

@@ -5,6 +5,7 @@
 
 pub mod bench;
 pub mod command;
+mod effects;
 pub mod engine;
 pub mod features;
 pub mod fit;

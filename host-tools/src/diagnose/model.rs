@@ -3,12 +3,10 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::features::{summarize, Extractor, Signals, N_FEATURES, ZERO_SHIFT_SQ};
+use super::effects::{diagnosis, pressure_reading_factors, shift_expected_features};
+use super::features::{summarize, Extractor, Signals, N_FEATURES};
 use super::fit::ParamSpec;
-use hammer_sim::effects::{
-    AccelZeroShift, CoulombFriction, Effects, HeatTransfer, Leakage, PressureGainError, SupplyRestriction, ValveDelay,
-    ViscousFriction,
-};
+use hammer_sim::effects::Effects;
 use hammer_sim::run::TruthTrace;
 use hammer_sim::{simulate_truth, SimConfig};
 
@@ -25,10 +23,7 @@ pub struct Candidate {
 impl Candidate {
     /// The effects the simulator must run; the sensor effects act on its output.
     pub fn physics(&self) -> Effects {
-        let mut e = self.effects.clone();
-        e.accel_zero_shift = None;
-        e.pressure_gain_error = None;
-        e
+        self.effects.physics()
     }
 
     pub fn has_physics(&self) -> bool {
@@ -36,77 +31,17 @@ impl Candidate {
     }
 }
 
-/// The free parameters the diagnosis fits for an effect, and the catalogue
-/// keys they set. Every other key keeps its default (documented in
-/// docs/diagnosis.md): a leakage's eccentricity and rod guide, a supply
-/// line's volume, a zero shift's discharge time constant.
+/// The free parameters the diagnosis fits for an effect (see
+/// [`super::effects`]); none for an unknown name.
 pub fn free_params(name: &str, distinct_pressures: usize) -> Vec<ParamSpec> {
-    let p = |key, lo, hi, log, step| ParamSpec { key, lo, hi, log, step };
-    match name {
-        // Friction at the lowest and highest fitted pressure (a line between
-        // them is the catalogue's F0 + k·p); from one pressure, F ∝ p.
-        "coulomb_friction" if distinct_pressures >= 2 => vec![
-            p("friction_at_low_n", 0.0, 300.0, false, 0.05),
-            p("friction_at_high_n", 0.0, 300.0, false, 0.05),
-        ],
-        "coulomb_friction" => vec![p("friction_at_low_n", 0.0, 300.0, false, 0.05)],
-        "viscous_friction" => vec![p("c_n_s_per_m", 0.01, 200.0, true, 0.02)],
-        "leakage" => vec![p("gap_m", 1e-6, 1.5e-4, true, 0.01)],
-        "valve_delay" => vec![p("tau_s", 1e-5, 0.03, true, 0.02)],
-        "heat_transfer" => vec![p("h_w_per_m2_k", 1.0, 5e4, true, 0.02)],
-        "supply_restriction" => vec![p("orifice_diameter_m", 5e-4, 0.03, true, 0.01)],
-        "accel_zero_shift" => vec![p("amplitude_mps2", 0.0, 1e3, false, 0.1)],
-        "pressure_gain_error" => vec![p("rear", -0.3, 0.3, false, 1e-3), p("front", -0.3, 0.3, false, 1e-3)],
-        _ => Vec::new(),
-    }
+    diagnosis(name).map_or_else(Vec::new, |d| d.free_params(distinct_pressures))
 }
 
 /// Writes fitted values `theta` of `name` into `effects`. `pressures` are the
 /// lowest and highest supply pressures of the fit set, bar.
 pub fn apply(effects: &mut Effects, name: &str, theta: &[f64], pressures: (f64, f64)) {
-    match name {
-        "coulomb_friction" => {
-            let (lo, hi) = pressures;
-            let (f0, k) = if theta.len() >= 2 && hi > lo {
-                let k = (theta[1] - theta[0]) / (hi - lo);
-                (theta[0] - k * lo, k)
-            } else {
-                (0.0, theta[0] / lo.max(1e-3))
-            };
-            effects.coulomb_friction = Some(CoulombFriction {
-                f0_n: f0,
-                k_n_per_bar: k,
-                ..Default::default()
-            });
-        }
-        "viscous_friction" => effects.viscous_friction = Some(ViscousFriction { c_n_s_per_m: theta[0] }),
-        "leakage" => {
-            effects.leakage = Some(Leakage {
-                gap_m: theta[0],
-                ..Default::default()
-            })
-        }
-        "valve_delay" => effects.valve_delay = Some(ValveDelay { tau_s: theta[0] }),
-        "heat_transfer" => effects.heat_transfer = Some(HeatTransfer { h_w_per_m2_k: theta[0] }),
-        "supply_restriction" => {
-            effects.supply_restriction = Some(SupplyRestriction {
-                orifice_diameter_m: theta[0],
-                ..Default::default()
-            })
-        }
-        "accel_zero_shift" => {
-            effects.accel_zero_shift = Some(AccelZeroShift {
-                amplitude_mps2: theta[0],
-                ..Default::default()
-            })
-        }
-        "pressure_gain_error" => {
-            effects.pressure_gain_error = Some(PressureGainError {
-                rear: theta[0],
-                front: theta[1],
-            })
-        }
-        _ => {}
+    if let Some(d) = diagnosis(name) {
+        d.apply(effects, theta, pressures);
     }
 }
 
@@ -183,15 +118,12 @@ impl ModelRunner {
 
     /// Features of a simulated solution seen through the candidate's sensor effects.
     pub fn features_of_truth(&self, truth: &TruthTrace, effects: &Effects) -> Option<Vec<f64>> {
-        let (g1, g2) = effects
-            .pressure_gain_error
-            .as_ref()
-            .map_or((0.0, 0.0), |g| (g.rear, g.front));
+        let (f1, f2) = pressure_reading_factors(effects);
         let scaled;
-        let (p1, p2): (&[f64], &[f64]) = if g1 != 0.0 || g2 != 0.0 {
+        let (p1, p2): (&[f64], &[f64]) = if f1 != 1.0 || f2 != 1.0 {
             scaled = (
-                truth.p_rear_pa.iter().map(|p| p * (1.0 + g1)).collect::<Vec<_>>(),
-                truth.p_front_pa.iter().map(|p| p * (1.0 + g2)).collect::<Vec<_>>(),
+                truth.p_rear_pa.iter().map(|p| p * f1).collect::<Vec<_>>(),
+                truth.p_front_pa.iter().map(|p| p * f2).collect::<Vec<_>>(),
             );
             (&scaled.0, &scaled.1)
         } else {
@@ -213,11 +145,7 @@ impl ModelRunner {
             return None;
         }
         let mut mean = summarize(&cycles).mean;
-        // The zero shift's sign is random per impact: its expected effect on
-        // the corrected waveforms is nil, on the squared amplitude E[u²]·A².
-        if let Some(z) = &effects.accel_zero_shift {
-            mean[ZERO_SHIFT_SQ] += ZERO_SHIFT_SQ_FACTOR * z.amplitude_mps2 * z.amplitude_mps2;
-        }
+        shift_expected_features(effects, &mut mean);
         debug_assert_eq!(mean.len(), N_FEATURES);
         Some(mean)
     }
