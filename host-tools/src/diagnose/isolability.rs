@@ -59,7 +59,10 @@ pub fn matrix(points: &[f64], duration_s: f64, diag: &Options) -> anyhow::Result
                 .iter()
                 .map(|j| of(j).map_or(0.0, |e| e.explained_fraction))
                 .collect(),
-            score: EFFECT_NAMES.iter().map(|j| of(j).map_or(f64::NAN, |e| e.score)).collect(),
+            score: EFFECT_NAMES
+                .iter()
+                .map(|j| of(j).map_or(f64::NAN, |e| e.score))
+                .collect(),
             named: r.verdict.effects.clone(),
         });
     }
