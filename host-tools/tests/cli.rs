@@ -515,6 +515,56 @@ fn diagnose_bench_structural_small_run() {
     assert!(force_balance_named >= 3, "{force_balance_named}");
 }
 
+/// The catalogue's isolability from the model alone: every effect put into
+/// the model at its default is named by the diagnosis and explains nearly
+/// all of its own gap; the effects the force balance pins leave no other
+/// effect more than a fifth of theirs.
+#[test]
+fn isolability_matrix_has_its_diagonal() {
+    let dir = tmp_dir("iso");
+    let (code, stdout, err) = hammer(&[
+        "diagnose-bench",
+        "--isolability",
+        "--points",
+        "4,7",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    println!("{stdout}");
+    let rows: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("isolability.json")).unwrap()).unwrap();
+    let rows = rows.as_array().unwrap();
+    assert_eq!(rows.len(), hammer_sim::effects::EFFECT_NAMES.len());
+    for (i, r) in rows.iter().enumerate() {
+        let name = r["effect"].as_str().unwrap();
+        let explained: Vec<f64> = r["explained"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x.as_f64().unwrap())
+            .collect();
+        assert!(r["named"].as_array().unwrap().iter().any(|n| n == name), "{r}");
+        assert!(explained[i] >= 0.9, "{name}: {}", explained[i]);
+        if [
+            "coulomb_friction",
+            "viscous_friction",
+            "accel_zero_shift",
+            "pressure_gain_error",
+        ]
+        .contains(&name)
+        {
+            let other = explained
+                .iter()
+                .enumerate()
+                .filter(|(j, _)| *j != i)
+                .map(|(_, x)| *x)
+                .fold(0.0, f64::max);
+            assert!(other <= 0.2, "{name}: another effect explains {other}");
+        }
+    }
+}
+
 /// Standard output that cannot be written is an error, never a panic or a
 /// silent success; a trace with no impact is an error as in `report`.
 #[test]
