@@ -8,8 +8,8 @@
 
 use std::time::Duration;
 
+use hammer_host::client::Client;
 use hammer_host::emulator::{firmware_elf, qemu_available, Emulator};
-use hammer_host::link::Link;
 use hammer_sim::estimation::{estimator_config, to_codes};
 use hammer_sim::simulate::simulate;
 use hammer_sim::SimConfig;
@@ -22,7 +22,7 @@ fn main() {
         std::process::exit(1);
     }
     let mut emu = Emulator::start(&firmware_elf(), true).expect("emulated firmware (cargo xtask firmware)");
-    let mut link = Link::new(emu.connect(Duration::from_secs(20)).expect("connect"));
+    let mut link = Client::new(emu.connect(Duration::from_secs(20)).expect("connect"));
     let t = Duration::from_secs(60);
     let mut cfg = SimConfig::nominal(5.0);
     cfg.solver.duration_s = 1.0;
@@ -30,7 +30,7 @@ fn main() {
     let sim = simulate(&cfg).unwrap();
     let est = estimator_config(&cfg.hammer, &cfg.sensors, &EstimatorParams::default(), 1e5, None).unwrap();
     let samples = to_codes(&sim.trace(), &est);
-    let status = |link: &mut Link<_>| {
+    let status = |link: &mut Client<_>| {
         link.send(&HostMsg::GetStatus).unwrap();
         link.recv_until(t, |m| if let DeviceMsg::Status(s) = m { Some(*s) } else { None })
             .unwrap()

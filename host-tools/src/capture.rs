@@ -68,16 +68,22 @@ pub fn to_trace(codes: &[[u16; 3]], cfg: &Config, supply_bar: Option<f64>) -> (T
 /// calibration that turns codes into units), starts the capture and collects
 /// the chunks until the capture is complete.
 pub fn record<S: std::io::Read + std::io::Write>(
-    link: &mut crate::link::Link<S>,
+    client: &mut crate::client::Client<S>,
     cycles: u8,
     timeout: std::time::Duration,
 ) -> anyhow::Result<(Vec<[u16; 3]>, Config)> {
+    use crate::client::reply_to;
     use hammer_wire::{CommandKind, DeviceMsg, HostMsg};
-    link.send(&HostMsg::GetConfig)?;
-    let (cfg, _) = link.recv_until(timeout, |m| if let DeviceMsg::Config(c) = m { Some(*c) } else { None })?;
+    let cfg = client.request(&HostMsg::GetConfig, timeout, |m| {
+        if let DeviceMsg::Config(c) = m {
+            Some(*c)
+        } else {
+            None
+        }
+    })?;
     let cfg = cfg.ok_or_else(|| anyhow::anyhow!("the device did not send its configuration"))?;
     let cfg = cfg.to_config(&Config::default());
-    link.send(&HostMsg::StartCapture { cycles })?;
+    client.send(&HostMsg::StartCapture { cycles })?;
     let mut chunks: Vec<CaptureChunk> = Vec::new();
     let deadline = std::time::Instant::now() + timeout;
     let mut acked = false;
@@ -92,22 +98,18 @@ pub fn record<S: std::io::Read + std::io::Write>(
                 chunks.len()
             );
         }
-        match link.recv(left)? {
-            Some(DeviceMsg::Ack(CommandKind::StartCapture)) => acked = true,
-            Some(DeviceMsg::Rejected {
-                command: CommandKind::StartCapture,
-                reason,
-            }) => {
-                anyhow::bail!("the device refused the capture: {reason:?}")
+        let Some(m) = client.recv(left)? else { continue };
+        match reply_to(CommandKind::StartCapture, &m) {
+            Some(Ok(())) => acked = true,
+            Some(Err(reason)) => anyhow::bail!("the device refused the capture: {reason:?}"),
+            None => {}
+        }
+        if let DeviceMsg::Capture(c) = m {
+            let done = c.offset as usize + c.samples.len() >= c.total as usize;
+            chunks.push(c);
+            if done {
+                break;
             }
-            Some(DeviceMsg::Capture(c)) => {
-                let done = c.offset as usize + c.samples.len() >= c.total as usize;
-                chunks.push(c);
-                if done {
-                    break;
-                }
-            }
-            _ => {}
         }
     }
     if !acked {

@@ -274,7 +274,7 @@ pub fn run(cli: Cli) -> Result<()> {
 }
 
 fn capture_cmd(args: &CaptureArgs) -> Result<()> {
-    use crate::link::Link;
+    use crate::client::Client;
     let timeout = std::time::Duration::from_secs(120);
     let (codes, cfg, supply) = match args.demo {
         Some(bar) => {
@@ -282,8 +282,8 @@ fn capture_cmd(args: &CaptureArgs) -> Result<()> {
             let codes = crate::demo::hammer_codes(&demo, 0.25 + 0.06 * args.cycles as f64)?;
             let (board, read, write) = crate::demo::start_board(false)?;
             let writer = std::sync::Arc::new(std::sync::Mutex::new(write));
-            let mut link = Link::new(crate::demo::SharedPort::new(read, writer.clone()));
-            crate::demo::handshake(&mut link, timeout)?;
+            let mut link = Client::new(crate::demo::SharedPort::new(read, writer.clone()));
+            link.handshake(timeout)?;
             // Arm the capture before the hammer starts, then feed it.
             let feeder = std::thread::spawn({
                 let writer = writer.clone();
@@ -302,8 +302,8 @@ fn capture_cmd(args: &CaptureArgs) -> Result<()> {
             let port = connector
                 .connect()
                 .with_context(|| format!("opening {}", connector.describe()))?;
-            let mut link = Link::new(port);
-            crate::demo::handshake(&mut link, std::time::Duration::from_secs(10))?;
+            let mut link = Client::new(port);
+            link.handshake(std::time::Duration::from_secs(10))?;
             let (codes, cfg) = crate::capture::record(&mut link, args.cycles, timeout)?;
             (codes, cfg, args.supply_bar)
         }

@@ -11,10 +11,10 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use hammer_estimator::RawSample;
-use hammer_wire::{encode, DeviceMsg, HostMsg, Report, SampleBlock, BLOCK_SAMPLES, MAX_FRAME, PROTOCOL_VERSION};
+use hammer_wire::{DeviceMsg, HostMsg, Report, SampleBlock, BLOCK_SAMPLES};
 
+use crate::client::{write_frame, Client};
 use crate::emulator::{firmware_elf, qemu_available, Emulator};
-use crate::link::Link;
 use hammer_sim::estimation::{estimator_config, to_codes};
 use hammer_sim::simulate::simulate;
 use hammer_sim::SimConfig;
@@ -158,7 +158,6 @@ pub fn start_board(native: bool) -> Result<(Board, Box<dyn Read + Send>, Box<dyn
 /// Streams `codes` as numbered sample blocks; paced to real time when `paced`.
 pub fn feed(codes: Vec<RawSample>, writer: Arc<Mutex<Box<dyn Write + Send>>>, paced: bool, sample_rate_hz: f64) {
     let start = Instant::now();
-    let mut frame = [0u8; MAX_FRAME];
     for (i, chunk) in codes.chunks(BLOCK_SAMPLES).enumerate() {
         if paced {
             let due = Duration::from_secs_f64((i * BLOCK_SAMPLES) as f64 / sample_rate_hz);
@@ -170,11 +169,8 @@ pub fn feed(codes: Vec<RawSample>, writer: Arc<Mutex<Box<dyn Write + Send>>>, pa
             seq: i as u32,
             samples: chunk.iter().map(|s| [s.rear, s.front, s.accel]).collect(),
         };
-        let Ok(n) = encode(&HostMsg::Samples(block), &mut frame) else {
-            continue;
-        };
         let Ok(mut w) = writer.lock() else { return };
-        if w.write_all(&frame[..n]).is_err() {
+        if write_frame(&mut *w, &HostMsg::Samples(block)).is_err() {
             return; // the board went away
         }
     }
@@ -244,9 +240,9 @@ pub fn run(args: &DemoArgs) -> Result<()> {
 }
 
 fn headless_loop(port: SharedPort, cycles: usize) -> Result<()> {
-    let mut link = Link::new(port);
+    let mut link = Client::new(port);
     let deadline = Duration::from_secs(30);
-    let (info, _) = handshake(&mut link, deadline)?;
+    let (info, _) = link.handshake(deadline)?;
     println!(
         "device: {} firmware {}.{}.{} protocol {} config {:08x}",
         String::from_utf8_lossy(&info.board),
@@ -275,8 +271,13 @@ fn headless_loop(port: SharedPort, cycles: usize) -> Result<()> {
             None => {}
         }
     }
-    link.send(&HostMsg::GetStatus)?;
-    let (status, _) = link.recv_until(deadline, |m| if let DeviceMsg::Status(s) = m { Some(*s) } else { None })?;
+    let status = link.request(&HostMsg::GetStatus, deadline, |m| {
+        if let DeviceMsg::Status(s) = m {
+            Some(*s)
+        } else {
+            None
+        }
+    })?;
     if let Some(s) = status {
         println!(
             "status: {} samples, {} cycles ({} invalid), {} dropped samples, {} frames sent, {} dropped, rx errors {}",
@@ -290,37 +291,6 @@ fn headless_loop(port: SharedPort, cycles: usize) -> Result<()> {
         );
     }
     Ok(())
-}
-
-/// The handshake, retried: the board may still be booting.
-pub fn handshake<S: Read + Write>(
-    link: &mut Link<S>,
-    timeout: Duration,
-) -> Result<(hammer_wire::DeviceInfo, Vec<DeviceMsg>)> {
-    let deadline = Instant::now() + timeout;
-    while Instant::now() < deadline {
-        link.send(&HostMsg::Hello {
-            protocol_version: PROTOCOL_VERSION,
-        })?;
-        let (info, seen) = link.recv_until(Duration::from_secs(2), |m| {
-            if let DeviceMsg::Hello(i) = m {
-                Some(i.clone())
-            } else {
-                None
-            }
-        })?;
-        if let Some(info) = info {
-            if info.protocol_version != PROTOCOL_VERSION {
-                bail!(
-                    "device speaks protocol {}, this tool {}: update one of them",
-                    info.protocol_version,
-                    PROTOCOL_VERSION
-                );
-            }
-            return Ok((info, seen));
-        }
-    }
-    bail!("no answer to the handshake in {} s", timeout.as_secs())
 }
 
 /// Hands the dashboard the demo board's one link; there is nothing to

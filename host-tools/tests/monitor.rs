@@ -486,19 +486,9 @@ fn the_dashboard_shows_the_emulated_boards_identity_and_health() {
         let mut info = None;
         for _ in 0..10 {
             let stream = emu.connect(T).expect("the board's UART");
-            let mut link = hammer_host::link::Link::new(stream);
-            for _ in 0..3 {
-                link.send(&HostMsg::Hello {
-                    protocol_version: PROTOCOL_VERSION,
-                })
-                .unwrap();
-                if let Ok((Some(i), _)) = link.recv_until(Duration::from_secs(2), |m| match m {
-                    DeviceMsg::Hello(i) => Some(i.clone()),
-                    _ => None,
-                }) {
-                    info = Some(i);
-                    break;
-                }
+            let mut link = hammer_host::client::Client::new(stream);
+            if let Ok((i, _)) = link.handshake(Duration::from_secs(6)) {
+                info = Some(i);
             }
             if info.is_some() {
                 break;

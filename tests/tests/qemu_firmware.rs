@@ -9,8 +9,8 @@
 use std::time::Duration;
 
 use hammer_estimator::{Config, Estimator, RawSample};
+use hammer_host::client::Client;
 use hammer_host::emulator::{firmware_elf, Emulator};
-use hammer_host::link::Link;
 use hammer_sim::estimation::{estimator_config, to_codes};
 use hammer_sim::simulate::simulate;
 use hammer_sim::SimConfig;
@@ -19,7 +19,7 @@ use hammer_wire::*;
 
 const T: Duration = Duration::from_secs(20);
 
-fn boot() -> (Emulator, Link<std::net::TcpStream>) {
+fn boot() -> (Emulator, Client<std::net::TcpStream>) {
     let mut emu = Emulator::start(&firmware_elf(), false).expect("QEMU and the emulated firmware");
     let link = connect(&mut emu);
     (emu, link)
@@ -28,11 +28,11 @@ fn boot() -> (Emulator, Link<std::net::TcpStream>) {
 /// Connects to the board's UART and shakes hands. Like a host tool, it retries:
 /// a fresh connection can be reset while QEMU starts, or wait in its listen
 /// queue until the previous connection is fully closed.
-fn connect(emu: &mut Emulator) -> Link<std::net::TcpStream> {
+fn connect(emu: &mut Emulator) -> Client<std::net::TcpStream> {
     for _ in 0..10 {
         let stream = emu.connect(T).expect("connect to the board's UART");
-        let mut link = Link::new(stream);
-        match hammer_host::demo::handshake(&mut link, Duration::from_secs(10)) {
+        let mut link = Client::new(stream);
+        match link.handshake(Duration::from_secs(10)) {
             Ok(_) => return link,
             Err(e) => eprintln!("handshake failed ({e}); reconnecting"),
         }
@@ -41,7 +41,7 @@ fn connect(emu: &mut Emulator) -> Link<std::net::TcpStream> {
     panic!("no handshake with the emulated board");
 }
 
-fn status(link: &mut Link<std::net::TcpStream>) -> Status {
+fn status(link: &mut Client<std::net::TcpStream>) -> Status {
     link.send(&HostMsg::GetStatus).unwrap();
     let (s, _) = link
         .recv_until(T, |m| if let DeviceMsg::Status(s) = m { Some(*s) } else { None })
@@ -50,7 +50,7 @@ fn status(link: &mut Link<std::net::TcpStream>) -> Status {
 }
 
 /// Polls the status until the device has processed `n` samples.
-fn wait_samples(link: &mut Link<std::net::TcpStream>, n: u64) -> Status {
+fn wait_samples(link: &mut Client<std::net::TcpStream>, n: u64) -> Status {
     let deadline = std::time::Instant::now() + T;
     loop {
         let s = status(link);
@@ -72,7 +72,7 @@ fn codes(bar: f64, seconds: f64, seed: u64) -> Vec<RawSample> {
 }
 
 /// Streams samples as numbered blocks; returns everything the device said.
-fn stream(link: &mut Link<std::net::TcpStream>, samples: &[RawSample], next_block: &mut u32) -> Vec<DeviceMsg> {
+fn stream(link: &mut Client<std::net::TcpStream>, samples: &[RawSample], next_block: &mut u32) -> Vec<DeviceMsg> {
     let mut got = vec![];
     for (i, chunk) in samples.chunks(BLOCK_SAMPLES).enumerate() {
         let block = SampleBlock {
@@ -91,7 +91,7 @@ fn stream(link: &mut Link<std::net::TcpStream>, samples: &[RawSample], next_bloc
 }
 
 /// Waits for the last chunk of a capture; returns every capture chunk in `got` and after it.
-fn finish_capture(link: &mut Link<std::net::TcpStream>, mut got: Vec<DeviceMsg>) -> Vec<CaptureChunk> {
+fn finish_capture(link: &mut Client<std::net::TcpStream>, mut got: Vec<DeviceMsg>) -> Vec<CaptureChunk> {
     let (_, more) = link
         .recv_until(T, |m| {
             matches!(m, DeviceMsg::Capture(c) if c.offset as usize + c.samples.len() == c.total as usize).then_some(())

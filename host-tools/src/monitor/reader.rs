@@ -2,16 +2,16 @@
 //! it shares with `hammer replay`.
 
 use std::collections::VecDeque;
-use std::io::{self, Read, Write as _};
+use std::io::{self, Read};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{SyncSender, TrySendError};
 use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use hammer_wire::{
-    encode, CommandKind, DecodeError, Decoder, DeviceMsg, HostMsg, RejectReason, MAX_FRAME, PROTOCOL_VERSION,
-};
+use hammer_wire::{DecodeError, Decoder, DeviceMsg, HostMsg, MAX_FRAME};
+
+use crate::client::{hello, hello_reply, write_frame, SeqCheck};
 
 use super::event::{now_us, Event, LinkStats, Stamped};
 use super::log::{Logger, Marker};
@@ -41,7 +41,7 @@ pub struct Ingest {
     stats: LinkStats,
     handshake: Handshake,
     held: VecDeque<DeviceMsg>,
-    last_seq: Option<u32>,
+    seq: SeqCheck,
     lost_at_us: Option<u64>,
     opened_before: bool,
     /// Stream offset just after the last delimiter: where the frame now being
@@ -62,7 +62,7 @@ impl Ingest {
             stats: LinkStats::default(),
             handshake: Handshake::Pending,
             held: VecDeque::new(),
-            last_seq: None,
+            seq: SeqCheck::default(),
             lost_at_us: None,
             opened_before: false,
             frame_start: 0,
@@ -171,38 +171,33 @@ impl Ingest {
     }
 
     fn message(&mut self, t_us: u64, m: DeviceMsg, emit: &mut dyn FnMut(Stamped)) {
-        let mismatch = match &m {
-            DeviceMsg::Hello(info) if info.protocol_version != PROTOCOL_VERSION => Some(info.protocol_version),
-            DeviceMsg::Rejected {
-                command: CommandKind::Hello,
-                reason: RejectReason::ProtocolMismatch { device },
-            } => Some(*device),
-            _ => None,
-        };
-        if let Some(device) = mismatch {
-            self.held.clear();
-            if self.handshake != Handshake::Mismatch(device) {
-                self.handshake = Handshake::Mismatch(device);
+        match hello_reply(&m) {
+            Some(Err(device)) => {
+                self.held.clear();
+                if self.handshake != Handshake::Mismatch(device) {
+                    self.handshake = Handshake::Mismatch(device);
+                    emit(Stamped {
+                        t_us,
+                        event: Event::VersionMismatch { device },
+                    });
+                }
+                return;
+            }
+            Some(Ok(info)) => {
+                let first = self.handshake != Handshake::Done;
+                self.handshake = Handshake::Done;
                 emit(Stamped {
                     t_us,
-                    event: Event::VersionMismatch { device },
+                    event: Event::Device(info.clone()),
                 });
-            }
-            return;
-        }
-        if let DeviceMsg::Hello(info) = m {
-            let first = self.handshake != Handshake::Done;
-            self.handshake = Handshake::Done;
-            emit(Stamped {
-                t_us,
-                event: Event::Device(info),
-            });
-            if first {
-                while let Some(h) = self.held.pop_front() {
-                    self.interpret(t_us, h, emit);
+                if first {
+                    while let Some(h) = self.held.pop_front() {
+                        self.interpret(t_us, h, emit);
+                    }
                 }
+                return;
             }
-            return;
+            None => {}
         }
         match self.handshake {
             Handshake::Done => self.interpret(t_us, m, emit),
@@ -219,20 +214,17 @@ impl Ingest {
 
     fn interpret(&mut self, t_us: u64, m: DeviceMsg, emit: &mut dyn FnMut(Stamped)) {
         if let DeviceMsg::Report(r) = &m {
-            if let Some(prev) = self.last_seq {
-                let expected = prev.wrapping_add(1);
-                if r.seq != expected {
-                    self.stats.seq_gaps += 1;
-                    if r.seq > expected {
-                        self.stats.lost_reports += u64::from(r.seq - expected);
-                    }
-                    emit(Stamped {
-                        t_us,
-                        event: Event::SeqGap { expected, got: r.seq },
-                    });
-                }
+            if let Some(gap) = self.seq.next(r.seq) {
+                self.stats.seq_gaps += 1;
+                self.stats.lost_reports += gap.lost();
+                emit(Stamped {
+                    t_us,
+                    event: Event::SeqGap {
+                        expected: gap.expected,
+                        got: gap.got,
+                    },
+                });
             }
-            self.last_seq = Some(r.seq);
             self.stats.reports += 1;
         }
         emit(Stamped {
@@ -395,10 +387,7 @@ impl Reader {
                             HELLO_RETRY.as_secs()
                         ))));
                     }
-                    let hello = HostMsg::Hello {
-                        protocol_version: PROTOCOL_VERSION,
-                    };
-                    match send(&mut port, &hello) {
+                    match write_frame(&mut port, &hello()) {
                         Ok(()) => {}
                         // A device that does not read yet: ask again next time.
                         Err(e) if matches!(e.kind(), io::ErrorKind::TimedOut | io::ErrorKind::WouldBlock) => {}
@@ -409,7 +398,7 @@ impl Reader {
                 }
                 Handshake::Done if !config_asked => {
                     config_asked = true;
-                    match send(&mut port, &HostMsg::GetConfig) {
+                    match write_frame(&mut port, &HostMsg::GetConfig) {
                         Ok(()) => {}
                         Err(e) if matches!(e.kind(), io::ErrorKind::TimedOut | io::ErrorKind::WouldBlock) => {
                             config_asked = false;
@@ -451,18 +440,10 @@ impl Reader {
     }
 }
 
-/// One frame out. No `flush`: on a serial port that is `tcdrain`, waiting
-/// for the device to take the bytes, which a stalled board never does.
-fn send(port: &mut Box<dyn Port>, msg: &HostMsg) -> io::Result<()> {
-    let mut buf = [0u8; MAX_FRAME];
-    let n = encode(msg, &mut buf).map_err(|_| io::Error::new(io::ErrorKind::InvalidInput, "message too large"))?;
-    port.write_all(&buf[..n])
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use hammer_wire::{DeviceInfo, Report};
+    use hammer_wire::{encode, DeviceInfo, Report, PROTOCOL_VERSION};
 
     fn frame(m: &DeviceMsg) -> Vec<u8> {
         let mut buf = [0u8; MAX_FRAME];
