@@ -311,10 +311,13 @@ mod tests {
     /// A scripted device in memory: each host frame it decodes is answered
     /// with the bytes `script` returns; reads with nothing to say are
     /// `WouldBlock`, as a port with a read timeout.
+    /// The bytes a fake device answers a host message with.
+    type Script = Box<dyn FnMut(&HostMsg) -> Vec<u8>>;
+
     struct FakeDevice {
         dec: Decoder<MAX_FRAME>,
         out: VecDeque<u8>,
-        script: Box<dyn FnMut(&HostMsg) -> Vec<u8>>,
+        script: Script,
         received: Arc<Mutex<Vec<HostMsg>>>,
     }
 
