@@ -229,13 +229,19 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
     let text = render(&s);
     print!("{text}");
     if let Some(dir) = &args.out {
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-        let json = dir.join("bench.json");
-        std::fs::write(&json, serde_json::to_string_pretty(&s)?)
-            .with_context(|| format!("writing {}", json.display()))?;
-        let txt = dir.join("bench.txt");
-        std::fs::write(&txt, &text).with_context(|| format!("writing {}", txt.display()))?;
+        write_result(dir, "bench", &s, &text)?;
     }
+    Ok(())
+}
+
+/// `DIR/NAME.json` (every figure) and `DIR/NAME.txt` (what was printed).
+fn write_result(dir: &Path, name: &str, value: &impl serde::Serialize, text: &str) -> Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let json = dir.join(format!("{name}.json"));
+    std::fs::write(&json, serde_json::to_string_pretty(value)?)
+        .with_context(|| format!("writing {}", json.display()))?;
+    let txt = dir.join(format!("{name}.txt"));
+    std::fs::write(&txt, text).with_context(|| format!("writing {}", txt.display()))?;
     Ok(())
 }
 
@@ -248,12 +254,7 @@ fn isolability(args: &BenchArgs) -> Result<()> {
     let text = super::isolability::render(&rows);
     print!("{text}");
     if let Some(dir) = &args.out {
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-        let json = dir.join("isolability.json");
-        std::fs::write(&json, serde_json::to_string_pretty(&rows)?)
-            .with_context(|| format!("writing {}", json.display()))?;
-        let txt = dir.join("isolability.txt");
-        std::fs::write(&txt, &text).with_context(|| format!("writing {}", txt.display()))?;
+        write_result(dir, "isolability", &rows, &text)?;
     }
     Ok(())
 }
