@@ -59,6 +59,8 @@ pub struct Monitor {
     /// The latest samples, so a capture starts at the impact's first shock
     /// sample although the impact is confirmed a few samples later.
     preroll: [RawSample; MAX_CONFIRM],
+    /// Where the next sample goes in `preroll` (a ring: no copy per sample).
+    preroll_next: usize,
     alarm_on: bool,
     pub counters: MonitorCounters,
     /// Counters of estimators replaced by a new configuration: the status counts since boot.
@@ -79,6 +81,7 @@ impl Monitor {
             capture_len: 0,
             capture_id: 0,
             preroll: [RawSample::default(); MAX_CONFIRM],
+            preroll_next: 0,
             alarm_on: false,
             counters: MonitorCounters::default(),
             carried: Default::default(),
@@ -153,8 +156,8 @@ impl Monitor {
                     self.finish_tare(&t, out);
                 }
             }
-            self.preroll.copy_within(1.., 0);
-            self.preroll[MAX_CONFIRM - 1] = s;
+            self.preroll[self.preroll_next] = s;
+            self.preroll_next = (self.preroll_next + 1) % MAX_CONFIRM;
             let impacts = self.est.counters().impacts;
             let report = self.est.push(s);
             if let Some(r) = &report {
@@ -191,8 +194,10 @@ impl Monitor {
         let mut started = false;
         self.capture = match self.capture {
             CaptureState::Armed { cycles } => {
-                let preroll = &self.preroll[MAX_CONFIRM - since..];
-                self.capture_buf[..since].copy_from_slice(preroll);
+                // The last `since` samples, oldest first, out of the ring.
+                for (k, dst) in self.capture_buf[..since].iter_mut().enumerate() {
+                    *dst = self.preroll[(self.preroll_next + MAX_CONFIRM - since + k) % MAX_CONFIRM];
+                }
                 self.capture_len = since;
                 self.capture_id = self.capture_id.wrapping_add(1);
                 started = true;

@@ -272,11 +272,7 @@ impl<M: RawMutex> SampleSource for LinkSamples<'_, M> {
         self.expected_seq = Some(block.seq.wrapping_add(1));
         let n = block.samples.len().min(buf.len());
         for (dst, c) in buf.iter_mut().zip(block.samples.iter()) {
-            *dst = RawSample {
-                rear: c[0],
-                front: c[1],
-                accel: c[2],
-            };
+            *dst = RawSample::from(*c);
         }
         Ok(n)
     }

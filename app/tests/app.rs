@@ -60,11 +60,7 @@ fn reports_are_the_estimators_and_a_capture_reassembles_one_cycle() {
     let mut got = vec![];
     for c in &chunks {
         assert_eq!(c.offset as usize, got.len());
-        got.extend(c.samples.iter().map(|s| RawSample {
-            rear: s[0],
-            front: s[1],
-            accel: s[2],
-        }));
+        got.extend(c.samples.iter().map(|&s| RawSample::from(s)));
     }
     assert_eq!(got.len(), total);
     // The capture starts at the first impact seen after it was armed (here

@@ -32,6 +32,17 @@ pub struct RawSample {
     pub accel: u16,
 }
 
+/// The wire's sample-set: codes in channel order rear, front, accel.
+impl From<[u16; 3]> for RawSample {
+    fn from(c: [u16; 3]) -> Self {
+        Self {
+            rear: c[0],
+            front: c[1],
+            accel: c[2],
+        }
+    }
+}
+
 /// Longest pre-impact blanking in samples (the delay line's size).
 pub const MAX_PRE_BLANK: usize = 64;
 

@@ -57,15 +57,7 @@ impl Device {
                     }
                 }
                 self.expected_seq = Some(block.seq.wrapping_add(1));
-                let raw: Vec<RawSample> = block
-                    .samples
-                    .iter()
-                    .map(|c| RawSample {
-                        rear: c[0],
-                        front: c[1],
-                        accel: c[2],
-                    })
-                    .collect();
+                let raw: Vec<RawSample> = block.samples.iter().map(|&c| RawSample::from(c)).collect();
                 self.mon.on_samples(&raw, &mut out);
                 self.now_us += raw.len() as u64 * 10;
             }
@@ -193,15 +185,7 @@ pub(crate) fn device_session() -> Vec<DeviceMsg> {
         }
     }
     for b in sample_blocks() {
-        let raw: Vec<RawSample> = b
-            .samples
-            .iter()
-            .map(|c| RawSample {
-                rear: c[0],
-                front: c[1],
-                accel: c[2],
-            })
-            .collect();
+        let raw: Vec<RawSample> = b.samples.iter().map(|&c| RawSample::from(c)).collect();
         mon.on_samples(&raw, &mut |m| out.push(m));
         while let Some(m) = mon.next_capture_chunk() {
             out.push(m);

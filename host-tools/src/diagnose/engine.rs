@@ -362,15 +362,7 @@ impl FitSet<'_> {
         if k == 0 {
             return r;
         }
-        let mut a = vec![vec![0.0; k]; k];
-        let mut b = vec![0.0; k];
-        for i in 0..k {
-            for j in 0..k {
-                a[i][j] = self.nuisance[i].iter().zip(&self.nuisance[j]).map(|(x, y)| x * y).sum();
-            }
-            a[i][i] += 1.0;
-            b[i] = -self.nuisance[i].iter().zip(&r).map(|(x, y)| x * y).sum::<f64>();
-        }
+        let (a, b) = prior_normal_equations(&self.nuisance, &r, &vec![0.0; k]);
         let Some(delta) = super::fit::solve(a, b) else {
             return r;
         };
@@ -456,15 +448,7 @@ impl FitSet<'_> {
                 .into_iter()
                 .map(|c| c.unwrap_or_else(|| vec![0.0; r.len()]))
                 .collect();
-            let mut a = vec![vec![0.0; k]; k];
-            let mut b = vec![0.0; k];
-            for i in 0..k {
-                for j in 0..k {
-                    a[i][j] = cols[i].iter().zip(&cols[j]).map(|(x, y)| x * y).sum();
-                }
-                a[i][i] += 1.0;
-                b[i] = -(cols[i].iter().zip(&r).map(|(x, y)| x * y).sum::<f64>() + delta[i]);
-            }
+            let (a, b) = prior_normal_equations(&cols, &r, &delta);
             sd = (0..k)
                 .map(|i| {
                     let mut e = vec![0.0; k];
@@ -506,6 +490,25 @@ impl FitSet<'_> {
     fn chi2(&self, cand: &Candidate) -> Option<f64> {
         self.residuals(cand).map(|r| r.iter().map(|x| x * x).sum())
     }
+}
+
+/// The Gauss–Newton step for whitened residuals `r` with Jacobian columns
+/// `cols` and a unit Gaussian prior on each parameter, taken from `at`:
+/// (JᵀJ + I)·step = −(Jᵀr + at). The profile (from 0) and the
+/// recalibration (from where it has got to) both solve it.
+fn prior_normal_equations(cols: &[Vec<f64>], r: &[f64], at: &[f64]) -> (Vec<Vec<f64>>, Vec<f64>) {
+    let dot = |x: &[f64], y: &[f64]| x.iter().zip(y).map(|(a, b)| a * b).sum::<f64>();
+    let k = cols.len();
+    let mut a = vec![vec![0.0; k]; k];
+    let mut b = vec![0.0; k];
+    for i in 0..k {
+        for j in 0..k {
+            a[i][j] = dot(&cols[i], &cols[j]);
+        }
+        a[i][i] += 1.0;
+        b[i] = -(dot(&cols[i], r) + at[i]);
+    }
+    (a, b)
 }
 
 /// The nominal model recalibrated for a candidate.
