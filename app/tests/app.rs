@@ -304,3 +304,19 @@ fn tasks_over_a_link_report_reject_garbage_and_count_gaps() {
     assert_eq!(s.frames_dropped, 0);
     assert_eq!(s.samples as usize, samples.len() - BLOCK_SAMPLES);
 }
+
+/// The device's default configuration on the wire: the mapping from the
+/// estimator's `Config` to `DeviceConfig` is part of what a host sees (the
+/// `Config` reply, the hash in `Hello` and `Status`), so its bytes are pinned.
+#[test]
+fn the_default_config_on_the_wire_is_pinned() {
+    let wire = DeviceConfig::from(&Config::default());
+    let mut buf = [0u8; MAX_FRAME];
+    let n = encode(&DeviceMsg::Config(wire), &mut buf).unwrap();
+    let hex: String = buf[..n].iter().map(|x| format!("{x:02x}")).collect();
+    assert_eq!(
+        hex,
+        "0002051050c347295c8f3f9eef273d4260e53c0101010fe922ba43654f8643ff1f6f12033c01117a44e922ba43654f8643ff1f6f12033c01037a440ef0ff44a10f7a3fff1f0ad7a33b0103803f1880bb4417b751386f12833a0ad7a33b8fc2f53d0ad7a33c010102400108c07f20bc3e4c320101023f01072041d17e84f000"
+    );
+    assert_eq!(wire.hash(), 551_341_621);
+}

@@ -45,6 +45,45 @@ fn sample_report() -> Report {
     }
 }
 
+fn channel(zero_code: f32, scale: f32, gain_uncertainty: f32, offset_uncertainty: f32) -> ChannelCalibration {
+    ChannelCalibration {
+        zero_code,
+        scale,
+        full_scale_code: 4095,
+        gain_uncertainty,
+        offset_uncertainty,
+    }
+}
+
+fn sample_config() -> DeviceConfig {
+    DeviceConfig {
+        sample_rate_hz: 100_000.0,
+        piston_mass_kg: 0.625,
+        bore_diameter_m: 0.0325,
+        rod_diameter_m: 0.0125,
+        inclination_deg: -15.0,
+        rear: channel(372.25, 268.5, 0.008, 1000.0),
+        front: channel(372.25, 268.5, 0.008, 1000.0),
+        accel: channel(2047.5, 0.976_5, 0.005, 1.0),
+        impact_threshold_mps2: 1000.0,
+        blank_before_s: 2e-4,
+        blank_after_s: 1.5e-3,
+        min_period_s: 0.02,
+        max_period_s: 0.5,
+        accel_zero_shift_tau_s: 0.5,
+        coverage_factor: 2.0,
+        supply_pressure_pa: f32::NAN,
+        wear_budget_j: 5.0e7,
+        baseline_cycles: 50,
+        cusum_k: 0.5,
+        cusum_h: 10.0,
+    }
+}
+
+const GOLDEN_CONFIG_FRAME: &str = "0002050450c347010b203fb81e053dcdcc4c3c010370c10420ba430a408643ff1f6f12033c01037a440420ba430a408643ff1f6f12033c01037a440ef0ff44e7fb793fff1f0ad7a33b0103803f010f7a4417b75139a69bc43a0ad7a33c0101023f0101023f010102400108c07f20bc3e4c320101023f0107204125d6285200";
+const GOLDEN_SET_CONFIG_FRAME: &str = "0002020450c347010b203fb81e053dcdcc4c3c010370c10420ba430a408643ff1f6f12033c01037a440420ba430a408643ff1f6f12033c01037a440ef0ff44e7fb793fff1f0ad7a33b0103803f010f7a4417b75139a69bc43a0ad7a33c0101023f0101023f010102400108c07f20bc3e4c320101023f01072041e052e21300";
+const GOLDEN_CONFIG_HASH: u32 = 2_188_404_417;
+
 /// The bytes of these frames are the protocol. If a test here fails, the
 /// wire format changed: bump PROTOCOL_VERSION (unless, like the leading
 /// delimiter, decoders of both versions still read each other's frames),
@@ -69,6 +108,13 @@ fn golden_frames() {
         hex(&frame(&DeviceMsg::Report(sample_report()))),
         "00030107010101010107e03f1283403d0103aa410103244101032041010328410103803f0103c03f0103c03f010320400103304001036040010388400101023e0101023e0103603f0101063e3333333d04ab9f4804966148010101010103c4400107803f8096184b0101010780101b7be5f800"
     );
+    // A configuration, both ways (`Config` answers `GetConfig`, `SetConfig` carries one).
+    assert_eq!(hex(&frame(&DeviceMsg::Config(sample_config()))), GOLDEN_CONFIG_FRAME);
+    assert_eq!(
+        hex(&frame(&HostMsg::SetConfig(sample_config()))),
+        GOLDEN_SET_CONFIG_FRAME
+    );
+    assert_eq!(sample_config().hash(), GOLDEN_CONFIG_HASH);
     let rej = DeviceMsg::Rejected {
         command: CommandKind::Unknown,
         reason: RejectReason::CorruptFrame,
