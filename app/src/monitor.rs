@@ -2,11 +2,10 @@
 //! No I/O and no time source of its own, so it is tested on the host as is.
 
 use hammer_estimator::tare::Tare;
-use hammer_estimator::wear::WEAR_STATE_BYTES;
 use hammer_estimator::{Config, Estimator, Flags, RawSample, WearState, MAX_CONFIRM};
 use hammer_wire::{
-    Alarm, AlarmKind, CaptureChunk, CommandKind, DeviceConfig, DeviceInfo, DeviceMsg, HostMsg, RejectReason, Report,
-    Status, WearBlob, BLOCK_SAMPLES, PROTOCOL_VERSION,
+    config_hash, Alarm, AlarmKind, CaptureChunk, CommandKind, DeviceConfig, DeviceInfo, DeviceMsg, HostMsg,
+    RejectReason, Status, WearBlob, BLOCK_SAMPLES, PROTOCOL_VERSION, WEAR_STATE_BYTES,
 };
 
 /// Sample-sets a raw capture holds: one full cycle of the paper's hammer
@@ -72,7 +71,7 @@ impl Monitor {
     pub fn new(cfg: Config, board: &'static str) -> Result<Self, hammer_estimator::ConfigError> {
         let est = Estimator::new(cfg)?;
         Ok(Self {
-            config_hash: DeviceConfig::from(&cfg).hash(),
+            config_hash: config_hash(&DeviceConfig::from(&cfg)),
             est,
             board,
             tare: None,
@@ -140,7 +139,7 @@ impl Monitor {
                     let _ = reports.push(r);
                 });
                 for r in &reports {
-                    out(DeviceMsg::Report(Report::from(r)));
+                    out(DeviceMsg::Report(*r));
                     self.alarms(r, out);
                 }
             }
@@ -161,7 +160,7 @@ impl Monitor {
             let impacts = self.est.counters().impacts;
             let report = self.est.push(s);
             if let Some(r) = &report {
-                out(DeviceMsg::Report(Report::from(r)));
+                out(DeviceMsg::Report(*r));
                 self.alarms(r, out);
             }
             if self.est.counters().impacts != impacts && self.capture_on_impact() {
@@ -222,7 +221,7 @@ impl Monitor {
             out(DeviceMsg::Alarm(Alarm {
                 kind,
                 cycle_seq: r.seq,
-                flags: r.flags.0,
+                flags: r.flags,
                 drift_score: r.drift_score,
             }));
         }
@@ -230,7 +229,7 @@ impl Monitor {
             out(DeviceMsg::Alarm(Alarm {
                 kind: AlarmKind::SensorFault,
                 cycle_seq: r.seq,
-                flags: r.flags.0,
+                flags: r.flags,
                 drift_score: r.drift_score,
             }));
         }
@@ -296,7 +295,7 @@ impl Monitor {
         c.invalid_cycles = c.invalid_cycles.wrapping_add(old.invalid_cycles);
         c.stalls = c.stalls.wrapping_add(old.stalls);
         self.est = est;
-        self.config_hash = DeviceConfig::from(&cfg).hash();
+        self.config_hash = config_hash(&DeviceConfig::from(&cfg));
         Ok(())
     }
 
@@ -320,7 +319,7 @@ impl Monitor {
             }
             HostMsg::GetConfig => out(DeviceMsg::Config(DeviceConfig::from(self.est.config()))),
             HostMsg::SetConfig(c) => {
-                let cfg = c.to_config(self.est.config());
+                let cfg = self.est.config().with_device(&c);
                 match self.replace_config(cfg) {
                     Ok(()) => {
                         out(DeviceMsg::Ack(CommandKind::SetConfig));

@@ -20,8 +20,8 @@ fn codes(bar: f64, seconds: f64) -> Vec<RawSample> {
     let est = estimator_config(&cfg.hammer, &cfg.sensors, &EstimatorParams::default(), 1e5, None).unwrap();
     // Compared as wire bytes: the unknown supply pressure is a NaN.
     assert_eq!(
-        DeviceConfig::from(&est).hash(),
-        DeviceConfig::from(&Config::default()).hash(),
+        config_hash(&DeviceConfig::from(&est)),
+        config_hash(&DeviceConfig::from(&Config::default())),
         "simulator sensors = device defaults"
     );
     to_codes(&sim.trace(), &est)
@@ -44,8 +44,8 @@ fn reports_are_the_estimators_and_a_capture_reassembles_one_cycle() {
     }
     let mut est = Estimator::new(Config::default()).unwrap();
     let mut expected = vec![];
-    est.push_block(&samples, |r| expected.push(Report::from(&r)));
-    let reports: Vec<Report> = out
+    est.push_block(&samples, |r| expected.push(r));
+    let reports: Vec<CycleReport> = out
         .iter()
         .filter_map(|m| if let DeviceMsg::Report(r) = m { Some(*r) } else { None })
         .collect();
@@ -206,7 +206,7 @@ fn tasks_over_a_link_report_reject_garbage_and_count_gaps() {
         if i == 5 {
             est.push_gap(b.len() as u32);
         } else {
-            est.push_block(b, |r| expected.push(Report::from(&r)));
+            est.push_block(b, |r| expected.push(r));
         }
     }
 
@@ -287,7 +287,7 @@ fn tasks_over_a_link_report_reject_garbage_and_count_gaps() {
         reason: RejectReason::CorruptFrame,
     };
     assert_eq!(got.iter().filter(|m| **m == rejected).count(), 1);
-    let reports: Vec<Report> = got
+    let reports: Vec<CycleReport> = got
         .iter()
         .filter_map(|m| if let DeviceMsg::Report(r) = m { Some(*r) } else { None })
         .collect();
@@ -318,5 +318,5 @@ fn the_default_config_on_the_wire_is_pinned() {
         hex,
         "0002051050c347295c8f3f9eef273d4260e53c0101010fe922ba43654f8643ff1f6f12033c01117a44e922ba43654f8643ff1f6f12033c01037a440ef0ff44a10f7a3fff1f0ad7a33b0103803f1880bb4417b751386f12833a0ad7a33b8fc2f53d0ad7a33c010102400108c07f20bc3e4c320101023f01072041d17e84f000"
     );
-    assert_eq!(wire.hash(), 551_341_621);
+    assert_eq!(config_hash(&wire), 551_341_621);
 }

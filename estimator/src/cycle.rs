@@ -21,7 +21,7 @@ use heapless::Vec;
 
 use crate::config::Config;
 use crate::math;
-use crate::report::Flags;
+use crate::Flags;
 
 /// Checkpoints per cycle: with one per millisecond, cycles up to 128 ms.
 pub const MAX_CHECKPOINTS: usize = 128;

@@ -11,37 +11,24 @@
 
 pub mod config;
 pub mod cycle;
+pub mod device;
 pub mod geometry;
 pub mod math;
-pub mod report;
 pub mod tare;
 pub mod wear;
 
 pub use config::{ChannelCal, ChannelSpec, Config, ConfigError, WearConfig, ADC_BITS_MAX, ADC_BITS_MIN};
 pub use geometry::Geometry;
-pub use report::{CycleReport, Flags};
+/// The canonical types the estimator produces and reads, defined once in
+/// `hammer-types` and shared with the wire, the firmware and the host.
+pub use hammer_types::{fields, ChannelCalibration, Codes, CycleReport, DeviceConfig, Flags, RawSample};
+/// `hammer_estimator::report::{CycleReport, Flags}`, as before the move.
+pub mod report {
+    pub use hammer_types::{CycleReport, Flags};
+}
 pub use wear::{WearState, WearStateError};
 
 use cycle::{CycleAcc, Derived};
-
-/// One sample-set: raw ADC codes of rear pressure, front pressure, acceleration.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct RawSample {
-    pub rear: u16,
-    pub front: u16,
-    pub accel: u16,
-}
-
-/// The wire's sample-set: codes in channel order rear, front, accel.
-impl From<[u16; 3]> for RawSample {
-    fn from(c: [u16; 3]) -> Self {
-        Self {
-            rear: c[0],
-            front: c[1],
-            accel: c[2],
-        }
-    }
-}
 
 /// Longest pre-impact blanking in samples (the delay line's size).
 pub const MAX_PRE_BLANK: usize = 64;

@@ -6,10 +6,8 @@
 use crate::config::WearConfig;
 use crate::math;
 
-/// Operating points remembered at once (bins of supply or peak rear pressure).
-pub const MAX_BASELINES: usize = 8;
-/// Size of the serialised state.
-pub const WEAR_STATE_BYTES: usize = 16 + 8 + 4 + 4 + 4 + MAX_BASELINES * 16 + 4;
+/// The state's size and its CRC, defined with the wire's `WearBlob` in `hammer-types`.
+pub use hammer_types::{crc32, MAX_BASELINES, WEAR_STATE_BYTES};
 const MAGIC: [u8; 4] = *b"HMWS";
 const VERSION: u32 = 1;
 
@@ -245,19 +243,6 @@ impl Reader<'_> {
     fn f64(&mut self) -> f64 {
         f64::from_le_bytes(self.take())
     }
-}
-
-/// CRC-32 (IEEE 802.3), bitwise: small and table-free for flash.
-pub fn crc32(data: &[u8]) -> u32 {
-    let mut crc = 0xFFFF_FFFFu32;
-    for &byte in data {
-        crc ^= byte as u32;
-        for _ in 0..8 {
-            let mask = (crc & 1).wrapping_neg();
-            crc = (crc >> 1) ^ (0xEDB8_8320 & mask);
-        }
-    }
-    !crc
 }
 
 #[cfg(test)]

@@ -208,7 +208,7 @@ fn stored_config(store: &mut persist::Persist, rate_hz: f32) -> Option<hammer_es
     let rec = store.load::<CONFIG_RECORD>(&persist::CONFIG)?;
     let len = u16::from_le_bytes([rec[0], rec[1]]) as usize;
     let wire: DeviceConfig = postcard::from_bytes(rec.get(2..2 + len)?).ok()?;
-    let mut cfg = wire.to_config(&hammer_estimator::Config::default());
+    let mut cfg = hammer_estimator::Config::default().with_device(&wire);
     cfg.sample_rate_hz = rate_hz;
     match cfg.validate() {
         Ok(()) => Some(cfg),

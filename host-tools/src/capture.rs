@@ -82,7 +82,7 @@ pub fn record<S: std::io::Read + std::io::Write>(
         }
     })?;
     let cfg = cfg.ok_or_else(|| anyhow::anyhow!("the device did not send its configuration"))?;
-    let cfg = cfg.to_config(&Config::default());
+    let cfg = Config::default().with_device(&cfg);
     client.send(&HostMsg::StartCapture { cycles })?;
     let mut chunks: Vec<CaptureChunk> = Vec::new();
     let deadline = std::time::Instant::now() + timeout;

@@ -283,7 +283,7 @@ impl<S: Read + Write> Client<S> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use hammer_wire::Report;
+    use hammer_wire::CycleReport;
     use std::sync::{Arc, Mutex};
 
     fn frame(m: &DeviceMsg) -> Vec<u8> {
@@ -302,7 +302,7 @@ mod tests {
     }
 
     fn report(seq: u32) -> DeviceMsg {
-        DeviceMsg::Report(Report {
+        DeviceMsg::Report(CycleReport {
             seq,
             ..Default::default()
         })

@@ -11,7 +11,7 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use hammer_estimator::RawSample;
-use hammer_wire::{DeviceMsg, HostMsg, Report, SampleBlock, BLOCK_SAMPLES};
+use hammer_wire::{CycleReport, DeviceMsg, HostMsg, SampleBlock, BLOCK_SAMPLES};
 
 use crate::client::{write_frame, Client};
 use crate::emulator::{firmware_elf, qemu_available, Emulator};
@@ -177,8 +177,8 @@ pub fn feed(codes: Vec<RawSample>, writer: Arc<Mutex<Box<dyn Write + Send>>>, pa
 }
 
 /// One line per report, for headless runs.
-pub fn report_line(r: &Report) -> String {
-    let flags: Vec<&str> = r.flags().names().collect();
+pub fn report_line(r: &CycleReport) -> String {
+    let flags: Vec<&str> = r.flags.names().collect();
     format!(
         "#{:>4} t={:>8.4} s  friction {:>6.2} ± {:<4.2} N (stroke {:>6.2}, backhaul {:>6.2})  energy {:>6.3} ± {:<5.3} J (friction-blind {:>6.3})  {:>6.2} Hz  wear {:>7.1} J  drift {:>5.2}{}",
         r.seq,

@@ -669,7 +669,7 @@ fn replay_cycles(out: &str) -> Vec<u32> {
 
 #[test]
 fn replay_of_a_damaged_recording_shows_the_good_frames_then_fails_naming_the_bad_ones() {
-    use hammer_wire::{DeviceInfo, DeviceMsg, Report, PROTOCOL_VERSION};
+    use hammer_wire::{CycleReport, DeviceInfo, DeviceMsg, PROTOCOL_VERSION};
     let dir = tmp_dir("replay-damage");
     let hello = wire_frame(&DeviceMsg::Hello(DeviceInfo {
         protocol_version: PROTOCOL_VERSION,
@@ -678,7 +678,7 @@ fn replay_of_a_damaged_recording_shows_the_good_frames_then_fails_naming_the_bad
         config_hash: 7,
     }));
     let report = |seq| {
-        wire_frame(&DeviceMsg::Report(Report {
+        wire_frame(&DeviceMsg::Report(CycleReport {
             seq,
             ..Default::default()
         }))

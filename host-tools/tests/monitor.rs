@@ -30,7 +30,7 @@ const T: Duration = Duration::from_secs(20);
 // ---------------------------------------------------------------- the data
 
 struct Fixture {
-    reports: Vec<Report>,
+    reports: Vec<CycleReport>,
     config: DeviceConfig,
 }
 
@@ -44,10 +44,10 @@ fn fixture() -> &'static Fixture {
         cfg.effects.apply_spec("coulomb_friction").unwrap();
         let sim = simulate(&cfg).unwrap();
         let est = estimator_config(&cfg.hammer, &cfg.sensors, &EstimatorParams::default(), 1e5, None).unwrap();
-        let reports: Vec<Report> = run(&to_codes(&sim.trace(), &est), est)
+        let reports: Vec<CycleReport> = run(&to_codes(&sim.trace(), &est), est)
             .unwrap()
             .iter()
-            .map(Report::from)
+            .copied()
             .collect();
         assert!(reports.len() >= 20, "{} reports", reports.len());
         assert!(reports.iter().all(|r| r.is_valid()), "valid cycles to show");
@@ -59,11 +59,11 @@ fn fixture() -> &'static Fixture {
 }
 
 /// How the dashboard prints friction and energy (and how a user reads them).
-fn friction(r: &Report) -> String {
+fn friction(r: &CycleReport) -> String {
     format!("{:.2} ± {:.2}", r.friction_n, r.friction_uncertainty_n)
 }
 
-fn energy(r: &Report) -> String {
+fn energy(r: &CycleReport) -> String {
     format!("{:.3} ± {:.3}", r.impact_energy_j, r.impact_energy_uncertainty_j)
 }
 
@@ -169,7 +169,7 @@ impl<S: Read + Write> Peer<S> {
             protocol_version: protocol,
             firmware_version: [0, 7, 3],
             board: b"bench-peer".iter().copied().collect(),
-            config_hash: f.config.hash(),
+            config_hash: config_hash(&f.config),
         }));
         if protocol == PROTOCOL_VERSION {
             self.expect("GetConfig", |m| *m == HostMsg::GetConfig);
@@ -187,7 +187,7 @@ impl<S: Read + Write> Peer<S> {
     }
 
     /// Reports at a hammer's pace (about 25 a second).
-    fn reports(&mut self, rs: &[Report]) {
+    fn reports(&mut self, rs: &[CycleReport]) {
         for r in rs {
             self.send(&DeviceMsg::Report(*r));
             std::thread::sleep(Duration::from_millis(40));
@@ -205,7 +205,7 @@ fn status(cpu_permille: u16, dropped: u64, overruns: u32) -> DeviceMsg {
         cpu_load_permille: cpu_permille,
         protocol_version: PROTOCOL_VERSION,
         firmware_version: [0, 7, 3],
-        config_hash: fixture().config.hash(),
+        config_hash: config_hash(&fixture().config),
         ..Default::default()
     })
 }
@@ -532,7 +532,7 @@ fn the_dashboard_shows_the_reports_a_device_sends() {
     peer.handshake(PROTOCOL_VERSION);
     let s = tmux.wait_text("bench-peer");
     assert!(
-        s.contains("0.7.3") && s.contains(&format!("{:08x}", f.config.hash())),
+        s.contains("0.7.3") && s.contains(&format!("{:08x}", config_hash(&f.config))),
         "{s}"
     );
     assert!(s.contains("waiting for the first report"), "{s}");
@@ -580,7 +580,7 @@ fn the_dashboard_shows_the_reports_a_device_sends() {
     peer.send(&DeviceMsg::Alarm(Alarm {
         kind: AlarmKind::DriftOn,
         cycle_seq: next.seq,
-        flags: 1 << 13,
+        flags: Flags(1 << 13),
         drift_score: 6.5,
     }));
     tmux.wait_text("DRIFT ALARM since cycle");
@@ -701,7 +701,7 @@ fn corrupted_and_truncated_frames_are_counted_never_shown() {
 
     // Poisoned reports whose numbers must never appear anywhere.
     let poison = |friction_n: f32| {
-        DeviceMsg::Report(Report {
+        DeviceMsg::Report(CycleReport {
             seq: 2,
             friction_n,
             friction_uncertainty_n: 0.5,
@@ -833,7 +833,7 @@ fn replay_reproduces_the_logged_reports() {
     }
     assert!(markers >= 1, "a connect marker");
     assert!(times.windows(2).all(|w| w[0] <= w[1]), "host times in order");
-    let decoded: Vec<Report> = {
+    let decoded: Vec<CycleReport> = {
         let mut d = Decoder::<MAX_FRAME>::new();
         payload
             .iter()
@@ -930,7 +930,7 @@ fn the_log_size_cap_stops_logging_visibly_and_counts_what_it_kept_out() {
     peer.handshake(PROTOCOL_VERSION);
     for seq in 0..n {
         let r = f.reports[seq as usize % f.reports.len()];
-        peer.send(&DeviceMsg::Report(Report { seq, ..r }));
+        peer.send(&DeviceMsg::Report(CycleReport { seq, ..r }));
     }
     let (st, out, err) = child.finish(T);
     assert!(st.success(), "{err}\n{out}");

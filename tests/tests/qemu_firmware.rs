@@ -109,13 +109,13 @@ fn finish_capture(link: &mut Client<std::net::TcpStream>, mut got: Vec<DeviceMsg
         .collect()
 }
 
-fn reports(msgs: &[DeviceMsg]) -> Vec<Report> {
+fn reports(msgs: &[DeviceMsg]) -> Vec<CycleReport> {
     msgs.iter()
         .filter_map(|m| if let DeviceMsg::Report(r) = m { Some(*r) } else { None })
         .collect()
 }
 
-fn wire_bytes(r: &Report) -> Vec<u8> {
+fn wire_bytes(r: &CycleReport) -> Vec<u8> {
     postcard::to_allocvec(r).unwrap()
 }
 
@@ -126,7 +126,7 @@ fn reports_from_the_emulated_board_equal_the_host_estimator_bit_for_bit() {
     let (cfg, _) = link
         .recv_until(T, |m| if let DeviceMsg::Config(c) = m { Some(*c) } else { None })
         .unwrap();
-    let device_cfg = cfg.expect("config").to_config(&Config::default());
+    let device_cfg = Config::default().with_device(&cfg.expect("config"));
 
     let mut next_block = 0;
     let mut total_samples = 0u64;
@@ -142,7 +142,7 @@ fn reports_from_the_emulated_board_equal_the_host_estimator_bit_for_bit() {
         let samples = codes(bar, 0.45, 20 + i as u64);
         let mut host = Estimator::new(device_cfg).unwrap();
         let mut expected = vec![];
-        host.push_block(&samples, |r| expected.push(Report::from(&r)));
+        host.push_block(&samples, |r| expected.push(r));
 
         let mut got = stream(&mut link, &samples, &mut next_block);
         total_samples += samples.len() as u64;

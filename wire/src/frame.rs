@@ -27,7 +27,7 @@ pub fn encode<T: Serialize>(msg: &T, out: &mut [u8]) -> Result<usize, EncodeErro
     let mut raw = [0u8; MAX_FRAME];
     let body = postcard::to_slice(msg, &mut raw[..MAX_BODY]).map_err(|_| EncodeError::TooLarge)?;
     let n = body.len();
-    let crc = hammer_estimator::wear::crc32(&raw[..n]);
+    let crc = hammer_types::crc32(&raw[..n]);
     raw[n..n + 4].copy_from_slice(&crc.to_le_bytes());
     let limit = out.len().min(MAX_FRAME);
     if cobs::max_encoded_len(n + 4) + 2 > limit {
@@ -139,7 +139,7 @@ impl<const N: usize> Decoder<N> {
         }
         let body = &self.buf[..n - 4];
         let crc = u32::from_le_bytes([self.buf[n - 4], self.buf[n - 3], self.buf[n - 2], self.buf[n - 1]]);
-        if crc != hammer_estimator::wear::crc32(body) {
+        if crc != hammer_types::crc32(body) {
             return Err(DecodeError::Crc);
         }
         match postcard::take_from_bytes::<T>(body) {

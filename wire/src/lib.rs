@@ -11,7 +11,6 @@
 #![forbid(unsafe_code)]
 
 pub mod cobs;
-pub mod convert;
 pub mod frame;
 pub mod msg;
 

@@ -6,8 +6,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::BLOCK_SAMPLES;
 
-/// One sample-set as ADC codes: rear pressure, front pressure, acceleration.
-pub type Codes = [u16; 3];
+/// The payloads defined once in `hammer-types` (estimator, firmware and host use the same).
+pub use hammer_types::{ChannelCalibration, Codes, CycleReport, DeviceConfig, Flags, WEAR_STATE_BYTES};
 
 /// A block of consecutive sample-sets; `seq` counts blocks so a lost one shows.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -83,14 +83,18 @@ pub enum RejectReason {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub enum DeviceMsg {
     Hello(DeviceInfo),
-    Report(Report),
+    /// Everything the estimator reports for one cycle, as it reports it.
+    Report(CycleReport),
     Status(Status),
     Capture(CaptureChunk),
     Alarm(Alarm),
     Config(DeviceConfig),
     Wear(WearBlob),
     Ack(CommandKind),
-    Rejected { command: CommandKind, reason: RejectReason },
+    Rejected {
+        command: CommandKind,
+        reason: RejectReason,
+    },
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -99,38 +103,6 @@ pub struct DeviceInfo {
     pub firmware_version: [u8; 3],
     pub board: Vec<u8, 24>,
     pub config_hash: u32,
-}
-
-/// Everything the estimator reports for one cycle (see `hammer_estimator::CycleReport`).
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
-pub struct Report {
-    pub seq: u32,
-    pub t_impact_s: f64,
-    pub period_s: f32,
-    pub frequency_hz: f32,
-    pub friction_n: f32,
-    pub friction_stroke_n: f32,
-    pub friction_backhaul_n: f32,
-    pub friction_uncertainty_n: f32,
-    pub friction_stroke_uncertainty_n: f32,
-    pub friction_backhaul_uncertainty_n: f32,
-    pub impact_velocity_mps: f32,
-    pub impact_velocity_frictionless_mps: f32,
-    pub impact_energy_j: f32,
-    pub impact_energy_frictionless_j: f32,
-    pub impact_energy_uncertainty_j: f32,
-    pub impact_energy_frictionless_uncertainty_j: f32,
-    pub friction_work_j: f32,
-    pub friction_work_ratio: f32,
-    pub stroke_m: f32,
-    pub peak_rear_pa: f32,
-    pub peak_front_pa: f32,
-    pub accel_zero_shift_mps2: f32,
-    pub wear_index_j: f32,
-    pub wear_remaining_fraction: f32,
-    pub remaining_life_cycles: f32,
-    pub drift_score: f32,
-    pub flags: u16,
 }
 
 /// Device health. Every counter only grows; a host compares two to see losses.
@@ -186,48 +158,22 @@ pub enum AlarmKind {
 pub struct Alarm {
     pub kind: AlarmKind,
     pub cycle_seq: u32,
-    pub flags: u16,
+    pub flags: Flags,
     pub drift_score: f32,
 }
 
 /// The saved wear state (`hammer_estimator::WearState::to_bytes`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct WearBlob {
-    pub bytes: Vec<u8, { hammer_estimator::wear::WEAR_STATE_BYTES }>,
+    pub bytes: Vec<u8, WEAR_STATE_BYTES>,
 }
 
-/// One channel's calibration: `value = (code − zero_code)·scale`.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct ChannelCalibration {
-    pub zero_code: f32,
-    pub scale: f32,
-    pub full_scale_code: u16,
-    pub gain_uncertainty: f32,
-    pub offset_uncertainty: f32,
-}
-
-/// The device's configuration: the hammer, the sensors, the thresholds.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct DeviceConfig {
-    pub sample_rate_hz: f32,
-    pub piston_mass_kg: f32,
-    pub bore_diameter_m: f32,
-    pub rod_diameter_m: f32,
-    pub inclination_deg: f32,
-    pub rear: ChannelCalibration,
-    pub front: ChannelCalibration,
-    pub accel: ChannelCalibration,
-    pub impact_threshold_mps2: f32,
-    pub blank_before_s: f32,
-    pub blank_after_s: f32,
-    pub min_period_s: f32,
-    pub max_period_s: f32,
-    pub accel_zero_shift_tau_s: f32,
-    pub coverage_factor: f32,
-    /// Gauge supply pressure, NaN when unknown.
-    pub supply_pressure_pa: f32,
-    pub wear_budget_j: f32,
-    pub baseline_cycles: u16,
-    pub cusum_k: f32,
-    pub cusum_h: f32,
+/// CRC-32 of a configuration's wire bytes: reported in `Hello` and
+/// `Status`, so a host sees which configuration produced a report.
+pub fn config_hash(c: &DeviceConfig) -> u32 {
+    let mut buf = [0u8; 256];
+    match postcard::to_slice(c, &mut buf) {
+        Ok(bytes) => hammer_types::crc32(bytes),
+        Err(_) => 0,
+    }
 }

@@ -122,7 +122,7 @@ fn run(data: &[u8]) -> u64 {
 fn message_code(m: &DeviceMsg) -> u32 {
     match m {
         DeviceMsg::Hello(_) => 0,
-        DeviceMsg::Report(r) => 1 + (r.flags != 0) as u32,
+        DeviceMsg::Report(r) => 1 + !r.flags.is_empty() as u32,
         DeviceMsg::Status(_) => 3,
         DeviceMsg::Capture(_) => 4,
         DeviceMsg::Alarm(_) => 5,

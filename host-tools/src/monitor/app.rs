@@ -4,7 +4,7 @@
 use std::collections::VecDeque;
 
 use hammer_estimator::Flags;
-use hammer_wire::{AlarmKind, DeviceConfig, DeviceInfo, DeviceMsg, Report, Status};
+use hammer_wire::{AlarmKind, CycleReport, DeviceConfig, DeviceInfo, DeviceMsg, Status};
 
 use super::event::{describe, flag_list, now_us, Event, LinkStats, Severity, Stamped};
 
@@ -77,7 +77,7 @@ pub struct View {
     pub config: Option<DeviceConfig>,
     pub status: Option<(u64, Status)>,
     /// The latest report and when it arrived.
-    pub last: Option<(u64, Report)>,
+    pub last: Option<(u64, CycleReport)>,
     pub history: History,
     /// Drift alarm or sensor fault, until cleared with `c`.
     pub alarm: Option<Banner>,
@@ -237,22 +237,9 @@ impl View {
 
     fn message(&mut self, t: u64, m: &DeviceMsg) {
         match m {
+            // Alarms are the device's: it raises them (`DeviceMsg::Alarm`)
+            // from the flags, the host only shows them.
             DeviceMsg::Report(r) => {
-                let flags = r.flags();
-                let before = self.last.map_or(Flags(0), |(_, p)| p.flags());
-                if flags.intersects(Flags::SENSOR_FAULTS) && !before.intersects(Flags::SENSOR_FAULTS) {
-                    let faults = Flags(flags.0 & Flags::SENSOR_FAULTS.0);
-                    self.raise(t, format!("SENSOR FAULT at cycle {}: {}", r.seq, flag_list(faults.0)));
-                }
-                if flags.contains(Flags::DRIFT_ALARM) && !before.contains(Flags::DRIFT_ALARM) {
-                    self.raise(
-                        t,
-                        format!(
-                            "DRIFT ALARM since cycle {}: friction rising (drift score {:.2})",
-                            r.seq, r.drift_score
-                        ),
-                    );
-                }
                 if r.is_valid() {
                     self.history.push(Point {
                         t_us: t,
@@ -280,10 +267,10 @@ impl View {
                     }
                 }
                 AlarmKind::SensorFault => {
-                    let faults = Flags(a.flags & Flags::SENSOR_FAULTS.0);
+                    let faults = Flags(a.flags.0 & Flags::SENSOR_FAULTS.0);
                     self.raise(
                         t,
-                        format!("SENSOR FAULT at cycle {}: {}", a.cycle_seq, flag_list(faults.0)),
+                        format!("SENSOR FAULT at cycle {}: {}", a.cycle_seq, flag_list(faults)),
                     );
                 }
             },
@@ -301,11 +288,24 @@ mod tests {
     fn report(seq: u32, flags: u16) -> Stamped {
         Stamped {
             t_us: 1_000_000 + u64::from(seq) * 50_000,
-            event: Event::Msg(DeviceMsg::Report(Report {
+            event: Event::Msg(DeviceMsg::Report(CycleReport {
                 seq,
                 friction_n: seq as f32,
-                flags,
+                flags: Flags(flags),
                 ..Default::default()
+            })),
+        }
+    }
+
+    /// What the device sends after a report that changes an alarm.
+    fn alarm(kind: AlarmKind, seq: u32, flags: u16) -> Stamped {
+        Stamped {
+            t_us: 1_000_000 + u64::from(seq) * 50_000,
+            event: Event::Msg(DeviceMsg::Alarm(Alarm {
+                kind,
+                cycle_seq: seq,
+                flags: Flags(flags),
+                drift_score: 11.5,
             })),
         }
     }
@@ -337,6 +337,11 @@ mod tests {
         app.on_event(&report(0, 0));
         app.toggle_pause();
         app.on_event(&report(1, Flags::DRIFT_ALARM.0));
+        assert!(
+            app.view.alarm.is_none(),
+            "the host derives no alarm from a report's flags"
+        );
+        app.on_event(&alarm(AlarmKind::DriftOn, 1, Flags::DRIFT_ALARM.0));
         assert_eq!(app.shown().last.unwrap().1.seq, 0);
         assert_eq!(app.view.last.unwrap().1.seq, 1);
         assert_eq!(app.reports_since_pause, 1);
@@ -346,7 +351,15 @@ mod tests {
         // Invalid cycles are not charted.
         app.on_event(&report(2, Flags::DISCONNECTED.0));
         assert_eq!(app.view.history.points.len(), 2);
-        assert!(app.view.alarm.as_ref().unwrap().text.contains("SENSOR FAULT"));
+        assert!(
+            app.view.alarm.is_none(),
+            "the device's alarm, not the report, raises the banner"
+        );
+        app.on_event(&alarm(AlarmKind::SensorFault, 2, Flags::DISCONNECTED.0));
+        assert_eq!(
+            app.view.alarm.as_ref().unwrap().text,
+            "SENSOR FAULT at cycle 2: disconnected"
+        );
         app.toggle_pause();
         assert_eq!(app.shown().last.unwrap().1.seq, 2);
         let off = Stamped {
@@ -354,7 +367,7 @@ mod tests {
             event: Event::Msg(DeviceMsg::Alarm(Alarm {
                 kind: AlarmKind::DriftOff,
                 cycle_seq: 3,
-                flags: 0,
+                flags: Flags(0),
                 drift_score: 0.0,
             })),
         };

@@ -4,7 +4,7 @@
 
 use std::time::{SystemTime, UNIX_EPOCH};
 
-use hammer_wire::{DecodeError, DeviceInfo, DeviceMsg, PROTOCOL_VERSION};
+use hammer_wire::{config_hash, DecodeError, DeviceInfo, DeviceMsg, Flags, PROTOCOL_VERSION};
 
 /// Host-side link counters. Sent as a whole snapshot, so a screen that
 /// skipped events still shows the right totals.
@@ -205,7 +205,11 @@ pub fn describe(ev: &Event) -> Option<(Severity, String)> {
         ),
         Event::Msg(DeviceMsg::Config(c)) => (
             Info,
-            format!("device config: {:.0} S/s, hash {:08x}", c.sample_rate_hz, c.hash()),
+            format!(
+                "device config: {:.0} S/s, hash {:08x}",
+                c.sample_rate_hz,
+                config_hash(c)
+            ),
         ),
         Event::Note(s) => (Info, s.clone()),
         Event::End => (Info, "end of recording".into()),
@@ -214,9 +218,9 @@ pub fn describe(ev: &Event) -> Option<(Severity, String)> {
 }
 
 /// Flag names joined by `|`, or `-` when none.
-pub fn flag_list(flags: u16) -> String {
-    let names: Vec<&str> = hammer_estimator::Flags(flags).names().collect();
-    let unknown = flags & !hammer_estimator::Flags::NAMES.iter().fold(0, |a, (f, _)| a | f.0);
+pub fn flag_list(flags: Flags) -> String {
+    let names: Vec<&str> = flags.names().collect();
+    let unknown = flags.0 & !Flags::NAMES.iter().fold(0, |a, (f, _)| a | f.0);
     let mut s = names.join("|");
     if unknown != 0 {
         if !s.is_empty() {
@@ -326,9 +330,9 @@ mod tests {
 
     #[test]
     fn flags_read_as_names() {
-        assert_eq!(flag_list(0), "-");
-        assert_eq!(flag_list((1 << 13) | 1), "rear_saturated|drift_alarm");
+        assert_eq!(flag_list(Flags(0)), "-");
+        assert_eq!(flag_list(Flags((1 << 13) | 1)), "rear_saturated|drift_alarm");
         // Every bit has a name now (no_impact took the last one).
-        assert_eq!(flag_list(1 << 15), "no_impact");
+        assert_eq!(flag_list(Flags(1 << 15)), "no_impact");
     }
 }

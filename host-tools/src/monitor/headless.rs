@@ -11,7 +11,7 @@ use std::sync::mpsc::{Receiver, RecvTimeoutError};
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Result};
-use hammer_wire::{DeviceMsg, Report, PROTOCOL_VERSION};
+use hammer_wire::{CycleReport, DeviceMsg, PROTOCOL_VERSION};
 
 use super::app::App;
 use super::event::{describe, flag_list, now_us, rfc3339, Event, Limiter, Stamped};
@@ -20,7 +20,7 @@ use super::ui::{num, pm};
 use super::UiOptions;
 
 /// `cycle 12  t 1.234567 s  friction 12.34 ± 1.12 N  energy 4.616 ± 0.166 J  (w/o friction 5.299 ± 0.180 J)  21.79 Hz  flags -`
-pub fn report_line(r: &Report) -> String {
+pub fn report_line(r: &CycleReport) -> String {
     format!(
         "cycle {:>6}  t {} s  friction {} N  energy {} J  (w/o friction {} J)  {} Hz  flags {}{}",
         r.seq,
@@ -244,7 +244,7 @@ mod tests {
     use crate::monitor::event::LinkStats;
 
     fn report(period_s: f32) -> Event {
-        Event::Msg(DeviceMsg::Report(Report {
+        Event::Msg(DeviceMsg::Report(CycleReport {
             period_s,
             ..Default::default()
         }))

@@ -34,7 +34,7 @@ use std::io::{self, BufWriter, Read, Write};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use hammer_wire::{DeviceMsg, Report};
+use hammer_wire::{CycleReport, DeviceMsg};
 
 use super::event::{describe, flag_list, rfc3339, Event, Limiter, Stamped};
 
@@ -278,7 +278,7 @@ impl Drop for Logger {
 }
 
 /// One cycles.csv row; `{}` prints the shortest text that reads back to the same f32.
-pub fn csv_row(t_us: u64, r: &Report) -> String {
+pub fn csv_row(t_us: u64, r: &CycleReport) -> String {
     format!(
         "{},{}.{:06},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
         rfc3339(t_us),
@@ -460,7 +460,7 @@ mod tests {
             }
             let report = Stamped {
                 t_us: 200,
-                event: Event::Msg(DeviceMsg::Report(Report::default())),
+                event: Event::Msg(DeviceMsg::Report(CycleReport::default())),
             };
             l.event(&report).unwrap();
             l.line(201, "a link event").unwrap();
@@ -503,7 +503,7 @@ mod tests {
 
     #[test]
     fn csv_rows_have_a_value_per_column() {
-        let row = csv_row(1_700_000_000_123_456, &Report::default());
+        let row = csv_row(1_700_000_000_123_456, &CycleReport::default());
         assert_eq!(row.split(',').count(), CYCLES_HEADER.split(',').count());
         assert!(
             row.starts_with("2023-11-14T22:13:20.123456Z,1700000000.123456,0,"),

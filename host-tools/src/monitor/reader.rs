@@ -443,7 +443,7 @@ impl Reader {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use hammer_wire::{encode, DeviceInfo, Report, PROTOCOL_VERSION};
+    use hammer_wire::{encode, CycleReport, DeviceInfo, PROTOCOL_VERSION};
 
     fn frame(m: &DeviceMsg) -> Vec<u8> {
         let mut buf = [0u8; MAX_FRAME];
@@ -461,7 +461,7 @@ mod tests {
     }
 
     fn report(seq: u32) -> DeviceMsg {
-        DeviceMsg::Report(Report {
+        DeviceMsg::Report(CycleReport {
             seq,
             ..Default::default()
         })

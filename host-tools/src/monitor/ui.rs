@@ -6,7 +6,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::Result;
 use hammer_estimator::Flags;
-use hammer_wire::PROTOCOL_VERSION;
+use hammer_wire::{config_hash, PROTOCOL_VERSION};
 use ratatui::crossterm::event::{self, Event as TermEvent, KeyCode, KeyEventKind, KeyModifiers};
 use ratatui::layout::{Alignment, Constraint, Layout, Rect};
 use ratatui::style::{Color, Modifier, Style, Stylize};
@@ -363,7 +363,7 @@ fn cycle_panel(app: &App, v: &View) -> Paragraph<'static> {
         &life,
     );
     add("Drift score", num(r.drift_score as f64, 2), "");
-    let flags = r.flags();
+    let flags = r.flags;
     let flag_style = if !valid || flags.intersects(Flags::SENSOR_FAULTS) {
         Style::new().fg(Color::Red).bold()
     } else if flags.is_empty() {
@@ -484,8 +484,8 @@ fn device_panel(v: &View) -> Paragraph<'static> {
                 &format!(" protocol {}", d.protocol_version),
             ));
             let cfg = match &v.config {
-                Some(c) if c.hash() == d.config_hash => format!(" {:.0} S/s", c.sample_rate_hz),
-                Some(c) => format!(" now {:08x}", c.hash()),
+                Some(c) if config_hash(c) == d.config_hash => format!(" {:.0} S/s", c.sample_rate_hz),
+                Some(c) => format!(" now {:08x}", config_hash(c)),
                 None => String::new(),
             };
             lines.push(row("Config", format!("{:08x}", d.config_hash), &cfg));
@@ -732,7 +732,7 @@ fn help(f: &mut Frame, area: Rect) {
 mod tests {
     use super::*;
     use crate::monitor::event::LinkStats;
-    use hammer_wire::{DeviceMsg, Report};
+    use hammer_wire::{CycleReport, DeviceMsg};
     use ratatui::backend::TestBackend;
     use ratatui::Terminal;
 
@@ -757,7 +757,7 @@ mod tests {
         for seq in 0..5 {
             app.on_event(&Stamped {
                 t_us: t + seq * 40_000,
-                event: Event::Msg(DeviceMsg::Report(Report {
+                event: Event::Msg(DeviceMsg::Report(CycleReport {
                     seq: seq as u32,
                     friction_n: 12.345,
                     friction_uncertainty_n: 1.118,
@@ -802,7 +802,7 @@ mod tests {
         for seq in 0..crate::monitor::app::HISTORY_CAP as u64 {
             app.on_event(&Stamped {
                 t_us: seq * 40_000,
-                event: Event::Msg(DeviceMsg::Report(Report {
+                event: Event::Msg(DeviceMsg::Report(CycleReport {
                     seq: seq as u32,
                     friction_n: (seq % 17) as f32,
                     impact_energy_j: 4.0,
