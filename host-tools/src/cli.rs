@@ -399,7 +399,7 @@ fn estimate_cmd(args: &EstimateArgs) -> Result<()> {
             }
         }
         Format::Csv => {
-            writeln!(out, "{CSV_HEADER}")?;
+            writeln!(out, "{}", csv_header())?;
             for r in &reports {
                 writeln!(out, "{}", csv_record(r))?;
             }

@@ -11,7 +11,7 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use hammer_estimator::RawSample;
-use hammer_wire::{CycleReport, DeviceMsg, HostMsg, SampleBlock, BLOCK_SAMPLES};
+use hammer_wire::{DeviceMsg, HostMsg, SampleBlock, BLOCK_SAMPLES};
 
 use crate::client::{write_frame, Client};
 use crate::emulator::{firmware_elf, qemu_available, Emulator};
@@ -176,26 +176,8 @@ pub fn feed(codes: Vec<RawSample>, writer: Arc<Mutex<Box<dyn Write + Send>>>, pa
     }
 }
 
-/// One line per report, for headless runs.
-pub fn report_line(r: &CycleReport) -> String {
-    let flags: Vec<&str> = r.flags.names().collect();
-    format!(
-        "#{:>4} t={:>8.4} s  friction {:>6.2} ± {:<4.2} N (stroke {:>6.2}, backhaul {:>6.2})  energy {:>6.3} ± {:<5.3} J (friction-blind {:>6.3})  {:>6.2} Hz  wear {:>7.1} J  drift {:>5.2}{}",
-        r.seq,
-        r.t_impact_s,
-        r.friction_n,
-        r.friction_uncertainty_n,
-        r.friction_stroke_n,
-        r.friction_backhaul_n,
-        r.impact_energy_j,
-        r.impact_energy_uncertainty_j,
-        r.impact_energy_frictionless_j,
-        r.frequency_hz,
-        r.wear_index_j,
-        r.drift_score,
-        if flags.is_empty() { String::new() } else { format!("  [{}]", flags.join(",")) }
-    )
-}
+/// One line per report, for headless runs: the headless monitor's line.
+pub use crate::records::report_line;
 
 pub fn run(args: &DemoArgs) -> Result<()> {
     use std::io::IsTerminal;

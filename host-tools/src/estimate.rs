@@ -1,100 +1,64 @@
 //! Per-cycle records of `hammer estimate`: the output formats. Traces are
 //! opened for the estimator by `hammer_sim::estimation`, the same crate and
-//! code path as the firmware; only the sample source differs.
+//! code path as the firmware; only the sample source differs. Every format is
+//! driven by the one table of report fields (`hammer_types::FIELDS`, through
+//! [`crate::records`]): the CSV and JSON carry every field under its
+//! unit-suffixed name, the table a selection of them.
 
 use std::fmt::Write as _;
 
 use hammer_estimator::CycleReport;
 
-pub fn flag_names(r: &CycleReport) -> Vec<&'static str> {
-    r.flags.names().collect()
+pub use crate::records::{csv_header, csv_record, json_record as jsonl_record};
+use crate::records::{flag_list, shown};
+
+/// The table's columns: (field, decimals, with its uncertainty).
+pub const TABLE: [(&str, usize, bool); 10] = [
+    ("seq", 0, false),
+    ("t_impact_s", 4, false),
+    ("frequency_hz", 3, false),
+    ("friction_n", 2, true),
+    ("friction_stroke_n", 2, false),
+    ("friction_backhaul_n", 2, false),
+    ("impact_energy_j", 3, true),
+    ("impact_energy_frictionless_j", 3, false),
+    ("stroke_m", 4, false),
+    ("wear_index_j", 1, false),
+];
+
+fn cell(r: &CycleReport, name: &str, decimals: usize, pm: bool) -> String {
+    if pm {
+        return shown(r, name, decimals);
+    }
+    match hammer_estimator::fields::field(name).map(|f| f.f64(r)) {
+        Some(v) if v.is_finite() => format!("{v:.decimals$}"),
+        _ => "n/a".into(),
+    }
 }
 
-/// One JSON object per cycle.
-pub fn jsonl_record(r: &CycleReport) -> serde_json::Value {
-    serde_json::json!({
-        "seq": r.seq,
-        "t_impact_s": r.t_impact_s,
-        "period_s": r.period_s,
-        "frequency_hz": r.frequency_hz,
-        "friction_n": r.friction_n,
-        "friction_stroke_n": r.friction_stroke_n,
-        "friction_backhaul_n": r.friction_backhaul_n,
-        "friction_uncertainty_n": r.friction_uncertainty_n,
-        "friction_stroke_uncertainty_n": r.friction_stroke_uncertainty_n,
-        "friction_backhaul_uncertainty_n": r.friction_backhaul_uncertainty_n,
-        "impact_velocity_mps": r.impact_velocity_mps,
-        "impact_velocity_frictionless_mps": r.impact_velocity_frictionless_mps,
-        "impact_energy_j": r.impact_energy_j,
-        "impact_energy_frictionless_j": r.impact_energy_frictionless_j,
-        "impact_energy_uncertainty_j": r.impact_energy_uncertainty_j,
-        "impact_energy_frictionless_uncertainty_j": r.impact_energy_frictionless_uncertainty_j,
-        "friction_work_j": r.friction_work_j,
-        "friction_work_ratio": r.friction_work_ratio,
-        "stroke_m": r.stroke_m,
-        "peak_rear_pa": r.peak_rear_pa,
-        "peak_front_pa": r.peak_front_pa,
-        "accel_zero_shift_mps2": r.accel_zero_shift_mps2,
-        "wear_index": r.wear_index_j,
-        "wear_remaining_fraction": r.wear_remaining_fraction,
-        "remaining_life_cycles": r.remaining_life_cycles,
-        "drift_score": r.drift_score,
-        "valid": r.is_valid(),
-        "flags": flag_names(r),
-    })
-}
-
-pub const CSV_HEADER: &str = "seq,t_impact_s,frequency_hz,friction_n,friction_stroke_n,friction_backhaul_n,friction_uncertainty_n,impact_velocity_mps,impact_energy_j,impact_energy_frictionless_j,impact_energy_uncertainty_j,friction_work_j,stroke_m,wear_index,drift_score,valid,flags";
-
-pub fn csv_record(r: &CycleReport) -> String {
-    format!(
-        "{},{:.6},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
-        r.seq,
-        r.t_impact_s,
-        r.frequency_hz,
-        r.friction_n,
-        r.friction_stroke_n,
-        r.friction_backhaul_n,
-        r.friction_uncertainty_n,
-        r.impact_velocity_mps,
-        r.impact_energy_j,
-        r.impact_energy_frictionless_j,
-        r.impact_energy_uncertainty_j,
-        r.friction_work_j,
-        r.stroke_m,
-        r.wear_index_j,
-        r.drift_score,
-        r.is_valid(),
-        flag_names(r).join("|")
-    )
-}
-
-/// A human-readable table with a summary line over the valid cycles.
+/// A human-readable table (columns named like the CSV's, see [`TABLE`]) with
+/// a summary line over the valid cycles.
 pub fn table(reports: &[CycleReport]) -> String {
+    let rows: Vec<Vec<String>> = reports
+        .iter()
+        .map(|r| TABLE.iter().map(|&(n, d, pm)| cell(r, n, d, pm)).collect())
+        .collect();
+    let widths: Vec<usize> = TABLE
+        .iter()
+        .enumerate()
+        .map(|(i, (n, _, _))| rows.iter().map(|row| row[i].chars().count()).fold(n.len(), usize::max))
+        .collect();
     let mut s = String::new();
-    let _ = writeln!(
-        s,
-        "{:>4} {:>9} {:>7} {:>15} {:>7} {:>7} {:>15} {:>8} {:>7} {:>7}  flags",
-        "seq", "t_imp_s", "f_hz", "friction_n", "F_str", "F_back", "energy_j", "E_nofr", "stroke", "wear_j"
-    );
-    for r in reports {
-        let _ = writeln!(
-            s,
-            "{:>4} {:>9.4} {:>7.3} {:>7.2} ± {:<5.2} {:>7.2} {:>7.2} {:>7.3} ± {:<5.3} {:>8.3} {:>5.1}mm {:>7.1}  {}",
-            r.seq,
-            r.t_impact_s,
-            r.frequency_hz,
-            r.friction_n,
-            r.friction_uncertainty_n,
-            r.friction_stroke_n,
-            r.friction_backhaul_n,
-            r.impact_energy_j,
-            r.impact_energy_uncertainty_j,
-            r.impact_energy_frictionless_j,
-            r.stroke_m * 1e3,
-            r.wear_index_j,
-            flag_names(r).join(",")
-        );
+    let line = |s: &mut String, cells: &mut dyn Iterator<Item = String>, flags: &str| {
+        for (c, w) in cells.zip(&widths) {
+            let pad = w.saturating_sub(c.chars().count());
+            let _ = write!(s, "{:pad$}{c} ", "");
+        }
+        let _ = writeln!(s, " {flags}");
+    };
+    line(&mut s, &mut TABLE.iter().map(|(n, _, _)| n.to_string()), "flags");
+    for (r, row) in reports.iter().zip(rows) {
+        line(&mut s, &mut row.into_iter(), &flag_list(r.flags));
     }
     let valid: Vec<&CycleReport> = reports.iter().filter(|r| r.is_valid()).collect();
     if !valid.is_empty() {

@@ -14,4 +14,5 @@ pub mod emulator;
 pub mod estimate;
 pub mod monitor;
 pub mod plot;
+pub mod records;
 pub mod report;

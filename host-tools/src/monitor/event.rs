@@ -4,7 +4,7 @@
 
 use std::time::{SystemTime, UNIX_EPOCH};
 
-use hammer_wire::{config_hash, DecodeError, DeviceInfo, DeviceMsg, Flags, PROTOCOL_VERSION};
+use hammer_wire::{config_hash, DecodeError, DeviceInfo, DeviceMsg, PROTOCOL_VERSION};
 
 /// Host-side link counters. Sent as a whole snapshot, so a screen that
 /// skipped events still shows the right totals.
@@ -217,23 +217,7 @@ pub fn describe(ev: &Event) -> Option<(Severity, String)> {
     })
 }
 
-/// Flag names joined by `|`, or `-` when none.
-pub fn flag_list(flags: Flags) -> String {
-    let names: Vec<&str> = flags.names().collect();
-    let unknown = flags.0 & !Flags::NAMES.iter().fold(0, |a, (f, _)| a | f.0);
-    let mut s = names.join("|");
-    if unknown != 0 {
-        if !s.is_empty() {
-            s.push('|');
-        }
-        s.push_str(&format!("0x{unknown:04x}"));
-    }
-    if s.is_empty() {
-        "-".into()
-    } else {
-        s
-    }
-}
+pub use crate::records::flag_list;
 
 /// RFC 3339 in UTC with microseconds, e.g. `2025-03-01T14:03:22.123456Z`.
 pub fn rfc3339(t_us: u64) -> String {
@@ -309,6 +293,7 @@ impl Limiter {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use hammer_wire::Flags;
 
     #[test]
     fn rfc3339_matches_known_dates() {

@@ -11,32 +11,15 @@ use std::sync::mpsc::{Receiver, RecvTimeoutError};
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Result};
-use hammer_wire::{CycleReport, DeviceMsg, PROTOCOL_VERSION};
+use hammer_wire::{DeviceMsg, PROTOCOL_VERSION};
 
 use super::app::App;
-use super::event::{describe, flag_list, now_us, rfc3339, Event, Limiter, Stamped};
+use super::event::{describe, now_us, rfc3339, Event, Limiter, Stamped};
 use super::log::Unlogged;
-use super::ui::{num, pm};
 use super::UiOptions;
 
-/// `cycle 12  t 1.234567 s  friction 12.34 ± 1.12 N  energy 4.616 ± 0.166 J  (w/o friction 5.299 ± 0.180 J)  21.79 Hz  flags -`
-pub fn report_line(r: &CycleReport) -> String {
-    format!(
-        "cycle {:>6}  t {} s  friction {} N  energy {} J  (w/o friction {} J)  {} Hz  flags {}{}",
-        r.seq,
-        num(r.t_impact_s, 6),
-        pm(r.friction_n, r.friction_uncertainty_n, 2),
-        pm(r.impact_energy_j, r.impact_energy_uncertainty_j, 3),
-        pm(
-            r.impact_energy_frictionless_j,
-            r.impact_energy_frictionless_uncertainty_j,
-            3
-        ),
-        num(r.frequency_hz as f64, 2),
-        flag_list(r.flags),
-        if r.is_valid() { "" } else { "  INVALID" }
-    )
-}
+/// One line per report: the same line `hammer demo --headless` prints.
+pub use crate::records::report_line;
 
 /// The shortest silence called a stall: a hammer's cycle is far shorter,
 /// but a device sends its status only every second.
@@ -242,6 +225,7 @@ pub fn run(app: &mut App, rx: &Receiver<Stamped>, opts: UiOptions) -> Result<()>
 mod tests {
     use super::*;
     use crate::monitor::event::LinkStats;
+    use hammer_wire::CycleReport;
 
     fn report(period_s: f32) -> Event {
         Event::Msg(DeviceMsg::Report(CycleReport {

@@ -36,7 +36,7 @@ use std::time::{Duration, Instant};
 
 use hammer_wire::{CycleReport, DeviceMsg};
 
-use super::event::{describe, flag_list, rfc3339, Event, Limiter, Stamped};
+use super::event::{describe, rfc3339, Event, Limiter, Stamped};
 
 pub const MAGIC: &[u8; 8] = b"HMFRAMES";
 pub const OPENED: u32 = 0xFFFF_FFFF;
@@ -46,12 +46,14 @@ pub const FLUSH_EVERY: Duration = Duration::from_millis(500);
 /// Default size cap of the three log files together, in MB (10^6 bytes).
 pub const DEFAULT_MAX_MB: f64 = 256.0;
 
-pub const CYCLES_HEADER: &str = "host_time,host_unix_s,seq,t_impact_s,period_s,frequency_hz,friction_n,\
-friction_stroke_n,friction_backhaul_n,friction_uncertainty_n,friction_stroke_uncertainty_n,\
-friction_backhaul_uncertainty_n,impact_velocity_mps,impact_velocity_frictionless_mps,impact_energy_j,\
-impact_energy_frictionless_j,impact_energy_uncertainty_j,impact_energy_frictionless_uncertainty_j,\
-friction_work_j,friction_work_ratio,stroke_m,peak_rear_pa,peak_front_pa,accel_zero_shift_mps2,wear_index_j,\
-wear_remaining_fraction,remaining_life_cycles,drift_score,valid,flags";
+/// The columns of cycles.csv before the report's: the host's arrival time.
+pub const HOST_COLUMNS: [&str; 2] = ["host_time", "host_unix_s"];
+
+/// cycles.csv's header: the host's columns, then every report column
+/// ([`crate::records::columns`], the one table of report fields).
+pub fn cycles_header() -> String {
+    HOST_COLUMNS.join(",") + "," + &crate::records::csv_header()
+}
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Marker {
@@ -121,8 +123,9 @@ impl Logger {
         };
         let t = super::event::now_us();
         // Without its header a file is unreadable: the header or nothing.
-        if cycles_len == 0 && l.admit(t, CYCLES_HEADER.len() as u64 + 1)? {
-            writeln!(l.cycles, "{CYCLES_HEADER}")?;
+        let header = cycles_header();
+        if cycles_len == 0 && l.admit(t, header.len() as u64 + 1)? {
+            writeln!(l.cycles, "{header}")?;
         }
         if frames_len == 0 && l.admit(t, MAGIC.len() as u64)? {
             l.frames.write_all(MAGIC)?;
@@ -277,41 +280,14 @@ impl Drop for Logger {
     }
 }
 
-/// One cycles.csv row; `{}` prints the shortest text that reads back to the same f32.
+/// One cycles.csv row; every report field prints the shortest text that reads back to the same number.
 pub fn csv_row(t_us: u64, r: &CycleReport) -> String {
     format!(
-        "{},{}.{:06},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+        "{},{}.{:06},{}",
         rfc3339(t_us),
         t_us / 1_000_000,
         t_us % 1_000_000,
-        r.seq,
-        r.t_impact_s,
-        r.period_s,
-        r.frequency_hz,
-        r.friction_n,
-        r.friction_stroke_n,
-        r.friction_backhaul_n,
-        r.friction_uncertainty_n,
-        r.friction_stroke_uncertainty_n,
-        r.friction_backhaul_uncertainty_n,
-        r.impact_velocity_mps,
-        r.impact_velocity_frictionless_mps,
-        r.impact_energy_j,
-        r.impact_energy_frictionless_j,
-        r.impact_energy_uncertainty_j,
-        r.impact_energy_frictionless_uncertainty_j,
-        r.friction_work_j,
-        r.friction_work_ratio,
-        r.stroke_m,
-        r.peak_rear_pa,
-        r.peak_front_pa,
-        r.accel_zero_shift_mps2,
-        r.wear_index_j,
-        r.wear_remaining_fraction,
-        r.remaining_life_cycles,
-        r.drift_score,
-        r.is_valid(),
-        flag_list(r.flags)
+        crate::records::csv_record(r)
     )
 }
 
@@ -443,7 +419,7 @@ mod tests {
             Err(FrameFileError::NotFrames)
         ));
         let header = std::fs::read_to_string(dir.join("cycles.csv")).unwrap();
-        assert_eq!(header.trim_end(), CYCLES_HEADER);
+        assert_eq!(header.trim_end(), cycles_header());
         let _ = std::fs::remove_dir_all(&dir);
     }
 
@@ -503,8 +479,18 @@ mod tests {
 
     #[test]
     fn csv_rows_have_a_value_per_column() {
+        // The layout cycles.csv had before the columns came from the table of report fields.
+        assert_eq!(
+            cycles_header(),
+            "host_time,host_unix_s,seq,t_impact_s,period_s,frequency_hz,friction_n,\
+friction_stroke_n,friction_backhaul_n,friction_uncertainty_n,friction_stroke_uncertainty_n,\
+friction_backhaul_uncertainty_n,impact_velocity_mps,impact_velocity_frictionless_mps,impact_energy_j,\
+impact_energy_frictionless_j,impact_energy_uncertainty_j,impact_energy_frictionless_uncertainty_j,\
+friction_work_j,friction_work_ratio,stroke_m,peak_rear_pa,peak_front_pa,accel_zero_shift_mps2,wear_index_j,\
+wear_remaining_fraction,remaining_life_cycles,drift_score,valid,flags"
+        );
         let row = csv_row(1_700_000_000_123_456, &CycleReport::default());
-        assert_eq!(row.split(',').count(), CYCLES_HEADER.split(',').count());
+        assert_eq!(row.split(',').count(), cycles_header().split(',').count());
         assert!(
             row.starts_with("2023-11-14T22:13:20.123456Z,1700000000.123456,0,"),
             "{row}"
