@@ -185,6 +185,9 @@ mod tests {
             ..sample()
         };
         let line = report_line(&bad);
-        assert!(line.contains("friction n/a N") && line.ends_with("flags no_reversal  INVALID"), "{line}");
+        assert!(
+            line.contains("friction n/a N") && line.ends_with("flags no_reversal  INVALID"),
+            "{line}"
+        );
     }
 }

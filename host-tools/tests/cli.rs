@@ -192,7 +192,7 @@ fn estimate_prints_one_record_per_cycle_in_each_format() {
         "impact_energy_j",
         "impact_energy_frictionless_j",
         "impact_energy_uncertainty_j",
-        "wear_index",
+        "wear_index_j",
         "flags",
     ] {
         assert!(records.iter().all(|r| r.get(key).is_some()), "missing {key}");
@@ -201,10 +201,51 @@ fn estimate_prints_one_record_per_cycle_in_each_format() {
     assert!((last["friction_n"].as_f64().unwrap() - 14.55).abs() < 0.3, "{last}");
     assert!(last["flags"].as_array().unwrap().is_empty());
 
+    // The CSV: the same columns as the JSON (every field, unit-suffixed names), the same numbers.
     let (code, out, _) = hammer(&["estimate", trace.to_str().unwrap(), "--format", "csv"]);
     assert_eq!(code, 0);
-    assert!(out.starts_with("seq,t_impact_s,frequency_hz,friction_n"));
+    assert!(
+        out.starts_with("seq,t_impact_s,period_s,frequency_hz,friction_n,"),
+        "{out}"
+    );
     assert_eq!(out.lines().count(), truth_cycles + 1);
+    let header: Vec<&str> = out.lines().next().unwrap().split(',').collect();
+    assert_eq!(&header[header.len() - 3..], ["drift_score", "valid", "flags"]);
+    assert!(!header.contains(&"wear_index"), "renamed wear_index_j");
+    let mut keys: Vec<&str> = records[0].as_object().unwrap().keys().map(|k| k.as_str()).collect();
+    let mut columns = header.clone();
+    keys.sort_unstable();
+    columns.sort_unstable();
+    assert_eq!(columns, keys, "the CSV's columns are the JSON's keys");
+    for (line, json) in out.lines().skip(1).zip(&records) {
+        let cells: Vec<&str> = line.split(',').collect();
+        assert_eq!(cells.len(), header.len(), "{line}");
+        for (name, cell) in header.iter().zip(&cells) {
+            match *name {
+                "flags" => assert_eq!(
+                    *cell,
+                    match json["flags"].as_array().unwrap().len() {
+                        0 => "-".to_string(),
+                        _ => json["flags"]
+                            .as_array()
+                            .unwrap()
+                            .iter()
+                            .map(|f| f.as_str().unwrap())
+                            .collect::<Vec<_>>()
+                            .join("|"),
+                    }
+                ),
+                "valid" => assert_eq!(*cell, json["valid"].to_string()),
+                _ => {
+                    let v: f64 = cell.parse().unwrap_or(f64::NAN);
+                    let j = json[*name].as_f64().unwrap_or(f64::NAN);
+                    // Both carry the report's own number: an f32 field reads back to the same f32.
+                    let same = v == j || (v as f32 == j as f32) || (v.is_nan() && j.is_nan());
+                    assert!(same, "{name}: csv {cell}, json {j}");
+                }
+            }
+        }
+    }
 
     let (code, out, _) = hammer(&["estimate", trace.to_str().unwrap(), "--supply-bar", "6"]);
     assert_eq!(code, 0);
@@ -218,8 +259,9 @@ fn estimate_prints_one_record_per_cycle_in_each_format() {
     assert!(err.contains(":3:") && err.contains("oops"), "{err}");
 }
 
+/// The report lines of headless output (`cycle N ...`, the headless monitor's line).
 fn report_lines(out: &str) -> Vec<&str> {
-    out.lines().filter(|l| l.starts_with('#')).collect()
+    out.lines().filter(|l| l.starts_with("cycle ")).collect()
 }
 
 /// The friction figure of a `hammer demo --headless` line.
