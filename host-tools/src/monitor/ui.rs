@@ -18,6 +18,7 @@ use ratatui::Frame;
 use super::app::{App, View};
 use super::event::{board_name, clock, firmware_version, flag_list, Event, Severity, Stamped};
 use super::UiOptions;
+use crate::records::{shown, unit};
 
 /// Redraw at least this often (clocks, "ago" times, scrolling charts).
 const TICK: Duration = Duration::from_millis(250);
@@ -286,6 +287,15 @@ fn row(l: &str, value: String, unit: &str) -> Line<'static> {
     ])
 }
 
+/// The cycle panel's rows with an uncertainty: (label, field, decimals).
+const PANEL: [(&str, &str, usize); 5] = [
+    ("Friction", "friction_n", 2),
+    ("  stroke", "friction_stroke_n", 2),
+    ("  backhaul", "friction_backhaul_n", 2),
+    ("Impact energy", "impact_energy_j", 3),
+    ("  w/o friction", "impact_energy_frictionless_j", 3),
+];
+
 fn cycle_panel(app: &App, v: &View) -> Paragraph<'static> {
     let block = Block::bordered().title(" Current cycle ");
     let Some((t, r)) = v.last else {
@@ -316,53 +326,40 @@ fn cycle_panel(app: &App, v: &View) -> Paragraph<'static> {
             Span::raw(format!(" {unit}")),
         ]));
     };
-    add("Friction", pm(r.friction_n, r.friction_uncertainty_n, 2), "N");
-    add(
-        "  stroke",
-        pm(r.friction_stroke_n, r.friction_stroke_uncertainty_n, 2),
-        "N",
-    );
-    add(
-        "  backhaul",
-        pm(r.friction_backhaul_n, r.friction_backhaul_uncertainty_n, 2),
-        "N",
-    );
-    add(
-        "Impact energy",
-        pm(r.impact_energy_j, r.impact_energy_uncertainty_j, 3),
-        "J",
-    );
-    add(
-        "  w/o friction",
-        pm(
-            r.impact_energy_frictionless_j,
-            r.impact_energy_frictionless_uncertainty_j,
-            3,
-        ),
-        "J",
-    );
+    // Value, uncertainty and unit from the one table of report fields.
+    for (l, name, decimals) in PANEL {
+        add(l, shown(&r, name, decimals), unit(name));
+    }
     add(
         "Frequency",
-        num(r.frequency_hz as f64, 2),
-        &format!("Hz  (period {} ms)", num(r.period_s as f64 * 1e3, 2)),
+        shown(&r, "frequency_hz", 2),
+        &format!(
+            "{}  (period {} ms)",
+            unit("frequency_hz"),
+            num(r.period_s as f64 * 1e3, 2)
+        ),
     );
     add(
         "Wear index",
-        num(r.wear_index_j as f64, 1),
-        &format!("J  ({} % left)", num(r.wear_remaining_fraction as f64 * 100.0, 1)),
+        shown(&r, "wear_index_j", 1),
+        &format!(
+            "{}  ({} % left)",
+            unit("wear_index_j"),
+            num(r.wear_remaining_fraction as f64 * 100.0, 1)
+        ),
     );
     let life_s = r.remaining_life_cycles as f64 / r.frequency_hz as f64;
     let life = if life_s.is_finite() && life_s >= 0.0 {
-        format!("cycles  (≈ {})", coarse(life_s))
+        format!("{}  (≈ {})", unit("remaining_life_cycles"), coarse(life_s))
     } else {
-        "cycles".into()
+        unit("remaining_life_cycles").into()
     };
     add(
         "Remaining life",
         si_count(r.remaining_life_cycles as f64).trim_end().to_string(),
         &life,
     );
-    add("Drift score", num(r.drift_score as f64, 2), "");
+    add("Drift score", shown(&r, "drift_score", 2), unit("drift_score"));
     let flags = r.flags;
     let flag_style = if !valid || flags.intersects(Flags::SENSOR_FAULTS) {
         Style::new().fg(Color::Red).bold()
