@@ -6,10 +6,8 @@ use embassy_sync::blocking_mutex::raw::NoopRawMutex;
 use embassy_sync::pipe::Pipe;
 use hammer_app::{link_rx, link_tx, sampling, Clock, LinkRx, LinkSamples, LinkTx, Monitor, Shared};
 use hammer_estimator::{Config, Estimator, RawSample};
-use hammer_sim::estimation::{estimator_config, to_codes};
 use hammer_sim::simulate::simulate;
 use hammer_sim::SimConfig;
-use hammer_trace::EstimatorParams;
 use hammer_wire::*;
 
 fn codes(bar: f64, seconds: f64) -> Vec<RawSample> {
@@ -17,14 +15,14 @@ fn codes(bar: f64, seconds: f64) -> Vec<RawSample> {
     cfg.solver.duration_s = seconds;
     cfg.effects.apply_spec("coulomb_friction").unwrap();
     let sim = simulate(&cfg).unwrap();
-    let est = estimator_config(&cfg.hammer, &cfg.sensors, &EstimatorParams::default(), 1e5, None).unwrap();
+    let est = cfg.estimator_config(None).unwrap();
     // Compared as wire bytes: the unknown supply pressure is a NaN.
     assert_eq!(
         config_hash(&DeviceConfig::from(&est)),
         config_hash(&DeviceConfig::from(&Config::default())),
         "simulator sensors = device defaults"
     );
-    to_codes(&sim.trace(), &est)
+    sim.measured.codes
 }
 
 fn monitor() -> Box<Monitor> {

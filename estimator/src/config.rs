@@ -40,6 +40,18 @@ impl ChannelCal {
         (code as f32 - self.zero_code) * self.scale
     }
 
+    /// The code this calibration reads as `value` (nearest, clipped to the
+    /// converter's range; NaN reads as code 0). The inverse of [`Self::value`]
+    /// up to rounding: what an ideal ADC of this calibration converts.
+    pub fn code(&self, value: f64) -> u16 {
+        let x = libm::roundf(value as f32 / self.scale + self.zero_code);
+        if x.is_nan() {
+            0
+        } else {
+            x.clamp(0.0, self.full_scale_code as f32) as u16
+        }
+    }
+
     /// Physical value of the range's ends.
     pub fn range(&self) -> (f32, f32) {
         (self.value(0), self.value(self.full_scale_code))

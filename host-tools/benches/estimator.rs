@@ -5,18 +5,16 @@
 use std::time::Instant;
 
 use hammer_estimator::{Estimator, RawSample};
-use hammer_sim::estimation::{estimator_config, to_codes};
 use hammer_sim::simulate::simulate;
 use hammer_sim::SimConfig;
-use hammer_trace::EstimatorParams;
 
 fn main() {
     let mut cfg = SimConfig::nominal(5.0);
     cfg.solver.duration_s = 2.0;
     cfg.effects.apply_spec("coulomb_friction").unwrap();
     let sim = simulate(&cfg).unwrap();
-    let est_cfg = estimator_config(&cfg.hammer, &cfg.sensors, &EstimatorParams::default(), 1e5, Some(5.0)).unwrap();
-    let codes: Vec<RawSample> = to_codes(&sim.trace(), &est_cfg);
+    let est_cfg = cfg.estimator_config(Some(5.0)).unwrap();
+    let codes: Vec<RawSample> = sim.measured.codes;
     // 20 passes over 2 s of hammer: 4 M sample-sets per timed run.
     let reps = 20;
     let mut best = f64::INFINITY;

@@ -10,10 +10,8 @@ use std::time::Duration;
 
 use hammer_host::client::Client;
 use hammer_host::emulator::{firmware_elf, qemu_available, Emulator};
-use hammer_sim::estimation::{estimator_config, to_codes};
 use hammer_sim::simulate::simulate;
 use hammer_sim::SimConfig;
-use hammer_trace::EstimatorParams;
 use hammer_wire::*;
 
 fn main() {
@@ -28,8 +26,7 @@ fn main() {
     cfg.solver.duration_s = 1.0;
     cfg.effects.apply_spec("coulomb_friction").unwrap();
     let sim = simulate(&cfg).unwrap();
-    let est = estimator_config(&cfg.hammer, &cfg.sensors, &EstimatorParams::default(), 1e5, None).unwrap();
-    let samples = to_codes(&sim.trace(), &est);
+    let samples = sim.measured.codes;
     let status = |link: &mut Client<_>| {
         link.send(&HostMsg::GetStatus).unwrap();
         link.recv_until(t, |m| if let DeviceMsg::Status(s) = m { Some(*s) } else { None })

@@ -327,14 +327,9 @@ fn config_check(file: &std::path::Path) -> Result<()> {
     let cfg: SimConfig = load_toml(file)?;
     let in_file = || file.display().to_string();
     cfg.validate().with_context(in_file)?;
-    let est = hammer_sim::estimation::estimator_config(
-        &cfg.hammer,
-        &cfg.sensors,
-        &cfg.estimator,
-        1.0 / cfg.solver.output_step_s,
-        Some(cfg.supply.pressure_bar),
-    )
-    .with_context(in_file)?;
+    let est = cfg
+        .estimator_config(Some(cfg.supply.pressure_bar))
+        .with_context(in_file)?;
     outln!("{}: ok", file.display());
     outln!(
         "  hammer: {} kg piston, bore {} mm, rod {} mm, supply {} bar, inclination {}°",

@@ -3,10 +3,15 @@
 //! its version check, commands and their `Ack`/`Rejected`, and the decoded
 //! device messages with frame-error and report-sequence accounting.
 //!
-//! `hammer demo`, `hammer capture` and the tests drive a [`Client`]. The
-//! monitor's reader thread owns its port itself (it logs every raw byte and
-//! shares its decoding core with `hammer replay`), so it uses the pieces the
-//! client is made of: [`hello`], [`hello_reply`], [`write_frame`] and [`SeqCheck`].
+//! Two layers, so every tool reads the link the same way:
+//! - [`Inbound`], sans-IO: bytes in, [`Incoming`] out (a message, or a frame
+//!   error with where its frame began): the host's one decoder. [`SeqCheck`]
+//!   is its one report-sequence check, applied where messages are accepted.
+//! - [`Client`], blocking over a stream: `hammer demo`, `hammer capture` and
+//!   the end-to-end tests. The monitor's reader thread owns its port itself
+//!   (it logs every raw byte, reconnects, and shares its event core with
+//!   `hammer replay`), and drives the same [`Inbound`] and [`SeqCheck`] with
+//!   [`hello`], [`hello_reply`] and [`write_frame`].
 
 use std::collections::VecDeque;
 use std::io::{self, Read, Write};
@@ -120,12 +125,89 @@ impl SeqCheck {
     }
 }
 
+/// What arrived on the link, in order.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Incoming {
+    Msg(DeviceMsg),
+    /// A frame that did not decode; `frame_start` is the stream offset where it began.
+    FrameError {
+        kind: DecodeError,
+        frame_start: u64,
+    },
+}
+
+/// The host's decoding core: frames and byte offsets. Knows nothing of ports or clocks.
+pub struct Inbound {
+    dec: Decoder<MAX_FRAME>,
+    /// Bytes fed so far.
+    bytes: u64,
+    /// Stream offset just after the last delimiter: where the frame now being
+    /// received began.
+    frame_start: u64,
+}
+
+impl Default for Inbound {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Inbound {
+    pub fn new() -> Self {
+        Self {
+            dec: Decoder::new(),
+            bytes: 0,
+            frame_start: 0,
+        }
+    }
+
+    /// A new connection: a frame cut by the disconnect must not swallow the
+    /// first new one.
+    pub fn reopen(&mut self) {
+        self.dec = Decoder::new();
+        self.frame_start = self.bytes;
+    }
+
+    pub fn stats(&self) -> DecoderStats {
+        self.dec.stats
+    }
+
+    /// Bytes fed so far.
+    pub fn bytes(&self) -> u64 {
+        self.bytes
+    }
+
+    /// Stream offset where the frame now being received began.
+    pub fn frame_start(&self) -> u64 {
+        self.frame_start
+    }
+
+    /// Feeds bytes as they arrived; `out` sees what they completed, in order.
+    pub fn feed(&mut self, bytes: &[u8], out: &mut dyn FnMut(Incoming)) {
+        let first = self.bytes;
+        self.bytes += bytes.len() as u64;
+        for (i, &b) in bytes.iter().enumerate() {
+            match self.dec.push::<DeviceMsg>(b) {
+                None => {}
+                Some(Ok(m)) => out(Incoming::Msg(m)),
+                Some(Err(kind)) => out(Incoming::FrameError {
+                    kind,
+                    frame_start: self.frame_start,
+                }),
+            }
+            if b == 0 {
+                self.frame_start = first + i as u64 + 1;
+            }
+        }
+    }
+}
+
 /// A framed, checksummed connection to a device.
 pub struct Client<S> {
     stream: S,
-    dec: Decoder<MAX_FRAME>,
-    pending: VecDeque<DeviceMsg>,
+    inbound: Inbound,
     seq: SeqCheck,
+    pending: VecDeque<DeviceMsg>,
     /// Frames that failed to decode, in arrival order (for tests and logs).
     pub errors: Vec<DecodeError>,
     pub frames_sent: u64,
@@ -139,9 +221,9 @@ impl<S: Read + Write> Client<S> {
     pub fn new(stream: S) -> Self {
         Self {
             stream,
-            dec: Decoder::new(),
-            pending: Default::default(),
+            inbound: Inbound::new(),
             seq: SeqCheck::default(),
+            pending: Default::default(),
             errors: vec![],
             frames_sent: 0,
             seq_gaps: 0,
@@ -154,7 +236,7 @@ impl<S: Read + Write> Client<S> {
     }
 
     pub fn stats(&self) -> DecoderStats {
-        self.dec.stats
+        self.inbound.stats()
     }
 
     /// Frames that did not decode (garbage, corruption, oversize).
@@ -175,21 +257,20 @@ impl<S: Read + Write> Client<S> {
 
     /// Feeds bytes read elsewhere (a reader thread, a log replay) into the decoder.
     pub fn feed(&mut self, bytes: &[u8]) {
-        for &b in bytes {
-            match self.dec.push::<DeviceMsg>(b) {
-                Some(Ok(m)) => {
-                    if let DeviceMsg::Report(r) = &m {
-                        if let Some(gap) = self.seq.next(r.seq) {
-                            self.seq_gaps += 1;
-                            self.lost_reports += gap.lost();
-                        }
+        let (pending, errors, seq) = (&mut self.pending, &mut self.errors, &mut self.seq);
+        let (gaps, lost) = (&mut self.seq_gaps, &mut self.lost_reports);
+        self.inbound.feed(bytes, &mut |i| match i {
+            Incoming::Msg(m) => {
+                if let DeviceMsg::Report(r) = &m {
+                    if let Some(g) = seq.next(r.seq) {
+                        *gaps += 1;
+                        *lost += g.lost();
                     }
-                    self.pending.push_back(m)
                 }
-                Some(Err(e)) => self.errors.push(e),
-                None => {}
+                pending.push_back(m)
             }
-        }
+            Incoming::FrameError { kind, .. } => errors.push(kind),
+        });
     }
 
     /// The next message, waiting at most `timeout`. `Ok(None)` on timeout.

@@ -15,7 +15,6 @@ use hammer_wire::{DeviceMsg, HostMsg, SampleBlock, BLOCK_SAMPLES};
 
 use crate::client::{write_frame, Client};
 use crate::emulator::{firmware_elf, qemu_available, Emulator};
-use hammer_sim::estimation::{estimator_config, to_codes};
 use hammer_sim::simulate::simulate;
 use hammer_sim::SimConfig;
 
@@ -113,14 +112,7 @@ pub fn hammer_codes(args: &DemoArgs, seconds: f64) -> Result<Vec<RawSample>> {
     }
     cfg.validate()?;
     let sim = simulate(&cfg).context("simulation failed")?;
-    let est = estimator_config(
-        &cfg.hammer,
-        &cfg.sensors,
-        &cfg.estimator,
-        1.0 / cfg.solver.output_step_s,
-        None,
-    )?;
-    Ok(to_codes(&sim.trace(), &est))
+    Ok(sim.measured.codes)
 }
 
 /// Starts the board and returns it with its link's read and write halves.

@@ -4,10 +4,9 @@
 //! find nothing beyond noise when it carries none.
 
 use hammer_host::diagnose::gap::{breakdown, measured_cycles, template, GapCell};
-use hammer_sim::estimation::{estimator_config, run, to_codes};
+use hammer_sim::estimation::run;
 use hammer_sim::simulate::simulate;
 use hammer_sim::{simulate_truth, SimConfig};
-use hammer_trace::EstimatorParams;
 
 fn gaps(effect: Option<&str>, bar: f64) -> Vec<GapCell> {
     let mut meas_cfg = SimConfig::nominal(bar);
@@ -18,15 +17,8 @@ fn gaps(effect: Option<&str>, bar: f64) -> Vec<GapCell> {
     }
     let meas = simulate(&meas_cfg).unwrap();
     let trace = meas.trace();
-    let est = estimator_config(
-        &meas_cfg.hammer,
-        &meas_cfg.sensors,
-        &EstimatorParams::default(),
-        1e5,
-        Some(bar),
-    )
-    .unwrap();
-    let impacts: Vec<f64> = run(&to_codes(&trace, &est), est)
+    let est = meas_cfg.estimator_config(Some(bar)).unwrap();
+    let impacts: Vec<f64> = run(meas.codes(), est)
         .unwrap()
         .iter()
         .filter(|r| r.t_impact_s > 0.2)

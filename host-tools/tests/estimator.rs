@@ -3,7 +3,7 @@
 //! no phase, position or velocity from the simulator reaches it.
 
 use hammer_estimator::{CycleReport, Flags};
-use hammer_sim::estimation::{estimator_config, run, to_codes};
+use hammer_sim::estimation::run;
 use hammer_sim::run::CycleTruth;
 use hammer_sim::simulate::{simulate, Simulation};
 use hammer_sim::SimConfig;
@@ -15,16 +15,10 @@ struct Matched {
 }
 
 fn estimate(sim: &Simulation, params: &EstimatorParams) -> Vec<CycleReport> {
-    let trace = sim.trace();
-    let cfg = estimator_config(
-        &sim.config.hammer,
-        &sim.config.sensors,
-        params,
-        1.0 / trace.dt_s,
-        Some(sim.config.supply.pressure_bar),
-    )
-    .unwrap();
-    run(&to_codes(&trace, &cfg), cfg).unwrap()
+    let mut with = sim.config.clone();
+    with.estimator = params.clone();
+    let cfg = with.estimator_config(Some(sim.config.supply.pressure_bar)).unwrap();
+    run(sim.codes(), cfg).unwrap()
 }
 
 /// Pairs each report with the truth cycle closed by the same impact; only

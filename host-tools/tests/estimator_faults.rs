@@ -2,10 +2,8 @@
 //! stuck and saturated sensors, dropped samples, a hammer that stops.
 
 use hammer_estimator::{CycleReport, Estimator, Flags, RawSample};
-use hammer_sim::estimation::{estimator_config, to_codes};
 use hammer_sim::simulate::simulate;
 use hammer_sim::SimConfig;
-use hammer_trace::EstimatorParams;
 
 fn stream(sensors_tweak: impl Fn(&mut SimConfig)) -> (Vec<RawSample>, hammer_estimator::Config) {
     let mut cfg = SimConfig::nominal(5.0);
@@ -13,8 +11,8 @@ fn stream(sensors_tweak: impl Fn(&mut SimConfig)) -> (Vec<RawSample>, hammer_est
     cfg.effects.apply_spec("coulomb_friction").unwrap();
     sensors_tweak(&mut cfg);
     let sim = simulate(&cfg).unwrap();
-    let est = estimator_config(&cfg.hammer, &cfg.sensors, &EstimatorParams::default(), 1e5, Some(5.0)).unwrap();
-    (to_codes(&sim.trace(), &est), est)
+    let est = cfg.estimator_config(Some(5.0)).unwrap();
+    (sim.measured.codes, est)
 }
 
 fn run(samples: &[RawSample], cfg: hammer_estimator::Config) -> Vec<CycleReport> {

@@ -5,7 +5,6 @@
 //! sensor-fault flag within one expected period of its start.
 
 use hammer_estimator::{CycleReport, Estimator, Flags, RawSample};
-use hammer_sim::estimation::{estimator_config, to_codes};
 use hammer_sim::run::CycleTruth;
 use hammer_sim::simulate::simulate;
 use hammer_sim::SimConfig;
@@ -29,9 +28,9 @@ fn clean(tweak: impl Fn(&mut SimConfig)) -> Run {
     cfg.effects.coulomb_friction = Some(Default::default());
     tweak(&mut cfg);
     let sim = simulate(&cfg).unwrap();
-    let est = estimator_config(&cfg.hammer, &cfg.sensors, &cfg.estimator, FS, Some(4.0)).unwrap();
+    let est = cfg.estimator_config(Some(4.0)).unwrap();
     Run {
-        codes: to_codes(&sim.trace(), &est),
+        codes: sim.measured.codes,
         cfg: est,
         truth: sim.run.cycles,
     }

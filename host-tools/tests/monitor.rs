@@ -18,10 +18,9 @@ use std::process::{Child, Command, Stdio};
 use std::sync::{Mutex, MutexGuard, OnceLock};
 use std::time::{Duration, Instant};
 
-use hammer_sim::estimation::{estimator_config, run, to_codes};
+use hammer_sim::estimation::run;
 use hammer_sim::simulate::simulate;
 use hammer_sim::SimConfig;
-use hammer_trace::EstimatorParams;
 use hammer_wire::*;
 
 /// The longest any single wait in these tests may take.
@@ -43,12 +42,8 @@ fn fixture() -> &'static Fixture {
         cfg.seed = 11;
         cfg.effects.apply_spec("coulomb_friction").unwrap();
         let sim = simulate(&cfg).unwrap();
-        let est = estimator_config(&cfg.hammer, &cfg.sensors, &EstimatorParams::default(), 1e5, None).unwrap();
-        let reports: Vec<CycleReport> = run(&to_codes(&sim.trace(), &est), est)
-            .unwrap()
-            .iter()
-            .copied()
-            .collect();
+        let est = cfg.estimator_config(None).unwrap();
+        let reports: Vec<CycleReport> = run(sim.codes(), est).unwrap().to_vec();
         assert!(reports.len() >= 20, "{} reports", reports.len());
         assert!(reports.iter().all(|r| r.is_valid()), "valid cycles to show");
         Fixture {

@@ -6,11 +6,10 @@ use std::sync::OnceLock;
 
 use hammer_estimator::CycleReport;
 use hammer_host::report::{self, ReportArgs, CYCLE_SIZE, RUN_SIZE, TRUTH_SIZE};
-use hammer_sim::estimation::{estimator_config, sensors_for, to_codes};
-use hammer_sim::simulate::read_simulated_sidecar;
+use hammer_sim::estimation::open_for_estimation;
 use hammer_sim::simulate::{simulate, Simulation};
 use hammer_sim::SimConfig;
-use hammer_trace::trace::{read_csv, write_csv, write_sidecar};
+use hammer_trace::trace::{write_csv, write_sidecar};
 
 /// A white canvas compresses to a few kB; titles, axes, curves and bands take
 /// a figure past 100 kB.
@@ -80,17 +79,10 @@ fn assert_drawn(path: &Path, size: (u32, u32)) {
 
 /// The estimator's reports, configured as `hammer estimate` does with no config file.
 fn estimate(trace_path: &Path) -> Vec<CycleReport> {
-    let file = SimConfig::default();
-    let trace = read_csv(trace_path).unwrap();
-    let sidecar = read_simulated_sidecar(trace_path).unwrap();
-    let supply = sidecar.as_ref().and_then(|s| s.supply_pressure_bar);
-    let sensors = sensors_for(sidecar.as_ref(), &file.sensors);
-    let hammer = sidecar
-        .as_ref()
-        .and_then(|s| s.simulation.as_ref())
-        .map_or(file.hammer.clone(), |s| s.config.hammer.clone());
-    let cfg = estimator_config(&hammer, &sensors, &file.estimator, 1.0 / trace.dt_s, supply).unwrap();
-    hammer_sim::estimation::run(&to_codes(&trace, &cfg), cfg).unwrap()
+    open_for_estimation(trace_path, &SimConfig::default(), None)
+        .unwrap()
+        .run()
+        .unwrap()
 }
 
 #[test]

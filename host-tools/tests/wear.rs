@@ -3,21 +3,12 @@
 //! wear state survives a reset.
 
 use hammer_estimator::{CycleReport, Estimator, Flags, RawSample, WearState};
-use hammer_sim::estimation::{estimator_config, to_codes};
 use hammer_sim::sensor::measure;
 use hammer_sim::simulate::simulate;
 use hammer_sim::{simulate_truth, SimConfig};
-use hammer_trace::EstimatorParams;
 
 fn config_for(sim_cfg: &SimConfig) -> hammer_estimator::Config {
-    estimator_config(
-        &sim_cfg.hammer,
-        &sim_cfg.sensors,
-        &EstimatorParams::default(),
-        1.0 / sim_cfg.solver.output_step_s,
-        Some(sim_cfg.supply.pressure_bar),
-    )
-    .unwrap()
+    sim_cfg.estimator_config(Some(sim_cfg.supply.pressure_bar)).unwrap()
 }
 
 #[test]
@@ -32,7 +23,7 @@ fn a_five_percent_friction_step_fires_the_alarm_within_50_cycles() {
     let est_cfg = config_for(&cfg);
     let mut est = Estimator::new(est_cfg).unwrap();
     let mut reports = Vec::new();
-    est.push_block(&to_codes(&sim.trace(), &est_cfg), |r| reports.push(r));
+    est.push_block(sim.codes(), |r| reports.push(r));
     let before: Vec<&CycleReport> = reports.iter().filter(|r| r.t_impact_s < step_at).collect();
     assert!(
         before.iter().filter(|r| r.is_valid()).count() > 60,
@@ -73,21 +64,12 @@ fn constant_friction_stream(cycles_wanted: usize, mut sink: impl FnMut(&[RawSamp
         .collect();
     let (i0, i1) = (impacts[0], *impacts.last().unwrap());
     let per_window = impacts.len() - 1;
-    let est_cfg = config_for(&cfg);
+    let _est_cfg = config_for(&cfg);
     let mut cycles = 0;
     let mut seed = 1;
     while cycles < cycles_wanted {
         let m = measure(&cfg.sensors, &cfg.effects, &run.truth, &run.events.impacts, seed);
-        let trace = hammer_trace::trace::Trace {
-            dt_s: dt,
-            t_s: run.truth.t_s[i0..i1].to_vec(),
-            p_rear_pa: m.p_rear_pa[i0..i1].to_vec(),
-            p_front_pa: m.p_front_pa[i0..i1].to_vec(),
-            accel_mps2: m.accel_mps2[i0..i1].to_vec(),
-            extra: Default::default(),
-            gaps: Vec::new(),
-        };
-        sink(&to_codes(&trace, &est_cfg));
+        sink(&m.codes[i0..i1]);
         cycles += per_window;
         seed += 1;
     }

@@ -11,10 +11,9 @@ use std::time::Duration;
 use hammer_estimator::{Config, Estimator, RawSample};
 use hammer_host::client::Client;
 use hammer_host::emulator::{firmware_elf, Emulator};
-use hammer_sim::estimation::{estimator_config, to_codes};
+use hammer_sim::estimation::to_codes;
 use hammer_sim::simulate::simulate;
 use hammer_sim::SimConfig;
-use hammer_trace::EstimatorParams;
 use hammer_wire::*;
 
 const T: Duration = Duration::from_secs(20);
@@ -67,8 +66,7 @@ fn codes(bar: f64, seconds: f64, seed: u64) -> Vec<RawSample> {
     cfg.seed = seed;
     cfg.effects.apply_spec("coulomb_friction").unwrap();
     let sim = simulate(&cfg).unwrap();
-    let est = estimator_config(&cfg.hammer, &cfg.sensors, &EstimatorParams::default(), 1e5, None).unwrap();
-    to_codes(&sim.trace(), &est)
+    sim.measured.codes
 }
 
 /// Streams samples as numbered blocks; returns everything the device said.
@@ -315,9 +313,8 @@ fn captures(bar: f64, n: usize, seed: u64) -> Vec<hammer_trace::trace::Trace> {
     cfg.seed = seed;
     cfg.effects.apply_spec("coulomb_friction").unwrap();
     let sim = simulate(&cfg).unwrap();
-    let est = estimator_config(&cfg.hammer, &cfg.sensors, &EstimatorParams::default(), 1e5, None).unwrap();
     // The start-up from rest is not what a bench records: begin at 0.25 s.
-    let samples = &to_codes(&sim.trace(), &est)[25_000..];
+    let samples = &sim.codes()[25_000..];
     let mut next = 0;
     let mut out = Vec::new();
     // Lock the estimator onto the cycle first.

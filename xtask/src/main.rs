@@ -2,6 +2,7 @@
 //! test: host tests, the no_std estimator built for the target, the firmware.
 
 mod elf;
+mod ninth_effect;
 
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
@@ -16,7 +17,7 @@ fn root() -> PathBuf {
         .to_path_buf()
 }
 
-fn run(dir: &Path, program: &str, args: &[&str]) -> Result<(), String> {
+pub(crate) fn run(dir: &Path, program: &str, args: &[&str]) -> Result<(), String> {
     eprintln!("xtask: ({}) {program} {}", dir.display(), args.join(" "));
     let status = Command::new(program)
         .args(args)
@@ -31,7 +32,7 @@ fn run(dir: &Path, program: &str, args: &[&str]) -> Result<(), String> {
 }
 
 /// Runs `cargo test` passing its output through and adds up its `test result` lines.
-fn cargo_test(dir: &Path, args: &[&str], totals: &mut (u64, u64)) -> Result<(), String> {
+pub(crate) fn cargo_test(dir: &Path, args: &[&str], totals: &mut (u64, u64)) -> Result<(), String> {
     eprintln!("xtask: ({}) cargo {}", dir.display(), args.join(" "));
     let mut child = Command::new("cargo")
         .args(args)
@@ -124,6 +125,10 @@ fn ci() -> Result<(), String> {
     // would wrap on bad input must not hide behind release mode.
     if result.is_ok() {
         result = cargo_test(&root, &["test", "-p", "hammer-estimator"], &mut totals);
+    }
+    // A ninth effect through the registry alone (a copy of the workspace).
+    if result.is_ok() {
+        result = ninth_effect::run(&root, &mut totals);
     }
     // Fuzzing smoke run: the seeded in-process runner over every target.
     if result.is_ok() {
@@ -248,6 +253,8 @@ const USAGE: &str = "usage: cargo xtask <command>
   firmware        build both firmware binaries and print their flash and RAM
   size            flash and static RAM of the built firmware binaries
   bench-firmware  estimator cost on the Cortex-M4 ISA under QEMU (-icount), with sizes
+  ninth-effect    adds a test effect to a copy of the workspace through the registry alone
+                  (xtask/fixtures/ninth-effect) and runs its tests: drawn, simulated, fitted
   fuzz [--execs N | --minutes M] [--seed S] [--target NAME]
                   the in-process fuzz runner over every target (CI runs 1,000,000 executions each)
   fuzz --afl NAME [--minutes M]
@@ -260,6 +267,7 @@ fn main() -> ExitCode {
         Some("fuzz") => fuzz(&args[1..].iter().map(String::as_str).collect::<Vec<_>>()),
         Some("firmware") => build_firmware(),
         Some("size") => size(),
+        Some("ninth-effect") => ninth_effect::run(&root(), &mut (0, 0)),
         Some("bench-firmware") => {
             build_firmware().and_then(|_| run(&root(), "cargo", &["bench", "-p", "hammer-host", "--bench", "firmware"]))
         }

@@ -3,7 +3,7 @@
 //! estimate`, `report`, `diagnose`, the app's tests and the end-to-end tests
 //! all open traces through here.
 
-use hammer_estimator::{ChannelCal, ChannelSpec, Config, CycleReport, Estimator, RawSample};
+use hammer_estimator::{ChannelSpec, Config, CycleReport, Estimator, RawSample};
 use hammer_trace::config::ConfigError;
 use std::path::Path;
 
@@ -12,14 +12,9 @@ use hammer_trace::trace::{read_csv, Gap, Trace, TraceError};
 use hammer_trace::EstimatorParams;
 
 use crate::params::HammerParams;
-use crate::sensor::{SensorChannel, SensorModel};
+use crate::sensor::SensorModel;
 use crate::simulate::{read_simulated_sidecar, Sidecar};
 use crate::SimConfig;
-
-fn cal(ch: &SensorChannel) -> ChannelCal {
-    // Validated to at most ADC_BITS_MAX, so the cast keeps every value.
-    ChannelCal::from_range(ch.range_min as f32, ch.range_max as f32, ch.adc_bits as u8)
-}
 
 /// The estimator's configuration for a trace: hammer and sensors from the
 /// config (or the simulator's sidecar), the sample rate from the trace.
@@ -35,9 +30,9 @@ pub fn estimator_config(
         sample_rate_hz: sample_rate_hz as f32,
         geometry: hammer.geometry(),
         inclination_deg: hammer.inclination_deg as f32,
-        rear: cal(&sensors.rear),
-        front: cal(&sensors.front),
-        accel: cal(&sensors.accel),
+        rear: sensors.rear.calibration(),
+        front: sensors.front.calibration(),
+        accel: sensors.accel.calibration(),
         rear_spec: ChannelSpec {
             gain_rel: p.pressure_gain_uncertainty as f32,
             offset: p.pressure_offset_uncertainty_pa as f32,
@@ -243,24 +238,17 @@ pub fn sensors_for(sidecar: Option<&Sidecar>, fallback: &SensorModel) -> SensorM
         .map_or_else(|| fallback.clone(), |sim| sim.config.sensors.clone())
 }
 
-fn code(cal: &ChannelCal, v: f64) -> u16 {
-    let x = (v as f32 / cal.scale + cal.zero_code).round();
-    if x.is_nan() {
-        0
-    } else {
-        x.clamp(0.0, cal.full_scale_code as f32) as u16
-    }
-}
-
 fn row_codes(c: &Config, r: &Row) -> RawSample {
     RawSample {
-        rear: code(&c.rear, r.p_rear_pa),
-        front: code(&c.front, r.p_front_pa),
-        accel: code(&c.accel, r.accel_mps2),
+        rear: c.rear.code(r.p_rear_pa),
+        front: c.front.code(r.p_front_pa),
+        accel: c.accel.code(r.accel_mps2),
     }
 }
 
-/// Physical values back to the ADC codes they came from.
+/// A trace file's physical values as the ADC codes of the calibration in
+/// `c` (a file holds values; the estimator reads codes). A simulation in
+/// memory has its codes already: [`crate::Simulation::codes`].
 pub fn to_codes(trace: &Trace, c: &Config) -> Vec<RawSample> {
     (0..trace.len())
         .map(|i| {

@@ -96,6 +96,8 @@ pub struct HammerModel {
     h_wall: f64,
     supply_orifice_m2: f64,
     supply_volume_m3: f64,
+    drags: super::effects::PistonDrags,
+    supply_bar: f64,
 }
 
 impl HammerModel {
@@ -159,6 +161,8 @@ impl HammerModel {
             h_wall: e.heat_transfer.as_ref().map_or(0.0, |h| h.h_w_per_m2_k),
             supply_orifice_m2,
             supply_volume_m3,
+            drags: e.piston_drags(),
+            supply_bar: cfg.supply.pressure_bar,
         }
     }
 
@@ -195,7 +199,11 @@ impl HammerModel {
             let fc = self.coulomb_n * c.factor_at(t);
             f -= fc * v / (v * v + self.coulomb_vs * self.coulomb_vs).sqrt();
         }
-        f - self.viscous * v
+        f -= self.viscous * v;
+        if !self.drags.is_empty() {
+            f += self.drags.force_n(t, v, self.supply_bar);
+        }
+        f
     }
 
     fn contact_n(&self, x: f64, v: f64) -> f64 {

@@ -296,6 +296,21 @@ impl SimConfig {
         c
     }
 
+    /// The estimator configuration that reads this run's codes
+    /// ([`crate::Simulation::codes`]) as the board would: the hammer and
+    /// sensors simulated, the `[estimator]` table, the output rate, and the
+    /// supply pressure if the board is told it (`None`: unknown, as on a
+    /// board nobody configured).
+    pub fn estimator_config(&self, supply_bar: Option<f64>) -> Result<hammer_estimator::Config, ConfigError> {
+        crate::estimation::estimator_config(
+            &self.hammer,
+            &self.sensors,
+            &self.estimator,
+            1.0 / self.solver.output_step_s,
+            supply_bar,
+        )
+    }
+
     pub fn validate(&self) -> Result<(), ConfigError> {
         self.hammer.validate()?;
         self.valve.validate()?;

@@ -4,6 +4,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use hammer_estimator::{ChannelCal, RawSample};
+
 use super::effects::Effects;
 use super::run::{EventRecord, TruthSample, TruthTrace};
 use crate::config::{check_range, ConfigError};
@@ -46,6 +48,12 @@ impl SensorChannel {
 
     pub fn value(&self, code: u32) -> f64 {
         self.range_min + code as f64 * self.lsb()
+    }
+
+    /// The calibration that reads this channel's codes on the board.
+    pub fn calibration(&self) -> ChannelCal {
+        // Validated to at most ADC_BITS_MAX, so the cast keeps every value.
+        ChannelCal::from_range(self.range_min as f32, self.range_max as f32, self.adc_bits as u8)
     }
 
     /// `name` is the channel's key under `[sensors]`.
@@ -115,12 +123,15 @@ impl SensorModel {
     }
 }
 
-/// Measured channels on the output grid: physical values of the ADC codes.
+/// Measured channels on the output grid: the ADC codes, and the physical
+/// values they stand for (what a trace file holds).
 #[derive(Debug, Clone, Default)]
 pub struct Measured {
     pub p_rear_pa: Vec<f64>,
     pub p_front_pa: Vec<f64>,
     pub accel_mps2: Vec<f64>,
+    /// What the board's ADC delivers, read by the channels' [`SensorChannel::calibration`].
+    pub codes: Vec<RawSample>,
     /// Samples at either end of the ADC range, per channel (rear, front, accel).
     pub clipped: [usize; 3],
 }
@@ -246,6 +257,14 @@ pub struct SensorChain {
     zero_shift_rng: Rng,
     shifts: Vec<ZeroShift>,
     channels: [ChannelState; 3],
+    cals: [ChannelCal; 3],
+}
+
+/// One sample through the chain: the physical values and the ADC codes.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ChainSample {
+    pub values: [f64; 3],
+    pub codes: RawSample,
 }
 
 impl SensorChain {
@@ -268,6 +287,7 @@ impl SensorChain {
                 ChannelState::new(&model.front, dt_s, base ^ 0x0000_0000_0000_0200),
                 ChannelState::new(&model.accel, dt_s, base ^ 0x0000_0000_0000_0300),
             ],
+            cals: [&model.rear, &model.front, &model.accel].map(SensorChannel::calibration),
         }
     }
 
@@ -285,8 +305,10 @@ impl SensorChain {
         }
     }
 
-    /// The measured rear, front and accel values of one truth sample.
-    pub fn measure(&mut self, s: &TruthSample) -> [f64; 3] {
+    /// The measured rear, front and accel values of one truth sample, and
+    /// their codes. With the chain off (ideal signals) the codes are those
+    /// an ideal converter of the same range gives.
+    pub fn measure(&mut self, s: &TruthSample) -> ChainSample {
         let mut accel = s.accel_mps2;
         if let Some((_, tau_s)) = self.zero_shift {
             self.shifts.retain(|z| z.end > s.index);
@@ -297,11 +319,20 @@ impl SensorChain {
         }
         let m = &self.model;
         let [rear, front, acc] = &mut self.channels;
-        [
+        let values = [
             rear.measure(&m.rear, m.enabled, s.p_rear_pa * (1.0 + self.gain_rear)),
             front.measure(&m.front, m.enabled, s.p_front_pa * (1.0 + self.gain_front)),
             acc.measure(&m.accel, m.enabled, accel),
-        ]
+        ];
+        let [r, f, a] = &self.cals;
+        ChainSample {
+            values,
+            codes: RawSample {
+                rear: r.code(values[0]),
+                front: f.code(values[1]),
+                accel: a.code(values[2]),
+            },
+        }
     }
 
     /// Samples at either end of the ADC range so far: rear, front, accel.
@@ -311,10 +342,11 @@ impl SensorChain {
 }
 
 impl Measured {
-    pub fn push(&mut self, m: [f64; 3]) {
-        self.p_rear_pa.push(m[0]);
-        self.p_front_pa.push(m[1]);
-        self.accel_mps2.push(m[2]);
+    pub fn push(&mut self, m: ChainSample) {
+        self.p_rear_pa.push(m.values[0]);
+        self.p_front_pa.push(m.values[1]);
+        self.accel_mps2.push(m.values[2]);
+        self.codes.push(m.codes);
     }
 }
 

@@ -9,9 +9,10 @@ use std::path::Path;
 use crate::run::{
     run_model, CycleTruth, EventRecord, MassBalance, RunError, RunSummary, SimRun, TruthSample, TruthSink, TruthTrace,
 };
-use crate::sensor::{Measured, SensorChain};
+use crate::sensor::{ChainSample, Measured, SensorChain};
 use crate::solver::{SolverError, SolverStats};
 use crate::SimConfig;
+use hammer_estimator::RawSample;
 use hammer_trace::trace::{read_sidecar_as, write_sidecar, CsvWriter, Trace, TraceError};
 
 /// Everything the simulator knows about a trace it wrote: the sidecar's
@@ -74,7 +75,7 @@ fn truth_columns_in_file_order() -> [(&'static str, fn(&TruthSample) -> f64); 7]
 /// Where measured samples go: kept in memory or written as trace rows.
 trait MeasuredSink {
     type Error;
-    fn sample(&mut self, truth: &TruthSample, measured: [f64; 3]) -> Result<(), Self::Error>;
+    fn sample(&mut self, truth: &TruthSample, measured: ChainSample) -> Result<(), Self::Error>;
 }
 
 /// The run's samples through the sensor chain into a [`MeasuredSink`].
@@ -102,7 +103,7 @@ struct InMemory {
 
 impl MeasuredSink for InMemory {
     type Error = std::convert::Infallible;
-    fn sample(&mut self, truth: &TruthSample, measured: [f64; 3]) -> Result<(), Self::Error> {
+    fn sample(&mut self, truth: &TruthSample, measured: ChainSample) -> Result<(), Self::Error> {
         self.truth.push(truth);
         self.measured.push(measured);
         Ok(())
@@ -116,9 +117,15 @@ struct CsvSink {
 
 impl MeasuredSink for CsvSink {
     type Error = TraceError;
-    fn sample(&mut self, truth: &TruthSample, m: [f64; 3]) -> Result<(), TraceError> {
-        self.w
-            .row(truth.t_s, m[0], m[1], m[2], self.columns.iter().map(|(_, f)| f(truth)))
+    fn sample(&mut self, truth: &TruthSample, m: ChainSample) -> Result<(), TraceError> {
+        let [rear, front, accel] = m.values;
+        self.w.row(
+            truth.t_s,
+            rear,
+            front,
+            accel,
+            self.columns.iter().map(|(_, f)| f(truth)),
+        )
     }
 }
 
@@ -167,7 +174,7 @@ pub fn simulate(config: &SimConfig) -> Result<Simulation, SolverError> {
 /// With no trace to write the samples are dropped as they are made.
 impl<O: MeasuredSink> MeasuredSink for Option<O> {
     type Error = O::Error;
-    fn sample(&mut self, truth: &TruthSample, measured: [f64; 3]) -> Result<(), O::Error> {
+    fn sample(&mut self, truth: &TruthSample, measured: ChainSample) -> Result<(), O::Error> {
         self.as_mut().map_or(Ok(()), |o| o.sample(truth, measured))
     }
 }
@@ -216,6 +223,11 @@ impl Simulation {
             trace.extra.insert(name.to_string(), col);
         }
         trace
+    }
+
+    /// The ADC codes the bench board reads of this run, sample by sample.
+    pub fn codes(&self) -> &[RawSample] {
+        &self.measured.codes
     }
 
     /// What the sidecar records about this run.
@@ -348,6 +360,31 @@ mod tests {
     use super::*;
     use crate::sensor::measure;
     use hammer_trace::trace::write_csv;
+
+    /// The codes a simulation carries are the ADC's own (with the chain on:
+    /// the code the channel converted, read back through the board's
+    /// calibration without loss) and what a file of its values reads as.
+    #[test]
+    fn the_codes_are_the_adcs_and_a_file_of_the_values_reads_as_them() {
+        for enabled in [true, false] {
+            let mut cfg = short_run_with_sensor_effects();
+            cfg.sensors.enabled = enabled;
+            let sim = simulate(&cfg).unwrap();
+            let est = cfg.estimator_config(None).unwrap();
+            assert_eq!(sim.codes().len(), sim.run.truth.len());
+            assert_eq!(
+                sim.codes(),
+                crate::estimation::to_codes(&sim.trace(), &est),
+                "enabled {enabled}"
+            );
+            if enabled {
+                let ch = &cfg.sensors.rear;
+                for (c, v) in sim.codes().iter().zip(&sim.measured.p_rear_pa) {
+                    assert_eq!(u32::from(c.rear), ch.code(*v), "{v}");
+                }
+            }
+        }
+    }
 
     fn short_run_with_sensor_effects() -> SimConfig {
         let mut cfg = SimConfig::nominal(5.0);

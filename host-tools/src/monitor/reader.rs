@@ -9,9 +9,9 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use hammer_wire::{DecodeError, Decoder, DeviceMsg, HostMsg, MAX_FRAME};
+use hammer_wire::{DecodeError, DeviceMsg, HostMsg};
 
-use crate::client::{hello, hello_reply, write_frame, SeqCheck};
+use crate::client::{hello, hello_reply, write_frame, Inbound, Incoming, SeqCheck};
 
 use super::event::{now_us, Event, LinkStats, Stamped};
 use super::log::{Logger, Marker};
@@ -33,20 +33,18 @@ pub enum Handshake {
     Mismatch(u16),
 }
 
-/// Bytes in, events out: framing, the handshake's verdict, report sequence
-/// checks and the link counters. Knows nothing of ports or clocks, so a
-/// replay of the recorded bytes yields the same events as the live link.
+/// Bytes in, events out: the client's [`Inbound`] core (framing) and
+/// [`SeqCheck`] (report sequence) plus the handshake's verdict, the held messages and the
+/// link counters. Knows nothing of ports or clocks, so a replay of the
+/// recorded bytes yields the same events as the live link.
 pub struct Ingest {
-    dec: Decoder<MAX_FRAME>,
+    inbound: Inbound,
     stats: LinkStats,
     handshake: Handshake,
     held: VecDeque<DeviceMsg>,
     seq: SeqCheck,
     lost_at_us: Option<u64>,
     opened_before: bool,
-    /// Stream offset just after the last delimiter: where the frame now being
-    /// received began.
-    frame_start: u64,
 }
 
 impl Default for Ingest {
@@ -58,14 +56,13 @@ impl Default for Ingest {
 impl Ingest {
     pub fn new() -> Self {
         Self {
-            dec: Decoder::new(),
+            inbound: Inbound::new(),
             stats: LinkStats::default(),
             handshake: Handshake::Pending,
             held: VecDeque::new(),
             seq: SeqCheck::default(),
             lost_at_us: None,
             opened_before: false,
-            frame_start: 0,
         }
     }
 
@@ -79,20 +76,19 @@ impl Ingest {
 
     /// Stream offset where the frame now being received began.
     pub fn frame_start(&self) -> u64 {
-        self.frame_start
+        self.inbound.frame_start()
     }
 
     /// Bytes of a frame that has begun but not ended yet (at the end of a
     /// recording: a frame that never ended).
     pub fn pending_bytes(&self) -> u64 {
-        self.stats.bytes - self.frame_start
+        self.inbound.bytes() - self.inbound.frame_start()
     }
 
     /// A new connection: a fresh decoder (a frame cut by the disconnect must
     /// not swallow the first new one) and a new handshake; counters go on.
     pub fn opened(&mut self, t_us: u64, port: String, emit: &mut dyn FnMut(Stamped)) {
-        self.dec = Decoder::new();
-        self.frame_start = self.stats.bytes;
+        self.inbound.reopen();
         self.handshake = Handshake::Pending;
         self.held.clear();
         if self.opened_before {
@@ -131,17 +127,17 @@ impl Ingest {
 
     /// Bytes as they arrived at `t_us`.
     pub fn feed(&mut self, t_us: u64, bytes: &[u8], emit: &mut dyn FnMut(Stamped)) {
-        let first = self.stats.bytes;
         self.stats.bytes += bytes.len() as u64;
-        for (i, &b) in bytes.iter().enumerate() {
-            match self.dec.push::<DeviceMsg>(b) {
-                None => {}
-                Some(Ok(m)) => {
+        let mut arrived = Vec::new();
+        self.inbound.feed(bytes, &mut |i| arrived.push(i));
+        for i in arrived {
+            match i {
+                Incoming::Msg(m) => {
                     self.stats.frames += 1;
                     self.stats.last_frame_us = Some(t_us);
                     self.message(t_us, m, emit);
                 }
-                Some(Err(kind)) => {
+                Incoming::FrameError { kind, frame_start } => {
                     let c = match kind {
                         DecodeError::Crc => &mut self.stats.crc_errors,
                         DecodeError::Cobs => &mut self.stats.cobs_errors,
@@ -155,13 +151,10 @@ impl Ingest {
                         event: Event::FrameError {
                             kind,
                             total,
-                            stream_offset: self.frame_start,
+                            stream_offset: frame_start,
                         },
                     });
                 }
-            }
-            if b == 0 {
-                self.frame_start = first + i as u64 + 1;
             }
         }
         emit(Stamped {
@@ -443,7 +436,7 @@ impl Reader {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use hammer_wire::{encode, CycleReport, DeviceInfo, PROTOCOL_VERSION};
+    use hammer_wire::{encode, CycleReport, DeviceInfo, MAX_FRAME, PROTOCOL_VERSION};
 
     fn frame(m: &DeviceMsg) -> Vec<u8> {
         let mut buf = [0u8; MAX_FRAME];

@@ -56,6 +56,7 @@ pub struct Plant {
     a2: f64,
     contact_c: f64,
     restriction_c: f64,
+    drags: hammer_sim::effects::PistonDrags,
 }
 
 impl Plant {
@@ -79,6 +80,7 @@ impl Plant {
             a2,
             contact_c,
             restriction_c,
+            drags: e.piston_drags(),
             p,
             s,
             e,
@@ -136,6 +138,9 @@ impl Plant {
         }
         if let Some(vf) = &self.e.viscous_friction {
             f -= vf.c_n_s_per_m * v;
+        }
+        if !self.drags.is_empty() {
+            f += self.drags.force_n(t, v, self.supply_bar);
         }
         f
     }

@@ -46,6 +46,19 @@ pub trait Effect:
     const PARAMS: &'static [Param];
     /// Acts on the sensor output, not on the simulated solution.
     const SENSOR: bool = false;
+    /// Has a [`Effect::piston_drag_n`] force.
+    const PISTON_DRAG: bool = false;
+
+    /// The simulator hook of an effect that is a force on the piston against
+    /// its motion (negative opposes forward motion; it counts as friction in
+    /// the truth and the friction work), at time `t_s`, velocity `v_mps` and
+    /// supply pressure `supply_bar`. Every plant adds the active ones, so an
+    /// effect of this kind needs no edit of the simulator. The effects older
+    /// than the hook are wired into the plants by hand (their forms are
+    /// plant-specific: smoothing, port geometry).
+    fn piston_drag_n(&self, _t_s: f64, _v_mps: f64, _supply_bar: f64) -> f64 {
+        0.0
+    }
 
     /// Checks every parameter against its range; errors name `effects.NAME.key`.
     fn validate(&self) -> Result<(), ConfigError> {
@@ -74,6 +87,9 @@ pub trait EffectEntry: Sync {
     fn validate(&self, effects: &Effects) -> Result<(), ConfigError>;
     /// The default parameters, as in a config file.
     fn default_params(&self) -> toml::Value;
+    fn has_piston_drag(&self) -> bool;
+    /// [`Effect::piston_drag_n`] if the effect is on, else 0.
+    fn piston_drag_n(&self, effects: &Effects, t_s: f64, v_mps: f64, supply_bar: f64) -> f64;
 }
 
 struct Entry<T>(PhantomData<fn() -> T>);
@@ -103,6 +119,12 @@ impl<T: Effect> EffectEntry for Entry<T> {
     }
     fn default_params(&self) -> toml::Value {
         toml::Value::try_from(T::default()).unwrap_or(toml::Value::Table(Default::default()))
+    }
+    fn has_piston_drag(&self) -> bool {
+        T::PISTON_DRAG
+    }
+    fn piston_drag_n(&self, effects: &Effects, t_s: f64, v_mps: f64, supply_bar: f64) -> f64 {
+        T::get(effects).map_or(0.0, |e| e.piston_drag_n(t_s, v_mps, supply_bar))
     }
 }
 
@@ -169,6 +191,34 @@ catalogue! {
     pressure_gain_error: PressureGainError,
 }
 
+/// The piston-drag forces of the active effects ([`Effect::piston_drag_n`]);
+/// empty (and free) when none is on.
+#[derive(Clone)]
+pub struct PistonDrags {
+    on: Vec<&'static dyn EffectEntry>,
+    effects: Effects,
+}
+
+impl PistonDrags {
+    /// Their sum, N (negative opposes forward motion).
+    pub fn force_n(&self, t_s: f64, v_mps: f64, supply_bar: f64) -> f64 {
+        self.on
+            .iter()
+            .map(|e| e.piston_drag_n(&self.effects, t_s, v_mps, supply_bar))
+            .sum()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.on.is_empty()
+    }
+}
+
+impl std::fmt::Debug for PistonDrags {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_list().entries(self.on.iter().map(|e| e.name())).finish()
+    }
+}
+
 /// The registry entry of effect `name`.
 pub fn entry(name: &str) -> Option<&'static dyn EffectEntry> {
     REGISTRY.iter().copied().find(|e| e.name() == name)
@@ -216,6 +266,18 @@ impl Effects {
 
     pub fn validate(&self) -> Result<(), ConfigError> {
         REGISTRY.iter().try_for_each(|e| e.validate(self))
+    }
+
+    /// The active effects with a piston-drag hook, for a plant to add up.
+    pub fn piston_drags(&self) -> PistonDrags {
+        PistonDrags {
+            on: REGISTRY
+                .iter()
+                .copied()
+                .filter(|e| e.has_piston_drag() && e.is_on(self))
+                .collect(),
+            effects: self.clone(),
+        }
     }
 
     /// The effects that act on the simulated solution (sensor effects removed).

@@ -1,0 +1,123 @@
+//! `cargo xtask ninth-effect`: the registry's promise, tested. A copy of the
+//! workspace gets the test effect of `xtask/fixtures/ninth-effect` the way
+//! docs/model.md's recipe says (its simulator file, its diagnosis file, one
+//! `catalogue!` line, one docs row) and nothing else; then the simulator's
+//! registry tests and the fixture's own test run there.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+const NAME: &str = "quadratic_drag";
+const TYPE: &str = "QuadraticDrag";
+
+fn write(path: &Path, text: &str) -> Result<(), String> {
+    if let Some(dir) = path.parent() {
+        std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    }
+    std::fs::write(path, text).map_err(|e| format!("{}: {e}", path.display()))
+}
+
+fn read(path: &Path) -> Result<String, String> {
+    std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))
+}
+
+/// The workspace's files (tracked and new, not ignored) copied to `to`; the
+/// firmware and the fuzz crate stay out (not workspace members).
+fn copy_workspace(root: &Path, to: &Path) -> Result<(), String> {
+    let out = Command::new("git")
+        .args(["ls-files", "-co", "--exclude-standard", "-z"])
+        .current_dir(root)
+        .output()
+        .map_err(|e| format!("git ls-files: {e}"))?;
+    if !out.status.success() {
+        return Err("git ls-files failed".into());
+    }
+    if to.exists() {
+        std::fs::remove_dir_all(to).map_err(|e| format!("{}: {e}", to.display()))?;
+    }
+    for file in out.stdout.split(|b| *b == 0).filter(|f| !f.is_empty()) {
+        let rel = String::from_utf8_lossy(file);
+        if rel.starts_with("firmware/") || rel.starts_with("fuzz/") {
+            continue;
+        }
+        let (src, dst) = (root.join(&*rel), to.join(&*rel));
+        if !src.is_file() {
+            continue; // deleted in the work tree
+        }
+        if let Some(dir) = dst.parent() {
+            std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+        }
+        std::fs::copy(&src, &dst).map_err(|e| format!("{}: {e}", src.display()))?;
+    }
+    Ok(())
+}
+
+/// Inserts `line` as the last entry of the `catalogue!` invocation.
+fn add_registry_line(mod_rs: &str, line: &str) -> Result<String, String> {
+    let start = mod_rs
+        .find("\ncatalogue! {")
+        .ok_or("no `catalogue! {` in effects/mod.rs")?;
+    let end = start + mod_rs[start..].find("\n}").ok_or("`catalogue!` does not close")?;
+    Ok(format!("{}\n    {line}{}", &mod_rs[..end], &mod_rs[end..]))
+}
+
+/// Appends `row` to the effect table of docs/model.md.
+fn add_docs_row(md: &str, row: &str) -> Result<String, String> {
+    let section = md
+        .find("## Effect catalogue")
+        .ok_or("no effect catalogue in docs/model.md")?;
+    let last_row = md[section..]
+        .lines()
+        .take_while(|l| !l.starts_with("### ") || l.is_empty())
+        .filter(|l| l.starts_with("| `"))
+        .last()
+        .ok_or("no rows in the effect table")?;
+    let at = section + md[section..].find(last_row).expect("found above") + last_row.len();
+    Ok(format!("{}\n{row}{}", &md[..at], &md[at..]))
+}
+
+pub fn run(root: &Path, totals: &mut (u64, u64)) -> Result<(), String> {
+    let fixtures = root.join("xtask/fixtures/ninth-effect");
+    let ws: PathBuf = root.join("target/ninth-effect/workspace");
+    copy_workspace(root, &ws)?;
+    write(
+        &ws.join(format!("host-tools/sim/src/effects/{NAME}.rs")),
+        &read(&fixtures.join("sim.rs"))?,
+    )?;
+    write(
+        &ws.join(format!("host-tools/src/diagnose/effects/{NAME}.rs")),
+        &read(&fixtures.join("diagnose.rs"))?,
+    )?;
+    write(
+        &ws.join(format!("host-tools/tests/{NAME}_ninth_effect.rs")),
+        &read(&fixtures.join("test.rs"))?,
+    )?;
+    let mod_rs = ws.join("host-tools/sim/src/effects/mod.rs");
+    write(
+        &mod_rs,
+        &add_registry_line(&read(&mod_rs)?, &format!("{NAME}: {TYPE},"))?,
+    )?;
+    let model_md = ws.join("docs/model.md");
+    write(
+        &model_md,
+        &add_docs_row(
+            &read(&model_md)?,
+            &format!("| `{NAME}` | `k_n_s2_per_m2` = 0.25 | `F = −k·v·abs(v)` (test effect) |"),
+        )?,
+    )?;
+    // The workspace's target directory: the dependencies are built already.
+    std::env::set_var("CARGO_TARGET_DIR", root.join("target"));
+    crate::cargo_test(&ws, &["test", "--release", "-p", "hammer-sim", "--lib"], totals)?;
+    crate::cargo_test(
+        &ws,
+        &[
+            "test",
+            "--release",
+            "-p",
+            "hammer-host",
+            "--test",
+            &format!("{NAME}_ninth_effect"),
+        ],
+        totals,
+    )
+}
