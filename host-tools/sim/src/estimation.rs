@@ -3,7 +3,7 @@
 //! estimate`, `report`, `diagnose`, the app's tests and the end-to-end tests
 //! all open traces through here.
 
-use hammer_estimator::{ChannelSpec, Config, CycleReport, Estimator, RawSample};
+use hammer_estimator::{Config, CycleReport, Estimator, RawSample};
 use hammer_trace::config::ConfigError;
 use std::path::Path;
 
@@ -33,34 +33,10 @@ pub fn estimator_config(
         rear: sensors.rear.calibration(),
         front: sensors.front.calibration(),
         accel: sensors.accel.calibration(),
-        rear_spec: ChannelSpec {
-            gain_rel: p.pressure_gain_uncertainty as f32,
-            offset: p.pressure_offset_uncertainty_pa as f32,
-        },
-        front_spec: ChannelSpec {
-            gain_rel: p.pressure_gain_uncertainty as f32,
-            offset: p.pressure_offset_uncertainty_pa as f32,
-        },
-        accel_spec: ChannelSpec {
-            gain_rel: p.accel_gain_uncertainty as f32,
-            offset: p.accel_offset_uncertainty_mps2 as f32,
-        },
-        impact_threshold_mps2: p.impact_threshold_mps2 as f32,
-        blank_before_s: p.blank_before_s as f32,
-        blank_after_s: p.blank_after_s as f32,
-        min_period_s: p.min_period_s as f32,
-        max_period_s: p.max_period_s as f32,
-        accel_zero_shift_tau_s: p.accel_zero_shift_tau_s as f32,
-        coverage_factor: p.coverage_factor as f32,
-        residual_correlation_factor: p.residual_correlation_factor as f32,
-        stuck_after_s: p.stuck_after_s as f32,
         supply_pressure_pa: supply_bar.map_or(f32::NAN, |b| (b * 1e5) as f32),
         ..Config::default()
     };
-    c.wear.budget_j = p.wear_budget_j as f32;
-    c.wear.baseline_cycles = p.baseline_cycles;
-    c.wear.cusum_k = p.cusum_k as f32;
-    c.wear.cusum_h = p.cusum_h as f32;
+    p.apply(&mut c);
     c.validate().map_err(in_user_terms)?;
     Ok(c)
 }
