@@ -90,10 +90,17 @@ pub enum ConfigCommand {
     Check { file: PathBuf },
 }
 
+/// `hammer estimate`'s output. Every format names a report field by the
+/// same unit-suffixed name (`friction_n`, `wear_index_j`, ...), from the one
+/// table of report fields (`hammer_types::FIELDS`; docs/trace-format.md).
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Format {
+    /// One JSON object per cycle: every field, `valid`, `flags` (an array of names).
     Jsonl,
+    /// One row per cycle: every field at full precision, `valid`, `flags`
+    /// (names joined by `|`, `-` when none): cycles.csv's columns after its host time.
     Csv,
+    /// The main fields (friction and energy ± their uncertainty) and a summary line.
     Table,
 }
 
