@@ -22,10 +22,6 @@ pub use geometry::Geometry;
 /// The canonical types the estimator produces and reads, defined once in
 /// `hammer-types` and shared with the wire, the firmware and the host.
 pub use hammer_types::{fields, ChannelCalibration, Codes, CycleReport, DeviceConfig, Flags, RawSample};
-/// `hammer_estimator::report::{CycleReport, Flags}`, as before the move.
-pub mod report {
-    pub use hammer_types::{CycleReport, Flags};
-}
 pub use wear::{WearState, WearStateError};
 
 use cycle::{CycleAcc, Derived};
