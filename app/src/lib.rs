@@ -1,6 +1,24 @@
 //! The hardware-independent monitoring app: sampling → estimator → telemetry,
 //! command handling and status, written against the small traits in
 //! [`board`]. The firmware binaries are thin board layers around it.
+//!
+//! Module map (data flows down the list):
+//! - [`board`]: the four traits a board implements (samples, link out, link in, clock);
+//! - [`tasks`]: the async tasks over those traits (sampling, link receive,
+//!   link transmit) and the [`Shared`] state between them;
+//! - [`monitor`]: the synchronous, sans-IO core: samples in, estimator,
+//!   reports, alarms, captures and wear persistence out; commands applied.
+//!
+//! How to add a board: implement the four traits of [`board`] over its
+//! peripherals in a firmware binary (`firmware/src/main.rs` is the reference
+//! board, `firmware/emulated/` the emulated one), spawn [`sampling`], [`link_rx`]
+//! and [`link_tx`] with one [`Shared`], and add it to `cargo xtask firmware`.
+//!
+//! How to add a wire message: append a variant to `hammer_wire`'s `HostMsg`
+//! or `DeviceMsg` (never reorder; see `docs/wire-protocol.md` for when to
+//! bump `PROTOCOL_VERSION`), add its golden bytes in `wire/tests`, handle it
+//! in [`Monitor::on_command`] or emit it from [`monitor`], and let the host's
+//! one client (`host-tools/src/client.rs`) name it in `command_kind`.
 #![no_std]
 #![forbid(unsafe_code)]
 #![allow(async_fn_in_trait)]

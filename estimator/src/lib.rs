@@ -12,7 +12,9 @@
 pub mod config;
 pub mod cycle;
 pub mod device;
+pub mod estimate;
 pub mod geometry;
+mod history;
 pub mod math;
 pub mod tare;
 pub mod wear;
@@ -25,6 +27,7 @@ pub use hammer_types::{fields, ChannelCalibration, Codes, CycleReport, DeviceCon
 pub use wear::{WearState, WearStateError};
 
 use cycle::{CycleAcc, Derived};
+use history::History;
 
 /// Longest pre-impact blanking in samples (the delay line's size).
 pub const MAX_PRE_BLANK: usize = 64;
@@ -81,13 +84,6 @@ pub const MAX_CONFIRM: usize = 8;
 /// A contact lasts tens of microseconds (≈ 75 µs for the paper's hammer);
 /// an accelerometer beyond the threshold for less than this is a spike.
 const MIN_SHOCK_S: f32 = 25e-6;
-/// Valid cycles kept for the neighbour check.
-const HISTORY: usize = 8;
-/// A cycle whose period or stroke leaves these bands around the recent
-/// median contradicts its neighbours (a supply change moves the period by
-/// ~25 % between 4 and 7 bar; a split or merged cycle by 50 % or more).
-const PERIOD_BAND: (f32, f32) = (0.6, 1.7);
-const STROKE_BAND: (f32, f32) = (0.7, 1.4);
 /// Pressure swing that says the hammer runs while no impact comes.
 const RUNNING_SWING_PA: f32 = 0.5e5;
 
@@ -103,49 +99,6 @@ pub struct Counters {
     pub stalls: u32,
     /// Accelerometer excursions too short to be a shock, held over.
     pub spikes: u32,
-}
-
-/// Recent valid cycles' periods and strokes, for the neighbour check.
-#[derive(Debug, Clone, Copy, Default)]
-struct History {
-    period_s: [f32; HISTORY],
-    stroke_m: [f32; HISTORY],
-    len: usize,
-    next: usize,
-}
-
-impl History {
-    fn push(&mut self, period_s: f32, stroke_m: f32) {
-        self.period_s[self.next] = period_s;
-        self.stroke_m[self.next] = stroke_m;
-        self.next = (self.next + 1) % HISTORY;
-        self.len = (self.len + 1).min(HISTORY);
-    }
-
-    fn median(values: &[f32; HISTORY], len: usize) -> f32 {
-        let mut v = [0.0f32; HISTORY];
-        v[..len].copy_from_slice(&values[..len]);
-        // Insertion sort of at most eight values.
-        for i in 1..len {
-            let mut j = i;
-            while j > 0 && v[j - 1] > v[j] {
-                v.swap(j - 1, j);
-                j -= 1;
-            }
-        }
-        v[len / 2]
-    }
-
-    /// True when the cycle contradicts the recent ones (needs four of them).
-    fn contradicts(&self, period_s: f32, stroke_m: f32) -> bool {
-        if self.len < 4 {
-            return false;
-        }
-        let p = Self::median(&self.period_s, self.len);
-        let x = Self::median(&self.stroke_m, self.len);
-        let out = |v: f32, m: f32, (lo, hi): (f32, f32)| !(v >= lo * m && v <= hi * m);
-        out(period_s, p, PERIOD_BAND) || out(stroke_m, x, STROKE_BAND)
-    }
 }
 
 pub struct Estimator {
@@ -608,7 +561,7 @@ impl Estimator {
         let start = self.cycle_start;
         let period_s = index.wrapping_sub(start) as f32 * self.d.dt;
         let tail = self.delay_len as u32;
-        let mut e = cycle::estimate(
+        let mut e = estimate::estimate(
             &self.acc,
             &self.cfg,
             &self.d,

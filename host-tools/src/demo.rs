@@ -15,6 +15,7 @@ use hammer_wire::{DeviceMsg, HostMsg, SampleBlock, BLOCK_SAMPLES};
 
 use crate::client::{write_frame, Client};
 use crate::emulator::{firmware_elf, qemu_available, Emulator};
+use hammer_sim::effects::CoulombFriction;
 use hammer_sim::simulate::simulate;
 use hammer_sim::SimConfig;
 
@@ -105,8 +106,11 @@ pub fn hammer_codes(args: &DemoArgs, seconds: f64) -> Result<Vec<RawSample>> {
     let mut cfg = SimConfig::nominal(args.supply_bar);
     cfg.solver.duration_s = seconds;
     cfg.seed = args.seed;
-    cfg.effects
-        .apply_spec(&format!("coulomb_friction:growth_per_s={}", args.wear_rate / 60.0))?;
+    // The paper's friction, growing at the demo's wear rate (per minute).
+    cfg.effects.coulomb_friction = Some(CoulombFriction {
+        growth_per_s: args.wear_rate / 60.0,
+        ..Default::default()
+    });
     for e in &args.effects {
         cfg.effects.apply_spec(e)?;
     }

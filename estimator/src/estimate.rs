@@ -1,0 +1,400 @@
+//! The estimate made from a closed cycle's running sums ([`crate::cycle`]).
+//!
+//! The method (docs/estimator.md):
+//! - force balance residual `r = m·a − (p1·A1 − p2·A2 + m·g·sinθ)`; in the
+//!   backhaul `r = +F_b`, in the stroke `r = −F_s` (the paper's
+//!   `F = s·(p1·A1 − p2·A2 − m·a)`), plus `m·o·e(t)` for the accelerometer's
+//!   zero shift, `e(t)` decaying from the impact with the sensor's time constant;
+//!   `F_b`, `F_s` and `o` are a least-squares fit;
+//! - velocity from the pressures, `v(t) = v_b + ∫(P ∓ F)/m dt`, its constant
+//!   fixed by the piston returning to the impact position (the displacement
+//!   over a cycle closes); the turning point is where `v` crosses zero;
+//! - impact velocity is `v` at the impact, i.e. the stroke integral from rest.
+
+use crate::config::Config;
+use crate::cycle::{CycleAcc, Derived, Sums, CLIPPED_DIP_BOUND_PA, VACUUM_GAUGE_PA};
+use crate::math;
+use crate::Flags;
+
+/// The numbers of one closed cycle before the wear bookkeeping.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Estimate {
+    pub friction_n: f32,
+    pub friction_stroke_n: f32,
+    pub friction_backhaul_n: f32,
+    pub u_friction_n: f32,
+    pub u_friction_stroke_n: f32,
+    pub u_friction_backhaul_n: f32,
+    pub v_impact_mps: f32,
+    pub v_impact_frictionless_mps: f32,
+    pub u_v_impact_mps: f32,
+    pub u_v_frictionless_mps: f32,
+    pub stroke_m: f32,
+    pub backhaul_m: f32,
+    pub zero_shift_mps2: f32,
+    pub friction_work_j: f32,
+    pub friction_work_stroke_j: f32,
+    pub flags: Flags,
+}
+
+/// Geometry of the cycle in time, relative to the first kept sample.
+#[derive(Debug, Clone, Copy)]
+struct Timing {
+    /// Impact onset to first kept sample.
+    d: f32,
+    /// Duration of the contact (the shock seen by the accelerometer).
+    contact: f32,
+    /// First to last kept sample.
+    t_end: f32,
+    /// Last kept sample to the next impact's onset.
+    gap: f32,
+}
+
+/// Kinematic totals that the closure uses; perturbed for sensitivities.
+#[derive(Debug, Clone, Copy)]
+struct Totals {
+    v: f32,
+    w: f32,
+    first_accel: f32,
+    last_accel: f32,
+}
+
+fn friction_integrals(m: f32, fs: f32, fb: f32, tr: f32, t: f32) -> (f32, f32) {
+    // f(t) = F_b/m·min(t, tr) − F_s/m·max(0, t − tr); returns (f(T), ∫_0^T f).
+    let tr = tr.clamp(0.0, t);
+    let f_t = (fb * tr - fs * (t - tr)) / m;
+    let int = (fb * (0.5 * tr * tr + tr * (t - tr)) - fs * 0.5 * (t - tr) * (t - tr)) / m;
+    (f_t, int)
+}
+
+/// Backhaul start velocity from the closure, and the impact velocity.
+fn kinematics(m: f32, tm: &Timing, tot: &Totals, fs: f32, fb: f32, tr: f32) -> (f32, f32) {
+    let (f_t, f_int) = friction_integrals(m, fs, fb, tr, tm.t_end);
+    let v_end_rel = tot.v + f_t;
+    let a_last = tot.last_accel - fs / m;
+    let a_first = tot.first_accel + fb / m;
+    // ∫ v over the cycle = 0. After the contact, through the blanking, the
+    // piston moves with v_b − a_b·(t_b − t); then the kept samples; then the
+    // tail before the next impact with v(T) + a·t.
+    let l = (tm.d - tm.contact).max(0.0);
+    let vb = -(-0.5 * a_first * l * l + tot.w + f_int + v_end_rel * tm.gap + 0.5 * a_last * tm.gap * tm.gap)
+        / (l + tm.t_end + tm.gap);
+    let v_imp = vb + v_end_rel + a_last * tm.gap;
+    (vb, v_imp)
+}
+
+struct Split {
+    back: Sums,
+    stroke: Sums,
+}
+
+fn split(acc: &CycleAcc, d: &Derived, tr: f32, guard: f32) -> Option<Split> {
+    let cps = &acc.cp;
+    // Last checkpoint before tr − guard, first after tr + guard.
+    let mut lo = None;
+    let mut hi = None;
+    for i in 0..cps.len() {
+        let t = CycleAcc::cp_time(d, i);
+        if t <= tr - guard {
+            lo = Some(i);
+        }
+        if hi.is_none() && t >= tr + guard {
+            hi = Some(i);
+        }
+    }
+    let back = cps[lo?];
+    let stroke = match hi {
+        Some(h) => acc.cur.minus(&cps[h]),
+        None => return None,
+    };
+    if back.n < 10.0 || stroke.n < 10.0 {
+        return None;
+    }
+    Some(Split { back, stroke })
+}
+
+/// Least-squares friction fit on a split: returns (F_b, F_s, o·m, var F_b, var F_s, cov, σ²).
+fn fit(sp: &Split, zero_shift: bool, kappa: f32) -> (f32, f32, f32, f32, f32, f32, f32) {
+    let b = &sp.back;
+    let s = &sp.stroke;
+    let (nb, ns) = (b.n, s.n);
+    let (mb, ms) = (b.r / nb, s.r / ns);
+    let (eb, es) = (b.e / nb, s.e / ns);
+    // Within-phase scatter of e and its covariance with r.
+    let dee = (b.ee - b.e * eb) + (s.ee - s.e * es);
+    let dre = (b.re - b.r * eb) + (s.re - s.r * es);
+    let use_e = zero_shift && dee > 1e-3;
+    let o = if use_e { dre / dee } else { 0.0 };
+    let fb = mb - eb * o;
+    let fs = -(ms - es * o);
+    let rss = (b.rr - b.r * mb) + (s.rr - s.r * ms) - if use_e { o * dre } else { 0.0 };
+    let p = if use_e { 3.0 } else { 2.0 };
+    let sigma2 = (rss.max(0.0) / (nb + ns - p).max(1.0)) * kappa * kappa;
+    let var_o = if use_e { sigma2 / dee } else { 0.0 };
+    let var_fb = sigma2 / nb + eb * eb * var_o;
+    let var_fs = sigma2 / ns + es * es * var_o;
+    let cov = -eb * es * var_o;
+    (fb, fs, o, var_fb, var_fs, cov, sigma2)
+}
+
+/// Closes the cycle: finds the turning point, fits the friction, integrates
+/// the stroke and propagates the uncertainties.
+#[allow(clippy::too_many_arguments)]
+pub fn estimate(
+    acc: &CycleAcc,
+    c: &Config,
+    d: &Derived,
+    blank_samples: u32,
+    contact_samples: u32,
+    tail_samples: u32,
+    friction_guess: f32,
+) -> Estimate {
+    let mut out = Estimate {
+        flags: acc.flags,
+        ..Default::default()
+    };
+    let n = acc.cur.n;
+    if n < 2.0 || acc.cp.len() < 4 {
+        out.flags.insert(Flags::NO_REVERSAL);
+        return out;
+    }
+    let m = d.m;
+    let tm = Timing {
+        d: (blank_samples as f32 + 0.5) * d.dt,
+        contact: contact_samples as f32 * d.dt,
+        t_end: (n - 1.0) * d.dt,
+        gap: (tail_samples as f32 + 0.5) * d.dt,
+    };
+    let tot = Totals {
+        v: acc.cur.v,
+        w: acc.cur.w,
+        first_accel: acc.first_force / m,
+        last_accel: acc.last_force / m,
+    };
+    let guard = 1.0e-3;
+    let zero_shift = d.q > 0.0;
+    let kappa = c.residual_correlation_factor;
+
+    // Fixed-point iteration: friction → turning point → friction.
+    let (mut fs, mut fb) = (friction_guess, friction_guess);
+    let mut tr = 0.5 * tm.t_end;
+    let mut result = None;
+    for _ in 0..4 {
+        let (vb, _) = kinematics(m, &tm, &tot, fs, fb, tr);
+        let Some(t_new) = turning_point(acc, d, &tm, vb, fs, fb, tr) else {
+            out.flags.insert(Flags::NO_REVERSAL);
+            return out;
+        };
+        tr = t_new;
+        let Some(sp) = split(acc, d, tr, guard) else {
+            out.flags.insert(Flags::NO_REVERSAL);
+            return out;
+        };
+        let f = fit(&sp, zero_shift, kappa);
+        fb = f.0;
+        fs = f.1;
+        result = Some((sp, f));
+    }
+    let Some((sp, (_, _, o, var_fb, var_fs, cov, sigma2))) = result else {
+        out.flags.insert(Flags::NO_REVERSAL);
+        return out;
+    };
+    let (nb, ns) = (sp.back.n, sp.stroke.n);
+    let (wb, ws) = (nb / (nb + ns), ns / (nb + ns));
+    let friction = wb * fb + ws * fs;
+
+    // Systematic sensitivities of (F_b, F_s) to each calibration error.
+    let mean = |x: f32, k: f32| x / k;
+    let (p1b, p1s) = (mean(sp.back.p1, nb), mean(sp.stroke.p1, ns));
+    let (p2b, p2s) = (mean(sp.back.p2, nb), mean(sp.stroke.p2, ns));
+    let force_b = d.a1 * p1b - d.a2 * p2b + d.fg;
+    let force_s = d.a1 * p1s - d.a2 * p2s + d.fg;
+    let ab = (mean(sp.back.r, nb) + force_b) / m;
+    let as_ = (mean(sp.stroke.r, ns) + force_s) / m;
+    // (source standard uncertainty, ∂F_b, ∂F_s, ∂V_T, ∂W_T)
+    let t_end = tm.t_end;
+    // ∫A·p/m dt ≈ (A/m)·dt·Σp and ∫∫ ≈ (A/m)·dt²·(J·Σp − Σ j·p), J the last index.
+    let last = n - 1.0;
+    let (v1, w1) = (
+        d.a1 / m * d.dt * acc.cur.p1,
+        d.a1 / m * d.dt * d.dt * (last * acc.cur.p1 - acc.jp1),
+    );
+    let (v2, w2) = (
+        d.a2 / m * d.dt * acc.cur.p2,
+        d.a2 / m * d.dt * d.dt * (last * acc.cur.p2 - acc.jp2),
+    );
+    // A transducer that starts at 0 gauge clips a vented chamber's dip below
+    // atmosphere: those samples read high by up to the dip's depth. Carried
+    // as an offset uncertainty over the cycle, in proportion to the samples
+    // at the bottom rail (none with the default vacuum-reaching ranges).
+    let clip_u = |cal: &crate::config::ChannelCal, rail: u32| {
+        if rail == 0 || cal.value(0) <= VACUUM_GAUGE_PA {
+            0.0
+        } else {
+            CLIPPED_DIP_BOUND_PA * (rail as f32 / n) / math::sqrt(3.0)
+        }
+    };
+    let (clip_rear, clip_front) = (clip_u(&c.rear, acc.rail[0]), clip_u(&c.front, acc.rail[1]));
+    let sources: [(f32, f32, f32, f32, f32); 8] = [
+        (c.rear_spec.gain_rel, -d.a1 * p1b, d.a1 * p1s, v1, w1),
+        (c.front_spec.gain_rel, d.a2 * p2b, -d.a2 * p2s, -v2, -w2),
+        (c.accel_spec.gain_rel, m * ab, -m * as_, 0.0, 0.0),
+        (
+            c.rear_spec.offset,
+            -d.a1,
+            d.a1,
+            d.a1 * t_end / m,
+            d.a1 * 0.5 * t_end * t_end / m,
+        ),
+        (
+            c.front_spec.offset,
+            d.a2,
+            -d.a2,
+            -d.a2 * t_end / m,
+            -d.a2 * 0.5 * t_end * t_end / m,
+        ),
+        (c.accel_spec.offset, m, -m, 0.0, 0.0),
+        (clip_rear, -d.a1, d.a1, d.a1 * t_end / m, d.a1 * 0.5 * t_end * t_end / m),
+        (
+            clip_front,
+            d.a2,
+            -d.a2,
+            -d.a2 * t_end / m,
+            -d.a2 * 0.5 * t_end * t_end / m,
+        ),
+    ];
+
+    // The impact velocity and its sensitivities (by linearity, one closure each).
+    let (vb, v_imp) = kinematics(m, &tm, &tot, fs, fb, tr);
+    let stroke_time = (tm.t_end + tm.gap - tr).max(0.0);
+    let v_free = v_imp + fs * stroke_time / m;
+    let vimp_of = |dv: f32, dw: f32, dfs: f32, dfb: f32| {
+        let t2 = Totals {
+            v: tot.v + dv,
+            w: tot.w + dw,
+            ..tot
+        };
+        let (_, vi) = kinematics(m, &tm, &t2, fs + dfs, fb + dfb, tr);
+        (vi, vi + (fs + dfs) * stroke_time / m)
+    };
+    let (mut sys_f, mut sys_fb, mut sys_fs, mut sys_v, mut sys_v0) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    for (u, dfb, dfs, dv, dw) in sources {
+        let df = wb * dfb + ws * dfs;
+        sys_f += (u * df) * (u * df);
+        sys_fb += (u * dfb) * (u * dfb);
+        sys_fs += (u * dfs) * (u * dfs);
+        let (vi, v0) = vimp_of(u * dv, u * dw, u * dfs, u * dfb);
+        sys_v += (vi - v_imp) * (vi - v_imp);
+        sys_v0 += (v0 - v_free) * (v0 - v_free);
+    }
+    // Random part: the fit's covariance, propagated to the impact velocity.
+    let var_f = wb * wb * var_fb + ws * ws * var_fs + 2.0 * wb * ws * cov;
+    let (dv_dfs, dv0_dfs) = {
+        let (vi, v0) = vimp_of(0.0, 0.0, 1.0, 0.0);
+        (vi - v_imp, v0 - v_free)
+    };
+    let (dv_dfb, dv0_dfb) = {
+        let (vi, v0) = vimp_of(0.0, 0.0, 0.0, 1.0);
+        (vi - v_imp, v0 - v_free)
+    };
+    // Noise integrated into V and W (a random walk: n·(1 + 1/3) steps of
+    // σ·dt/m, with the residual σ as a conservative bound of the force noise),
+    // and the impact instant known to ±½ sample.
+    let step = d.dt / m;
+    let a_last = tot.last_accel - fs / m;
+    let var_walk = sigma2 * step * step * n * (4.0 / 3.0) + (a_last * d.dt) * (a_last * d.dt) / 12.0;
+    let var_v = dv_dfs * dv_dfs * var_fs + dv_dfb * dv_dfb * var_fb + 2.0 * dv_dfs * dv_dfb * cov + var_walk;
+    let var_v0 = dv0_dfs * dv0_dfs * var_fs + dv0_dfb * dv0_dfb * var_fb + 2.0 * dv0_dfs * dv0_dfb * cov + var_walk;
+
+    let k = c.coverage_factor;
+    out.friction_n = friction;
+    out.friction_backhaul_n = fb;
+    out.friction_stroke_n = fs;
+    out.u_friction_n = k * math::sqrt(var_f.max(0.0) + sys_f);
+    out.u_friction_backhaul_n = k * math::sqrt(var_fb.max(0.0) + sys_fb);
+    out.u_friction_stroke_n = k * math::sqrt(var_fs.max(0.0) + sys_fs);
+    out.v_impact_mps = v_imp;
+    out.v_impact_frictionless_mps = v_free;
+    out.u_v_impact_mps = k * math::sqrt(var_v.max(0.0) + sys_v);
+    out.u_v_frictionless_mps = k * math::sqrt(var_v0.max(0.0) + sys_v0);
+    out.zero_shift_mps2 = o / m;
+
+    // Distances: stroke from the turning point to the impact, backhaul from the impact to the turning point.
+    let w_tr = interp_w(acc, d, tr);
+    let (_, f_int_tr) = friction_integrals(m, fs, fb, tr, tr);
+    let (_, f_int_t) = friction_integrals(m, fs, fb, tr, tm.t_end);
+    let l = (tm.d - tm.contact).max(0.0);
+    let x_back = -(vb * tr + w_tr + f_int_tr) - (vb * l - 0.5 * (tot.first_accel + fb / m) * l * l); // positive
+    let (f_t, _) = friction_integrals(m, fs, fb, tr, tm.t_end);
+    let x_stroke = (tot.w - w_tr) + vb * (tm.t_end - tr) + (f_int_t - f_int_tr) + (vb + tot.v + f_t) * tm.gap;
+    out.stroke_m = x_stroke;
+    out.backhaul_m = x_back;
+    out.friction_work_stroke_j = fs * x_stroke;
+    out.friction_work_j = fs * x_stroke + fb * x_back;
+
+    // Plausibility and warnings.
+    let peak_force = d.a1 * acc.peak_p1.max(0.0) + d.a2 * acc.peak_p2.max(0.0);
+    let u_f = out.u_friction_n;
+    if !(x_stroke > 0.002 && x_stroke < 1.0)
+        || !(v_imp > 0.0)
+        || friction < -u_f - 1.0
+        || friction > 0.5 * peak_force + 1.0
+        || !math::is_finite(friction)
+    {
+        out.flags.insert(Flags::IMPLAUSIBLE);
+    }
+    let u_o = k * math::sqrt(var_fb.max(0.0)) / m; // scale of the fit's resolution
+    if zero_shift && math::abs(out.zero_shift_mps2) > (3.0 * u_o).max(1.0) {
+        out.flags.insert(Flags::ACCEL_ZERO_SHIFT);
+    }
+    let u_diff = math::sqrt(
+        out.u_friction_backhaul_n * out.u_friction_backhaul_n + out.u_friction_stroke_n * out.u_friction_stroke_n,
+    );
+    if math::abs(fb - fs) > u_diff {
+        out.flags.insert(Flags::PHASE_MISMATCH);
+    }
+    out
+}
+
+/// The last upward zero crossing of v(t) = v_b + V(t) + f(t), searched on the checkpoints.
+fn turning_point(acc: &CycleAcc, d: &Derived, tm: &Timing, vb: f32, fs: f32, fb: f32, tr_f: f32) -> Option<f32> {
+    let v_at = |t: f32, v_rel: f32| {
+        let (f, _) = friction_integrals(d.m, fs, fb, tr_f, t);
+        vb + v_rel + f
+    };
+    let mut prev_t = 0.0;
+    let mut prev_v = vb;
+    let mut found = None;
+    let cps = &acc.cp;
+    for i in 0..=cps.len() {
+        let (t, v) = if i < cps.len() {
+            let t = CycleAcc::cp_time(d, i);
+            (t, v_at(t, cps[i].v))
+        } else {
+            (tm.t_end, v_at(tm.t_end, acc.cur.v))
+        };
+        if prev_v < 0.0 && v >= 0.0 {
+            let frac = -prev_v / (v - prev_v);
+            found = Some(prev_t + frac * (t - prev_t));
+        }
+        prev_t = t;
+        prev_v = v;
+    }
+    found
+}
+
+/// W(t) between checkpoints, linearly.
+fn interp_w(acc: &CycleAcc, d: &Derived, t: f32) -> f32 {
+    let mut prev_t = 0.0;
+    let mut prev_w = 0.0;
+    for (i, cp) in acc.cp.iter().enumerate() {
+        let ti = CycleAcc::cp_time(d, i);
+        if ti >= t {
+            let frac = if ti > prev_t { (t - prev_t) / (ti - prev_t) } else { 0.0 };
+            return prev_w + frac * (cp.w - prev_w);
+        }
+        prev_t = ti;
+        prev_w = cp.w;
+    }
+    acc.cur.w
+}

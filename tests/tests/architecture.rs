@@ -1,0 +1,193 @@
+//! The architecture's rules, checked on the source tree (issue 11):
+//! - outside tests, docs and the effect's own files, no source names an
+//!   effect as a string literal (everything goes through the registry);
+//! - no function of the diagnosis longer than 120 lines, and no source file
+//!   longer than 700 lines of code (its test module excluded);
+//! - the wire crate does not depend on the estimator; the app's tests do not
+//!   pull in the host's terminal, plotting or serial-port crates.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use hammer_sim::effects::EFFECT_NAMES;
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap().to_path_buf()
+}
+
+/// Every `.rs` file of the workspace's crates and the firmware, outside
+/// `tests/` folders, benches, examples and build output.
+fn sources() -> Vec<PathBuf> {
+    fn walk(dir: &Path, out: &mut Vec<PathBuf>) {
+        let Ok(entries) = std::fs::read_dir(dir) else { return };
+        for e in entries.flatten() {
+            let p = e.path();
+            let name = e.file_name().to_string_lossy().to_string();
+            if p.is_dir() {
+                if !matches!(
+                    name.as_str(),
+                    "target" | "tests" | "benches" | "examples" | "fixtures" | ".git" | "fuzz"
+                ) {
+                    walk(&p, out);
+                }
+            } else if name.ends_with(".rs") {
+                out.push(p);
+            }
+        }
+    }
+    let mut out = Vec::new();
+    for top in ["types", "estimator", "wire", "app", "host-tools", "firmware", "xtask"] {
+        walk(&root().join(top), &mut out);
+    }
+    assert!(out.len() > 50, "found {} sources", out.len());
+    out
+}
+
+/// The code of a file: what comes before its `#[cfg(test)]` module.
+fn code(path: &Path) -> String {
+    let text = std::fs::read_to_string(path).unwrap();
+    match text.find("\n#[cfg(test)]") {
+        Some(at) => text[..at].to_string(),
+        None => text,
+    }
+}
+
+fn rel(path: &Path) -> String {
+    path.strip_prefix(root()).unwrap().display().to_string()
+}
+
+#[test]
+fn no_source_names_an_effect_outside_its_own_files() {
+    let mut found = vec![];
+    // The crates below the simulator cannot know the catalogue (the
+    // estimator's `accel_zero_shift` is its flag's name, not the effect's).
+    for path in sources().into_iter().filter(|p| {
+        let r = rel(p);
+        r.starts_with("host-tools") || r.starts_with("xtask")
+    }) {
+        let stem = path.file_stem().unwrap().to_string_lossy().to_string();
+        let in_effects = path.parent().is_some_and(|d| d.ends_with("effects"));
+        let text = code(&path);
+        for name in EFFECT_NAMES {
+            if in_effects && stem == name {
+                continue;
+            }
+            if text.contains(&format!("\"{name}\"")) || text.contains(&format!("\"{name}:")) {
+                found.push(format!("{}: \"{name}\"", rel(&path)));
+            }
+        }
+    }
+    assert!(
+        found.is_empty(),
+        "effect names as string literals:\n{}",
+        found.join("\n")
+    );
+}
+
+/// (length in lines, name) of every `fn` in `text`, by rustfmt's layout: a
+/// function ends at the first `}` line at its own indentation.
+fn functions(text: &str) -> Vec<(usize, String)> {
+    let lines: Vec<&str> = text.lines().collect();
+    let mut out = vec![];
+    for (i, l) in lines.iter().enumerate() {
+        let t = l.trim_start();
+        let indent = l.len() - t.len();
+        let after_vis = t
+            .strip_prefix("pub ")
+            .or_else(|| t.strip_prefix("pub(crate) "))
+            .or_else(|| t.strip_prefix("pub(super) "))
+            .or_else(|| t.strip_prefix("pub(in crate::diagnose) "))
+            .unwrap_or(t);
+        let Some(sig) = after_vis.strip_prefix("fn ") else {
+            continue;
+        };
+        if l.trim_end().ends_with(';') {
+            continue; // a trait's declaration
+        }
+        let name: String = sig.chars().take_while(|c| c.is_alphanumeric() || *c == '_').collect();
+        let close = format!("{}}}", " ".repeat(indent));
+        if t.contains('{') && t.trim_end().ends_with('}') {
+            out.push((1, name));
+            continue;
+        }
+        let end = lines[i..]
+            .iter()
+            .position(|x| x.trim_end() == close)
+            .map_or(lines.len(), |k| i + k);
+        out.push((end - i + 1, name));
+    }
+    out
+}
+
+#[test]
+fn the_diagnosis_has_no_function_over_120_lines_and_no_file_over_700() {
+    let mut long = vec![];
+    for path in sources() {
+        let text = code(&path);
+        let n = text.lines().count();
+        if n > 700 {
+            long.push(format!("{}: {n} lines", rel(&path)));
+        }
+        if rel(&path).starts_with("host-tools/src/diagnose") {
+            for (len, name) in functions(&text) {
+                if len > 120 {
+                    long.push(format!("{}: fn {name} has {len} lines", rel(&path)));
+                }
+            }
+        }
+    }
+    assert!(long.is_empty(), "too long:\n{}", long.join("\n"));
+}
+
+#[test]
+fn the_function_measure_counts_what_rustfmt_wrote() {
+    let text = "fn a() {\n    x;\n}\n    fn c() -> u8 { 1 }\n\npub fn b(\n    y: u8,\n) -> u8 {\n    if y > 0 {\n        1\n    } else {\n        2\n    }\n}\n";
+    assert_eq!(
+        functions(text),
+        vec![(3, "a".to_string()), (1, "c".to_string()), (9, "b".to_string())]
+    );
+}
+
+/// The packages a package depends on (normal edges, plus dev edges if asked), by name.
+fn dependencies(package: &str, dev: bool) -> Vec<String> {
+    let edges = if dev { "normal,dev" } else { "normal" };
+    let out = Command::new(env!("CARGO"))
+        .args([
+            "tree",
+            "--offline",
+            "-p",
+            package,
+            "-e",
+            edges,
+            "--prefix",
+            "none",
+            "--format",
+            "{p}",
+        ])
+        .current_dir(root())
+        .output()
+        .expect("cargo tree runs");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .filter_map(|l| l.split_whitespace().next().map(String::from))
+        .collect()
+}
+
+#[test]
+fn the_wire_stands_apart_from_the_estimator_and_the_app_from_the_host() {
+    let wire = dependencies("hammer-wire", false);
+    assert!(wire.iter().any(|d| d == "postcard"), "{wire:?}");
+    assert!(
+        !wire.iter().any(|d| d == "hammer-estimator"),
+        "hammer-wire depends on the estimator: {wire:?}"
+    );
+    let app = dependencies("hammer-app", true);
+    assert!(app.iter().any(|d| d == "hammer-sim"), "{app:?}");
+    for host_only in ["ratatui", "plotters", "serialport", "hammer-host"] {
+        assert!(
+            !app.iter().any(|d| d == host_only),
+            "hammer-app's tests pull in {host_only}"
+        );
+    }
+}
