@@ -70,6 +70,16 @@ pub fn signed(x: f64, prec: usize) -> String {
     }
 }
 
+/// A parameter value short enough for a figure's title: four decimals at
+/// most, scientific outside 10⁻³ to 10⁵.
+pub fn compact(x: f64) -> String {
+    if x != 0.0 && !(1e-3..1e5).contains(&x.abs()) {
+        format!("{x:.3e}")
+    } else {
+        format!("{}", (x * 1e4).round() / 1e4)
+    }
+}
+
 /// A count out of a total with its share: `7/8 (88 %)`; `-` of none.
 pub fn fraction((n, of): (usize, usize)) -> String {
     if of == 0 {
@@ -101,6 +111,9 @@ mod tests {
         assert_eq!(fixed(f64::INFINITY, 2), MISSING_HTML);
         assert_eq!(signed(-0.0004, 3), "+0.000");
         assert_eq!(signed(-0.24, 1), "-0.2");
+        assert_eq!(compact(2.14159), "2.1416");
+        assert_eq!(compact(1e-5), "1.000e-5");
+        assert_eq!(compact(0.0), "0");
         assert_eq!(fraction((7, 8)), "7/8 (88 %)");
         assert_eq!(fraction((0, 0)), "-");
     }

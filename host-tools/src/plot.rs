@@ -7,6 +7,7 @@ use anyhow::{anyhow, Context, Result};
 
 use crate::chart::render::figure_png;
 use crate::chart::{Chart, Series, EFFECT, NOMINAL};
+use crate::numfmt::compact;
 use hammer_sim::simulate::{simulate, Simulation};
 use hammer_sim::{SimConfig, EFFECT_NAMES};
 
@@ -118,8 +119,7 @@ pub fn effect_params_text(effects: &hammer_sim::Effects, name: &str) -> Result<S
     Ok(obj
         .iter()
         .map(|(k, v)| match v.as_f64() {
-            Some(x) if x != 0.0 && !(1e-3..1e5).contains(&x.abs()) => format!("{k}={x:.3e}"),
-            Some(x) => format!("{k}={}", (x * 1e4).round() / 1e4),
+            Some(x) => format!("{k}={}", compact(x)),
             None => format!("{k}={v}"),
         })
         .collect::<Vec<_>>()

@@ -246,15 +246,19 @@ fn split_valid(reports: &[CycleReport], f: impl Fn(&CycleReport) -> f32) -> (Vec
     )
 }
 
+/// A line of a run panel: its label, color, value and expanded uncertainty.
+type RunLine<'l> = (
+    &'l str,
+    RGBColor,
+    fn(&CycleReport) -> f32,
+    Option<fn(&CycleReport) -> f32>,
+);
+/// A truth line of the truth figure: its label and value.
+type TruthLine = (&'static str, fn(&CycleTruth) -> f64);
+
 /// A run panel: the valid values as a line, their uncertainty as a band, the
 /// flagged ones as crosses.
-fn run_chart<'a>(
-    reports: &[CycleReport],
-    k: f32,
-    x: &'a [f64],
-    y_label: &str,
-    lines: &[(&str, RGBColor, fn(&CycleReport) -> f32, Option<fn(&CycleReport) -> f32>)],
-) -> Chart<'a> {
+fn run_chart<'a>(reports: &[CycleReport], k: f32, x: &'a [f64], y_label: &str, lines: &[RunLine]) -> Chart<'a> {
     let mut chart = Chart::new(y_label, Vec::new());
     // Dots show the cycles while they can be told apart; beyond that they only thicken the line.
     chart.points = reports.len() <= MAX_DOTTED_CYCLES;
@@ -387,7 +391,7 @@ pub(super) fn truth_figure(a: &Analysis, matched: &[Matched], path: &Path) -> Re
         ),
     ];
     // Truth first, so the estimate is drawn over it.
-    let truths: [(&str, fn(&CycleTruth) -> f64); 3] = [
+    let truths: [TruthLine; 3] = [
         ("truth (cycle mean)", |t| t.friction_cycle_n),
         ("truth", |t| t.impact_energy_j),
         ("truth", |t| t.frequency_hz),

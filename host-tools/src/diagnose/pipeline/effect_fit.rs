@@ -213,6 +213,6 @@ mod tests {
         assert!(stroke(&st[BINS - 1]), "{st:?}");
         let first_stroke = st.iter().position(stroke).unwrap();
         assert!(st[first_stroke..].iter().all(stroke), "{st:?}");
-        assert!(st[..first_stroke].iter().any(|s| *s == Stage::BackhaulFed), "{st:?}");
+        assert!(st[..first_stroke].contains(&Stage::BackhaulFed), "{st:?}");
     }
 }

@@ -76,7 +76,7 @@ pub(crate) fn models(fs: &FitSet, bars: &[f64], verdict: Option<&EffectResult>, 
     };
     let nominal = Candidate::default();
     let recal_nominal = recalibrated(&nominal);
-    let recal_verdict = fitted_cand.as_ref().and_then(|c| recalibrated(c));
+    let recal_verdict = fitted_cand.as_ref().and_then(recalibrated);
     let (fitted_runner, fitted_runs) = match &fitted_cand {
         Some(c) => model_runs(&recal_verdict, c),
         None => (fs.runner.clone(), bars.iter().map(|_| None).collect()),
