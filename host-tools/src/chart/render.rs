@@ -16,7 +16,7 @@ static FONT: Once = Once::new();
 
 /// plotters draws text with ab_glyph; the font comes from the `dejavu` crate
 /// so figures render identically on a machine without system fonts.
-pub fn register_font() {
+fn register_font() {
     FONT.call_once(|| {
         let _ = plotters::style::register_font("sans-serif", FontStyle::Normal, dejavu::sans::regular());
     });
@@ -310,5 +310,3 @@ fn draw_marks(ctx: &mut Ctx, c: &Chart, (y0, y1): (f64, f64)) -> Result<()> {
     }
     Ok(())
 }
-
-// ---------------------------------------------------------------------------

@@ -10,8 +10,8 @@
 //! a cycle are correlated, so raw samples would overstate the evidence.
 //!
 //! This module is the pipeline's entry point and its public vocabulary
-//! (inputs, options, outcome); the stages live in [`super::pipeline`], the
-//! report's schema in [`super::report`], the statistics in [`super::fitset`].
+//! (inputs, options, outcome); the stages live in `pipeline`, the
+//! report's schema in [`super::report`], the statistics in `fitset`.
 
 use std::sync::atomic::{AtomicUsize, Ordering};
 

@@ -19,6 +19,7 @@ use hammer_trace::trace::Trace;
 /// times agree this closely (two samples at 100 kS/s).
 pub const MATCH_TOLERANCE_S: f64 = 20e-6;
 
+/// Means over the valid cycles: what the report's summary table shows.
 /// NaN where there is no valid cycle.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Summary {

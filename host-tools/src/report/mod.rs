@@ -6,9 +6,8 @@
 //! one cycle's signals with the stroke/backhaul split, the run's trends with
 //! their uncertainty, and, for a simulated trace, the estimate against the
 //! simulator's truth.
-
 //!
-//! Modules: [`analysis`] runs the estimator and sums it up (no drawing),
+//! Modules: `analysis` runs the estimator and sums it up (no drawing),
 //! `figures` draws the PNGs in the shared chart model, `html` writes the
 //! page; this module is the command's glue.
 
@@ -61,7 +60,6 @@ pub struct ReportArgs {
     pub config: Option<PathBuf>,
 }
 
-/// Means over the valid cycles: what the report's summary table shows.
 /// Writes the report of `args.input` into `args.out`; returns the files written
 /// (figures first, index.html last).
 pub fn run(args: &ReportArgs) -> Result<Vec<PathBuf>> {
@@ -87,7 +85,7 @@ fn progress_bar(stages: u64) -> ProgressBar {
 }
 
 /// Starts the next stage: the position counts the stages already done.
-pub(crate) fn stage(pb: &ProgressBar, msg: &'static str) {
+fn stage(pb: &ProgressBar, msg: &'static str) {
     if !pb.message().is_empty() {
         pb.inc(1);
     }

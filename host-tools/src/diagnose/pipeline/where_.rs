@@ -13,7 +13,6 @@ use crate::diagnose::effects::pressure_reading_factors;
 use crate::diagnose::engine::{MeasuredInput, Options, PointWaves};
 use crate::diagnose::gap::{breakdown, measured_cycles, normalized, template, CycleSignals, GapCell};
 use crate::diagnose::report::{Remainder, WhereCell};
-
 use hammer_sim::params::HammerParams;
 use hammer_sim::SimConfig;
 
