@@ -28,7 +28,7 @@
 //! - [`model`], `effects`, [`fit`]: the candidate models, the catalogue's
 //!   diagnosis hooks (start values, evidence) and the optimiser;
 //! - [`output`]: the report for people (Markdown, terminal, figures);
-//! - [`bench`], [`isolability`], [`command`]: proving it on generated data, and the CLI.
+//! - [`bench`](mod@bench), [`isolability`], [`command`]: proving it on generated data, and the CLI.
 
 pub mod bench;
 pub mod command;

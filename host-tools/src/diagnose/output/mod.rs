@@ -1,4 +1,4 @@
-//! The output of `hammer diagnose`: `report.json` (the [`Report`] as is),
+//! The output of `hammer diagnose`: `report.json` (the [`Report`](super::report::Report) as is),
 //! `report.md` (the same for people) and one figure per operating point,
 //! `gap-<bar>bar.png`: the measured mean cycle against the nominal and the
 //! fitted model, the gap between measurement and nominal model shaded.
@@ -6,7 +6,7 @@
 //! Units in the Markdown: pressures in bar, acceleration in m/s², velocity in
 //! m/s, times in ms, energies in J, frequencies in Hz.
 //!
-//! [`markdown`] writes the text (report.md and the terminal summary),
+//! [`markdown`](mod@markdown) writes the text (report.md and the terminal summary),
 //! [`figures`] the PNGs on the shared chart renderer; this module writes the files.
 
 pub mod figures;
