@@ -6,6 +6,7 @@ mod stdout;
 
 pub mod board;
 pub mod capture;
+pub mod chart;
 pub mod cli;
 pub mod client;
 pub mod demo;
@@ -13,5 +14,6 @@ pub mod diagnose;
 pub mod emulator;
 pub mod estimate;
 pub mod monitor;
+pub mod numfmt;
 pub mod plot;
 pub mod report;
