@@ -6,6 +6,7 @@ mod stdout;
 
 pub mod board;
 pub mod capture;
+pub mod chart;
 pub mod cli;
 pub mod client;
 pub mod demo;
@@ -13,6 +14,7 @@ pub mod diagnose;
 pub mod emulator;
 pub mod estimate;
 pub mod monitor;
+pub mod numfmt;
 pub mod plot;
 pub mod records;
 pub mod report;

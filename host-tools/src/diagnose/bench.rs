@@ -9,6 +9,7 @@ use serde::{Deserialize, Serialize};
 
 use super::effects::diagnosis;
 use super::engine::{diagnose, MeasuredInput, Options};
+use crate::numfmt::fraction;
 use hammer_sim::effects::{Effects, EFFECT_NAMES};
 use hammer_sim::sensor::Rng;
 use hammer_sim::simulate::simulate;
@@ -334,14 +335,6 @@ pub fn summarize(options: &BenchOptions, cases: Vec<CaseResult>) -> BenchSummary
     }
 }
 
-fn pct(x: (usize, usize)) -> String {
-    if x.1 == 0 {
-        "-".into()
-    } else {
-        format!("{}/{} ({:.0} %)", x.0, x.1, 100.0 * x.0 as f64 / x.1 as f64)
-    }
-}
-
 /// The benchmark's result as a text page.
 pub fn render(s: &BenchSummary) -> String {
     use std::fmt::Write as _;
@@ -398,19 +391,19 @@ pub fn render(s: &BenchSummary) -> String {
     let _ = writeln!(
         out,
         "\nsingle effect named right: {}   (target ≥ 95 %)",
-        pct(s.single_right)
+        fraction(s.single_right)
     );
     let _ = writeln!(
         out,
         "no-effect controls flagged: {}   (target ≤ 5 %)",
-        pct(s.none_flagged)
+        fraction(s.none_flagged)
     );
     let _ = writeln!(
         out,
         "pairs named right:          {}   (target ≥ 80 %)",
-        pct(s.pair_right)
+        fraction(s.pair_right)
     );
-    let _ = writeln!(out, "parameters within 10 %:     {}", pct(s.params_within_10pct));
+    let _ = writeln!(out, "parameters within 10 %:     {}", fraction(s.params_within_10pct));
     let _ = writeln!(out, "\nparameter error (named right)    median      max");
     for (k, m) in &s.median_param_error {
         let _ = writeln!(

@@ -1,5 +1,5 @@
 use super::{between, rel, Diagnosed};
-use crate::diagnose::engine::FitSet;
+use crate::diagnose::fitset::FitSet;
 use crate::diagnose::features::ZERO_SHIFT_SQ;
 use crate::diagnose::fit::ParamSpec;
 use crate::diagnose::model::ZERO_SHIFT_SQ_FACTOR;

@@ -10,8 +10,8 @@
 
 use std::marker::PhantomData;
 
-use super::engine::FitSet;
 use super::fit::ParamSpec;
+use super::fitset::FitSet;
 use hammer_sim::effects::{Effect, Effects, N_EFFECTS};
 use hammer_sim::sensor::Rng;
 

@@ -1,5 +1,5 @@
 use super::{between, rel, Diagnosed};
-use crate::diagnose::engine::FitSet;
+use crate::diagnose::fitset::FitSet;
 use crate::diagnose::features::{GAIN_FRONT, GAIN_REAR};
 use crate::diagnose::fit::ParamSpec;
 use hammer_sim::effects::PressureGainError;

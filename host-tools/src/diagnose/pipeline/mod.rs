@@ -1,0 +1,42 @@
+//! The diagnosis as a pipeline of named stages, each a function of the one
+//! before's result (see [`crate::diagnose`] for the map):
+//!
+//! 1. [`group`]: inputs → operating points, cycles split into fit and held out;
+//! 2. [`nominal`]: the nominal model at every point → the fit set;
+//! 3. [`rank`]: every effect fitted ([`effect_fit`]) and ranked → the verdict;
+//! 4. [`held_out`]: the verdict's model against the held-out data → the shrink;
+//! 5. [`where_`]: the gap and its remainder by signal × stage → where to look.
+//!
+//! [`crate::diagnose::engine::diagnose`] runs them in this order and
+//! assembles the report; a stage's unit test runs it alone.
+
+pub(crate) mod effect_fit;
+pub(crate) mod group;
+pub(crate) mod held_out;
+pub(crate) mod nominal;
+pub(crate) mod rank;
+pub(crate) mod where_;
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use crate::diagnose::engine::MeasuredInput;
+    use hammer_sim::simulate::simulate;
+    use hammer_sim::SimConfig;
+
+    /// A short simulated measurement of the nominal hammer at `bar`.
+    pub(crate) fn measured(bar: f64, fit: bool) -> MeasuredInput {
+        let mut c = SimConfig::nominal(bar);
+        c.solver.duration_s = 0.4;
+        c.seed = 3;
+        let sim = simulate(&c).unwrap();
+        MeasuredInput {
+            label: format!("nominal at {bar} bar"),
+            supply_bar: bar,
+            trace: sim.trace(),
+            fit,
+        }
+    }
+
+    /// A progress callback that reports nothing.
+    pub(crate) fn quiet(_: &str) {}
+}

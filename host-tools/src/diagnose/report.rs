@@ -1,0 +1,166 @@
+//! The diagnosis report: what `report.json` holds, field for field. The
+//! stages of the pipeline fill it; `output` renders it for people. Kept
+//! apart from the computation so a reader of the JSON finds its schema in
+//! one place, and a change of the schema shows in one file's diff.
+
+use std::collections::BTreeMap;
+
+use serde::{Deserialize, Serialize};
+
+use super::engine::Options;
+use super::model::Candidate;
+use super::stages::Stage;
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct InputInfo {
+    pub label: String,
+    pub supply_bar: f64,
+    pub cycles: usize,
+    /// Cycles dropped as start-up.
+    pub startup_cycles: usize,
+    pub fit_cycles: usize,
+    pub held_out_cycles: usize,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct WhereCell {
+    pub supply_bar: f64,
+    pub signal: String,
+    pub stage: Stage,
+    pub bias: f64,
+    pub rms: f64,
+    pub relative_rms: f64,
+    pub timing_shift_s: f64,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct FittedParam {
+    pub key: String,
+    pub value: f64,
+    pub sd: f64,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct EffectResult {
+    /// An effect of the catalogue, or two joined by `+`.
+    pub name: String,
+    /// In the catalogue's terms, ready for a config file.
+    pub params: serde_json::Value,
+    /// The free parameters as fitted, with their standard deviations.
+    pub fitted: Vec<FittedParam>,
+    pub chi2: f64,
+    /// BIC difference against the nominal model: higher explains more.
+    pub score: f64,
+    pub explained_fraction: f64,
+    pub evidence: Vec<String>,
+    pub simulations: usize,
+    #[serde(skip)]
+    pub candidate: Candidate,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Verdict {
+    /// Effect names, or `["none"]`.
+    pub effects: Vec<String>,
+    pub params: serde_json::Value,
+    /// The named model's score (the best single effect's when `none`).
+    pub score: f64,
+    pub reason: String,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct PointShrink {
+    pub supply_bar: f64,
+    pub held_out_point: bool,
+    pub cycles: usize,
+    pub impact_energy_measured_j: f64,
+    pub impact_energy_nominal_j: f64,
+    pub impact_energy_fitted_j: f64,
+    /// The nominal model with its uncertain parameters refitted, no effect.
+    pub impact_energy_recalibrated_j: f64,
+    pub frequency_measured_hz: f64,
+    pub frequency_nominal_hz: f64,
+    pub frequency_fitted_hz: f64,
+    /// RMS of the binned waveform residual per signal, nominal and fitted model.
+    pub rms_before: BTreeMap<String, f64>,
+    pub rms_after: BTreeMap<String, f64>,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Shrink {
+    /// Mean |simulated − measured| / measured over the held-out data, %.
+    pub impact_energy_error_before: f64,
+    pub impact_energy_error_after: f64,
+    pub frequency_error_before: f64,
+    pub frequency_error_after: f64,
+    /// The control: nominal parameters refitted within their prior, no effect added.
+    pub impact_energy_error_recalibrated_only: f64,
+    /// Supply pressures (bar) not used for fitting.
+    pub held_out_points: Vec<f64>,
+    /// What the figures above were computed on.
+    pub judged_on: String,
+    pub points: Vec<PointShrink>,
+}
+
+/// The model-form error of one group of model-based features: how much
+/// larger the recalibrated nominal model's residual is than the measurement
+/// noise and floors allow. The group's weights are divided by it, so a model
+/// whose valve or ports differ in form cannot make an effect out of that
+/// difference, and the model-free force balance keeps its full weight.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct ModelForm {
+    pub group: String,
+    /// RMS of the group's whitened residual (1 = within noise and floors).
+    pub factor: f64,
+}
+
+/// A nominal parameter the fit moved: its value and standard deviation
+/// after the fit, and how many prior standard deviations it moved.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Recalibration {
+    pub parameter: String,
+    pub nominal: f64,
+    pub value: f64,
+    pub sd: f64,
+    pub prior_sds: f64,
+    /// Moved beyond one prior standard deviation.
+    pub beyond_prior: bool,
+}
+
+/// What neither the named effects nor the recalibration explain, by
+/// signal × stage: where the model's form differs from the hammer's.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Remainder {
+    pub supply_bar: f64,
+    pub signal: String,
+    pub stage: Stage,
+    /// RMS of the residual after the verdict's model over the signal's RMS in that stage.
+    pub relative_rms: f64,
+    /// The same before (nominal model).
+    pub relative_rms_nominal: f64,
+    pub statement: String,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Report {
+    pub tool: String,
+    pub inputs: Vec<InputInfo>,
+    pub fit_points: Vec<f64>,
+    #[serde(rename = "where")]
+    pub where_: Vec<WhereCell>,
+    pub effects: Vec<EffectResult>,
+    pub pairs: Vec<EffectResult>,
+    pub verdict: Verdict,
+    /// The nominal parameters as the verdict's fit left them.
+    pub recalibration: Vec<Recalibration>,
+    /// The unexplained remainder, largest first.
+    pub remainder: Vec<Remainder>,
+    pub model_form: Vec<ModelForm>,
+    pub shrink: Shrink,
+    pub chi2_nominal: f64,
+    pub features_compared: usize,
+    pub fit_cycles: usize,
+    pub options: Options,
+    pub simulations: usize,
+    pub elapsed_s: f64,
+}

@@ -1,0 +1,120 @@
+//! Numbers for people: the formatting rules of the reports in one place
+//! (`hammer report`'s page, `hammer diagnose`'s Markdown and terminal
+//! summary, `hammer diagnose-bench`'s text).
+//!
+//! Two dialects are kept as they were, since their outputs are pinned by the
+//! documentation's examples: the diagnosis writes significant digits and an
+//! en dash for a missing number; the report page writes fixed decimals,
+//! chosen per quantity, and an em dash.
+
+/// A missing number in the diagnosis' Markdown and terminal text.
+pub const MISSING: &str = "–";
+/// A missing number on the report's HTML page.
+pub const MISSING_HTML: &str = "—";
+
+/// Three significant digits, plain notation where it reads well (10⁻³ to
+/// 10⁵), else scientific; [`MISSING`] when not finite.
+pub fn sig3(x: f64) -> String {
+    if !x.is_finite() {
+        return MISSING.into();
+    }
+    let a = x.abs();
+    if a == 0.0 {
+        "0".into()
+    } else if !(1e-3..1e5).contains(&a) {
+        format!("{x:.2e}")
+    } else {
+        let decimals = (2.0 - a.log10().floor()).max(0.0) as usize;
+        format!("{x:.decimals$}")
+    }
+}
+
+/// A percentage (`x` already in %): one decimal, two below 1 %; [`MISSING`] when not finite.
+pub fn pct(x: f64) -> String {
+    if !x.is_finite() {
+        MISSING.into()
+    } else if x != 0.0 && x.abs() < 1.0 {
+        format!("{x:.2}")
+    } else {
+        format!("{x:.1}")
+    }
+}
+
+/// A supply pressure without trailing zeros: `4`, `5.5`, `6.25`; `unknown` when not finite.
+pub fn bar(bar: f64) -> String {
+    if !bar.is_finite() {
+        return "unknown".into();
+    }
+    let r = (bar * 100.0).round() / 100.0;
+    // `-0` would print as "-0".
+    format!("{}", if r == 0.0 { 0.0 } else { r })
+}
+
+/// `x` with `prec` decimals, or [`MISSING_HTML`] where there is no number.
+pub fn fixed(x: f64, prec: usize) -> String {
+    if x.is_finite() {
+        format!("{x:.prec$}")
+    } else {
+        MISSING_HTML.into()
+    }
+}
+
+/// Signed, for errors; a value that rounds to zero shows as +0, not −0.
+pub fn signed(x: f64, prec: usize) -> String {
+    let scale = 10f64.powi(prec as i32);
+    let x = (x * scale).round() / scale + 0.0;
+    if x.is_finite() {
+        format!("{x:+.prec$}")
+    } else {
+        MISSING_HTML.into()
+    }
+}
+
+/// A parameter value short enough for a figure's title: four decimals at
+/// most, scientific outside 10⁻³ to 10⁵.
+pub fn compact(x: f64) -> String {
+    if x != 0.0 && !(1e-3..1e5).contains(&x.abs()) {
+        format!("{x:.3e}")
+    } else {
+        format!("{}", (x * 1e4).round() / 1e4)
+    }
+}
+
+/// A count out of a total with its share: `7/8 (88 %)`; `-` of none.
+pub fn fraction((n, of): (usize, usize)) -> String {
+    if of == 0 {
+        "-".into()
+    } else {
+        format!("{}/{} ({:.0} %)", n, of, 100.0 * n as f64 / of as f64)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn numbers_read_well() {
+        assert_eq!(bar(4.0), "4");
+        assert_eq!(bar(5.5), "5.5");
+        assert_eq!(bar(6.25), "6.25");
+        assert_eq!(bar(-0.001), "0");
+        assert_eq!(sig3(0.0), "0");
+        assert_eq!(sig3(123.456), "123");
+        assert_eq!(sig3(0.012345), "0.0123");
+        assert_eq!(sig3(-2.345), "-2.35");
+        assert_eq!(sig3(123456.0), "1.23e5");
+        assert_eq!(sig3(f64::NAN), MISSING);
+        assert_eq!(pct(0.5), "0.50");
+        assert_eq!(pct(12.34), "12.3");
+        assert_eq!(fixed(1.23456, 2), "1.23");
+        assert_eq!(fixed(f64::INFINITY, 2), MISSING_HTML);
+        assert_eq!(signed(-0.0004, 3), "+0.000");
+        assert_eq!(signed(-0.24, 1), "-0.2");
+        assert_eq!(compact(2.14159), "2.1416");
+        assert_eq!(compact(1e-5), "1.000e-5");
+        assert_eq!(compact(0.0), "0");
+        assert_eq!(fraction((7, 8)), "7/8 (88 %)");
+        assert_eq!(fraction((0, 0)), "-");
+    }
+}
