@@ -17,6 +17,7 @@ use ratatui::Frame;
 
 use super::app::{App, View};
 use super::event::{board_name, clock, firmware_version, flag_list, Event, Severity, Stamped};
+use super::text::{ago, bytes, coarse, duration, num, si_count};
 use super::UiOptions;
 use crate::records::{shown, unit};
 
@@ -26,77 +27,6 @@ const TICK: Duration = Duration::from_millis(250);
 const MIN_FRAME: Duration = Duration::from_millis(50);
 /// Events taken from the queue between two looks at the keyboard.
 const DRAIN_MAX: usize = 5_000;
-
-/// `v ± u` with `d` decimals; `n/a` for what the device could not estimate.
-pub fn pm(v: f32, u: f32, d: usize) -> String {
-    if !v.is_finite() {
-        return "n/a".into();
-    }
-    if !u.is_finite() {
-        return format!("{v:.d$} ± n/a");
-    }
-    format!("{v:.d$} ± {u:.d$}")
-}
-
-pub fn num(v: f64, d: usize) -> String {
-    if v.is_finite() {
-        format!("{v:.d$}")
-    } else {
-        "n/a".into()
-    }
-}
-
-fn si_count(v: f64) -> String {
-    if !v.is_finite() {
-        return "n/a".into();
-    }
-    let a = v.abs();
-    if a >= 1e9 {
-        format!("{:.2} G", v / 1e9)
-    } else if a >= 1e6 {
-        format!("{:.2} M", v / 1e6)
-    } else if a >= 1e4 {
-        format!("{:.1} k", v / 1e3)
-    } else {
-        format!("{v:.0} ")
-    }
-}
-
-fn bytes(n: u64) -> String {
-    match n {
-        n if n >= 1 << 30 => format!("{:.2} GiB", n as f64 / (1u64 << 30) as f64),
-        n if n >= 1 << 20 => format!("{:.2} MiB", n as f64 / (1u64 << 20) as f64),
-        n if n >= 1 << 10 => format!("{:.1} KiB", n as f64 / 1024.0),
-        n => format!("{n} B"),
-    }
-}
-
-fn duration(s: f64) -> String {
-    if !s.is_finite() || s < 0.0 {
-        return "n/a".into();
-    }
-    let s = s as u64;
-    match s {
-        s if s >= 86_400 => format!("{}d{:02}h{:02}m", s / 86_400, s / 3600 % 24, s / 60 % 60),
-        s if s >= 3600 => format!("{}h{:02}m{:02}s", s / 3600, s / 60 % 60, s % 60),
-        s if s >= 60 => format!("{}m{:02}s", s / 60, s % 60),
-        s => format!("{s}s"),
-    }
-}
-
-/// A long time to one decimal in its largest unit.
-fn coarse(s: f64) -> String {
-    match s {
-        s if s >= 86_400.0 => format!("{:.1} d", s / 86_400.0),
-        s if s >= 3600.0 => format!("{:.1} h", s / 3600.0),
-        s if s >= 60.0 => format!("{:.1} min", s / 60.0),
-        s => format!("{s:.0} s"),
-    }
-}
-
-fn ago(now_us: u64, t_us: u64) -> String {
-    format!("{:.1} s ago", now_us.saturating_sub(t_us) as f64 * 1e-6)
-}
 
 /// Puts the terminal in raw mode on the alternate screen (restored on exit,
 /// on error and, through ratatui's panic hook, on panic) and runs until `q`.
