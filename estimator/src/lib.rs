@@ -6,6 +6,22 @@
 //! Feed raw ADC codes one sample-set at a time with [`Estimator::push`]; a
 //! [`CycleReport`] comes out when an impact closes a cycle. The method is
 //! described in `docs/estimator.md`.
+//!
+//! Module map (a sample's path, top to bottom):
+//! - [`config`], [`geometry`], [`device`]: the runtime configuration, the
+//!   piston's mass and areas, and its one mapping to the wire's `DeviceConfig`;
+//! - [`tare`]: zero offsets from the hammer at rest;
+//! - this file: [`Estimator`], impact detection (shock confirmation, spike
+//!   rejection, blanking), the cycle's phases, stalls and gaps;
+//! - [`cycle`]: the running sums of the cycle under way and the sensor
+//!   watches (rails, stuck channels, the accelerometer's force-balance slope);
+//! - [`estimate`]: what a closed cycle's sums give (friction per phase, zero
+//!   shift, impact velocity and energy, their uncertainties);
+//! - `history`: the neighbour check on period and stroke;
+//! - [`wear`]: the wear index, the drift CUSUM and their saved state;
+//! - [`math`]: the one path for transcendental functions (host = target).
+//!
+//! The report and its flags are `hammer_types`' (re-exported here).
 #![no_std]
 #![forbid(unsafe_code)]
 

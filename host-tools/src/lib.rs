@@ -1,5 +1,18 @@
-//! Host side of hammer-monitor: the hammer simulator, trace files and the
-//! `hammer` command line.
+//! Host side of hammer-monitor: the `hammer` command line over the crates
+//! below it (the trace format `hammer-trace`, the simulator `hammer-sim`, the
+//! second model family `hammer-variants`, the wire and the app).
+//!
+//! Module map (each row uses only the rows above it and the crates below):
+//! - [`numfmt`], [`chart`]: numbers for people, the one chart model and renderer;
+//! - [`records`]: every rendering of a cycle report, from `hammer_types::fields::FIELDS`;
+//! - [`client`]: the one protocol client (its sans-IO decoding core, the blocking client);
+//! - [`board`], [`emulator`]: the firmware's app natively, and on QEMU's mps2-an386;
+//! - [`estimate`], [`report`], [`plot`]: offline: per-cycle records, the
+//!   report page, the effect figures;
+//! - [`diagnose`]: the sim-to-real gap diagnosis and its benchmarks;
+//! - [`capture`], [`demo`], [`monitor`]: live: raw captures, the no-hardware
+//!   demo, the dashboard, logs and replay;
+//! - [`cli`]: the subcommands, thin over the above.
 
 #[macro_use]
 mod stdout;

@@ -7,6 +7,16 @@
 //! change to a message's fields changes the bytes: [`PROTOCOL_VERSION`] is
 //! exchanged in the handshake, and golden byte snapshots in the tests make an
 //! accidental change fail CI. Policy: `docs/wire-protocol.md`.
+//!
+//! Module map: [`msg`] (every message; the report, flags and configuration
+//! are `hammer_types`' own, carried as they are), [`frame`] (encode, and a
+//! bounded decoder that counts what it throws away), [`cobs`].
+//!
+//! How to add a message: append a variant to [`HostMsg`] or [`DeviceMsg`]
+//! (never reorder or insert: an old peer would misread every later variant),
+//! add its golden bytes to `wire/tests/frames.rs`, bump [`PROTOCOL_VERSION`]
+//! if an old peer cannot ignore it, and follow the app's and the host
+//! client's recipe (`app/src/lib.rs`).
 #![no_std]
 #![forbid(unsafe_code)]
 
