@@ -92,6 +92,19 @@ pub fn run(root: &Path, totals: &mut (u64, u64)) -> Result<(), String> {
         &ws.join(format!("host-tools/tests/{NAME}_ninth_effect.rs")),
         &read(&fixtures.join("test.rs"))?,
     )?;
+    // Another version makes every workspace crate of the copy a unit of its
+    // own in the shared build directory: nothing of it can stand in for the
+    // workspace's (cargo would take a same-named artifact as fresh).
+    let manifest = ws.join("Cargo.toml");
+    let text = read(&manifest)?;
+    let version = "version = \"0.1.0\"";
+    if !text.contains(version) {
+        return Err(format!("no `{version}` in the workspace manifest"));
+    }
+    write(
+        &manifest,
+        &text.replacen(version, "version = \"0.1.0-ninth-effect\"", 1),
+    )?;
     let mod_rs = ws.join("host-tools/sim/src/effects/mod.rs");
     write(
         &mod_rs,
@@ -105,8 +118,11 @@ pub fn run(root: &Path, totals: &mut (u64, u64)) -> Result<(), String> {
             &format!("| `{NAME}` | `k_n_s2_per_m2` = 0.25 | `F = −k·v·abs(v)` (test effect) |"),
         )?,
     )?;
-    // The workspace's target directory: the dependencies are built already.
-    std::env::set_var("CARGO_TARGET_DIR", root.join("target"));
+    // The workspace's build directory, where the dependencies are built
+    // already; final artifacts (the `hammer` binary with the test effect)
+    // land apart, so the workspace's own binary is not replaced.
+    std::env::set_var("CARGO_BUILD_BUILD_DIR", root.join("target"));
+    std::env::set_var("CARGO_TARGET_DIR", root.join("target/ninth-effect/target"));
     crate::cargo_test(&ws, &["test", "--release", "-p", "hammer-sim", "--lib"], totals)?;
     crate::cargo_test(
         &ws,
