@@ -17,7 +17,6 @@ pub mod headless;
 pub mod log;
 pub mod reader;
 pub mod replay;
-pub mod text;
 pub mod ui;
 
 use std::io::IsTerminal;

@@ -17,8 +17,8 @@ use ratatui::Frame;
 
 use super::app::{App, View};
 use super::event::{board_name, clock, firmware_version, flag_list, Event, Severity, Stamped};
-use super::text::{ago, bytes, coarse, duration, num, si_count};
 use super::UiOptions;
+use crate::numfmt::{ago, bytes, coarse, duration, num, si_count};
 use crate::records::{shown, unit};
 
 /// Redraw at least this often (clocks, "ago" times, scrolling charts).
