@@ -48,7 +48,7 @@ impl ChannelCal {
         if x.is_nan() {
             0
         } else {
-            x.clamp(0.0, self.full_scale_code as f32) as u16
+            crate::math::clamp(x, 0.0, self.full_scale_code as f32) as u16
         }
     }
 

@@ -61,7 +61,7 @@ struct Totals {
 
 fn friction_integrals(m: f32, fs: f32, fb: f32, tr: f32, t: f32) -> (f32, f32) {
     // f(t) = F_b/m·min(t, tr) − F_s/m·max(0, t − tr); returns (f(T), ∫_0^T f).
-    let tr = tr.clamp(0.0, t);
+    let tr = math::clamp(tr, 0.0, t);
     let f_t = (fb * tr - fs * (t - tr)) / m;
     let int = (fb * (0.5 * tr * tr + tr * (t - tr)) - fs * 0.5 * (t - tr) * (t - tr)) / m;
     (f_t, int)

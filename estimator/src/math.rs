@@ -5,6 +5,21 @@
 //! different numbers. Everything goes through `libm` explicitly, so a report
 //! computed on the host is bit-identical to the one the firmware sends.
 
+/// `x` limited to `lo ..= hi`, NaN passed through. Unlike `f32::clamp` it
+/// cannot panic (on `lo > hi` or a NaN bound), so no panic message with
+/// formatted floats (core's float formatting, ~8 KB of flash) reaches the
+/// firmware image.
+#[inline]
+pub fn clamp(x: f32, lo: f32, hi: f32) -> f32 {
+    if x < lo {
+        lo
+    } else if x > hi {
+        hi
+    } else {
+        x
+    }
+}
+
 #[inline]
 pub fn sqrt(x: f32) -> f32 {
     libm::sqrtf(x)

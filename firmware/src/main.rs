@@ -35,6 +35,7 @@ use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_time::{Duration, Instant, Ticker, Timer};
 use hammer_app::{Monitor, Shared};
 use hammer_estimator::wear::WEAR_STATE_BYTES;
+use hammer_estimator::ConfigError;
 use hammer_wire::{DeviceConfig, DeviceMsg, HostMsg, WearBlob};
 use static_cell::StaticCell;
 use {defmt_rtt as _, panic_probe as _};
@@ -284,9 +285,19 @@ async fn main(spawner: Spawner) {
         Ok(m) => m,
         // The configuration is a constant of this build, not data: a
         // rejection is a programming error, caught on the first boot.
-        Err(e) => defmt::panic!(
-            "estimator rejects the board's default configuration: {}",
-            defmt::Debug2Format(&e)
+        // Its fields go to defmt as they are (formatted on the host): core's
+        // float formatting, ~10 KB of flash, stays out of the image.
+        Err(ConfigError::OutOfRange { field, value, min, max }) => defmt::panic!(
+            "estimator rejects the board's default configuration: {=str} = {} is outside {} ..= {}",
+            field,
+            value,
+            min,
+            max
+        ),
+        Err(ConfigError::PeriodTooLongForMemory { max_period_s, limit_s }) => defmt::panic!(
+            "estimator rejects the board's default configuration: max_period_s = {} over the checkpoint memory's {} s",
+            max_period_s,
+            limit_s
         ),
     });
     let store = restore_wear(monitor, store);
