@@ -204,13 +204,18 @@ impl CodeSums {
             n: piece.len() as u32,
             ..Default::default()
         };
+        // In u32: no narrowing per sample.
+        let mut min = [u16::MAX as u32; 3];
+        let mut max = [0u32; 3];
         for smp in piece {
-            let x = [smp.rear, smp.front, smp.accel];
+            let x = [smp.rear as u32, smp.front as u32, smp.accel as u32];
             for ch in 0..3 {
-                c.min[ch] = c.min[ch].min(x[ch]);
-                c.max[ch] = c.max[ch].max(x[ch]);
+                min[ch] = min[ch].min(x[ch]);
+                max[ch] = max[ch].max(x[ch]);
             }
         }
+        c.min = min.map(|v| v as u16);
+        c.max = max.map(|v| v as u16);
         c
     }
 
