@@ -198,6 +198,27 @@ impl Default for CodeSums {
 }
 
 impl CodeSums {
+    #[inline(always)]
+    fn of(piece: &[crate::RawSample]) -> Self {
+        let mut c = CodeSums {
+            n: piece.len() as u32,
+            ..Default::default()
+        };
+        // In u32: no narrowing per sample.
+        let mut min = [u16::MAX as u32; 3];
+        let mut max = [0u32; 3];
+        for smp in piece {
+            let x = [smp.rear as u32, smp.front as u32, smp.accel as u32];
+            for ch in 0..3 {
+                min[ch] = min[ch].min(x[ch]);
+                max[ch] = max[ch].max(x[ch]);
+            }
+        }
+        c.min = min.map(|v| v as u16);
+        c.max = max.map(|v| v as u16);
+        c
+    }
+
     /// Appends the sums of the samples that follow.
     #[inline(always)]
     fn merge(&mut self, o: &CodeSums) {
@@ -220,20 +241,12 @@ struct Locals {
     f: f32,
     ff: f32,
     rf: f32,
-    /// The codes' extremes (in u32: no narrowing per sample).
-    min: [u32; 3],
-    max: [u32; 3],
 }
 
 impl Locals {
     /// One sample; `FIRST`: the cycle's first (no integration step). Returns its force.
     #[inline(always)]
     fn add<const FIRST: bool>(&mut self, d: &Derived, cal: &Calibration, smp: &crate::RawSample) -> f32 {
-        let x = [smp.rear as u32, smp.front as u32, smp.accel as u32];
-        for ch in 0..3 {
-            self.min[ch] = self.min[ch].min(x[ch]);
-            self.max[ch] = self.max[ch].max(x[ch]);
-        }
         let s = &mut self.s;
         let p1 = (smp.rear as f32 - cal.zero[0]) * cal.scale[0];
         let p2 = (smp.front as f32 - cal.zero[1]) * cal.scale[1];
@@ -413,9 +426,10 @@ impl CycleAcc {
             let room = (d.k - self.since_cp) as usize;
             let (piece, tail) = rest.split_at(rest.len().min(room));
             rest = tail;
-            let c = self.sums(d, cal, piece);
+            let c = CodeSums::of(piece);
             self.watch(cal, &c, piece, stuck_limit);
             self.pend.merge(&c);
+            self.sums(d, cal, piece);
             self.since_cp += piece.len() as u32;
             if self.since_cp == d.k {
                 self.since_cp = 0;
@@ -429,10 +443,9 @@ impl CycleAcc {
         }
     }
 
-    /// The running sums over `piece`, exactly as one sample at a time; and
-    /// the piece's code extremes.
+    /// The running sums over `piece`, exactly as one sample at a time.
     #[inline(always)]
-    fn sums(&mut self, d: &Derived, cal: &Calibration, piece: &[crate::RawSample]) -> CodeSums {
+    fn sums(&mut self, d: &Derived, cal: &Calibration, piece: &[crate::RawSample]) {
         let mut l = Locals {
             s: self.cur,
             e: self.e,
@@ -442,8 +455,6 @@ impl CycleAcc {
             f: self.slope.f,
             ff: self.slope.ff,
             rf: self.slope.rf,
-            min: [u16::MAX as u32; 3],
-            max: [0; 3],
         };
         let mut it = piece.iter();
         if l.s.n <= 0.0 {
@@ -467,11 +478,6 @@ impl CycleAcc {
             ff: l.ff,
             rf: l.rf,
         };
-        CodeSums {
-            n: piece.len() as u32,
-            min: l.min.map(|v| v as u16),
-            max: l.max.map(|v| v as u16),
-        }
     }
 
     /// Rails and stuck codes over `piece`. When no channel's run of equal
