@@ -178,6 +178,105 @@ impl Watch {
     }
 }
 
+/// A piece's integer pass: the codes' extremes (the pressures' peaks; a
+/// rail touched).
+#[derive(Debug, Clone, Copy)]
+struct CodeSums {
+    n: u32,
+    min: [u16; 3],
+    max: [u16; 3],
+}
+
+impl Default for CodeSums {
+    fn default() -> Self {
+        CodeSums {
+            n: 0,
+            min: [u16::MAX; 3],
+            max: [0; 3],
+        }
+    }
+}
+
+impl CodeSums {
+    #[inline(always)]
+    fn of(piece: &[crate::RawSample]) -> Self {
+        let mut c = CodeSums {
+            n: piece.len() as u32,
+            ..Default::default()
+        };
+        // In u32: no narrowing per sample.
+        let mut min = [u16::MAX as u32; 3];
+        let mut max = [0u32; 3];
+        for smp in piece {
+            let x = [smp.rear as u32, smp.front as u32, smp.accel as u32];
+            for ch in 0..3 {
+                min[ch] = min[ch].min(x[ch]);
+                max[ch] = max[ch].max(x[ch]);
+            }
+        }
+        c.min = min.map(|v| v as u16);
+        c.max = max.map(|v| v as u16);
+        c
+    }
+
+    /// Appends the sums of the samples that follow.
+    #[inline(always)]
+    fn merge(&mut self, o: &CodeSums) {
+        for ch in 0..3 {
+            self.min[ch] = self.min[ch].min(o.min[ch]);
+            self.max[ch] = self.max[ch].max(o.max[ch]);
+        }
+        self.n += o.n;
+    }
+}
+
+/// The running sums of [`CycleAcc::push_run`]'s float pass, kept in
+/// registers for a piece.
+struct Locals {
+    s: Sums,
+    e: f32,
+    prev_force: f32,
+    jp1: f32,
+    jp2: f32,
+    f: f32,
+    ff: f32,
+    rf: f32,
+}
+
+impl Locals {
+    /// One sample; `FIRST`: the cycle's first (no integration step). Returns its force.
+    #[inline(always)]
+    fn add<const FIRST: bool>(&mut self, d: &Derived, cal: &Calibration, smp: &crate::RawSample) -> f32 {
+        let s = &mut self.s;
+        let p1 = (smp.rear as f32 - cal.zero[0]) * cal.scale[0];
+        let p2 = (smp.front as f32 - cal.zero[1]) * cal.scale[1];
+        let a = (smp.accel as f32 - cal.zero[2]) * cal.scale[2];
+        let force = d.a1 * p1 - d.a2 * p2 + d.fg;
+        let r = d.m * a - force;
+        self.e *= d.q;
+        if !FIRST {
+            let v_new = s.v + (force + self.prev_force) * d.half_dt_over_m;
+            s.w += (s.v + v_new) * d.half_dt;
+            s.v = v_new;
+        }
+        self.jp1 += s.n * p1;
+        self.jp2 += s.n * p2;
+        s.n += 1.0;
+        s.e += self.e;
+        s.ee += self.e * self.e;
+        s.r += r;
+        s.re += r * self.e;
+        s.rr += r * r;
+        s.p1 += p1;
+        s.p2 += p2;
+        self.f += force;
+        self.ff += force * force;
+        self.rf += r * force;
+        self.prev_force = force;
+        force
+    }
+}
+
 /// The running state of the cycle under way.
 #[derive(Debug, Clone)]
 pub struct CycleAcc {
@@ -209,6 +308,8 @@ pub struct CycleAcc {
     span_now: [f32; 4],
     /// Kept samples at which an accelerometer fault was first seen.
     pub accel_fault_at: Option<u32>,
+    /// The codes' extremes since the last checkpoint (see [`Self::settle`]).
+    pend: CodeSums,
 }
 
 /// Checkpoints per span of the recent-activity record, and spans kept.
@@ -299,6 +400,7 @@ impl CycleAcc {
             span_count: 0,
             span_now: EMPTY_SPAN,
             accel_fault_at: None,
+            pend: CodeSums::default(),
         }
     }
 
@@ -313,104 +415,164 @@ impl CycleAcc {
         };
     }
 
-    /// Adds a run of consecutive samples. The hot loop of the estimator: the
-    /// running sums live in locals (registers) for the whole run and go back
-    /// to memory at checkpoints and at the end.
+    /// Adds a run of consecutive samples. The hot loop of the estimator, in
+    /// pieces that end at checkpoints: the sensor watches first (an integer
+    /// pass; see [`Self::watch`]), then the running sums (a float pass
+    /// without branches, its sums in registers), then the checkpoint's work.
     #[inline]
     pub fn push_run(&mut self, d: &Derived, cal: &Calibration, samples: &[crate::RawSample], stuck_limit: u32) {
-        let mut s = self.cur;
-        let mut e = self.e;
-        let mut prev_force = self.prev_force;
-        let (mut jp1, mut jp2) = (self.jp1, self.jp2);
-        let (mut peak_p1, mut peak_p2) = (self.peak_p1, self.peak_p2);
-        let mut sl = self.slope;
-        let mut since_cp = self.since_cp;
+        let mut rest = samples;
+        while !rest.is_empty() {
+            let room = (d.k - self.since_cp) as usize;
+            let (piece, tail) = rest.split_at(rest.len().min(room));
+            rest = tail;
+            let c = CodeSums::of(piece);
+            self.watch(cal, &c, piece, stuck_limit);
+            self.pend.merge(&c);
+            self.sums(d, cal, piece);
+            self.since_cp += piece.len() as u32;
+            if self.since_cp == d.k {
+                self.since_cp = 0;
+                self.settle(cal);
+                if let Some(last) = piece.last() {
+                    let p1 = (last.rear as f32 - cal.zero[0]) * cal.scale[0];
+                    let p2 = (last.front as f32 - cal.zero[1]) * cal.scale[1];
+                    self.checkpoint(p1, p2);
+                }
+            }
+        }
+    }
+
+    /// The running sums over `piece`, exactly as one sample at a time.
+    #[inline(always)]
+    fn sums(&mut self, d: &Derived, cal: &Calibration, piece: &[crate::RawSample]) {
+        let mut l = Locals {
+            s: self.cur,
+            e: self.e,
+            prev_force: self.prev_force,
+            jp1: self.jp1,
+            jp2: self.jp2,
+            f: self.slope.f,
+            ff: self.slope.ff,
+            rf: self.slope.rf,
+        };
+        let mut it = piece.iter();
+        if l.s.n <= 0.0 {
+            if let Some(smp) = it.next() {
+                self.first_force = l.add::<true>(d, cal, smp);
+            }
+        }
+        for smp in it {
+            l.add::<false>(d, cal, smp);
+        }
+        self.cur = l.s;
+        self.e = l.e;
+        self.prev_force = l.prev_force;
+        self.last_force = l.prev_force;
+        self.jp1 = l.jp1;
+        self.jp2 = l.jp2;
+        self.slope = SlopeSums {
+            n: l.s.n,
+            r: l.s.r,
+            f: l.f,
+            ff: l.ff,
+            rf: l.rf,
+        };
+    }
+
+    /// Rails and stuck codes over `piece`. When no channel's run of equal
+    /// codes can reach the stuck limit within the piece and no sample is at
+    /// a rail (one integer pass), nothing is flagged and only the run
+    /// lengths at its end are needed (a scan back from its end); otherwise
+    /// sample by sample.
+    #[inline(always)]
+    fn watch(&mut self, cal: &Calibration, c: &CodeSums, piece: &[crate::RawSample], stuck_limit: u32) {
+        let Some(last) = piece.last() else {
+            return;
+        };
+        let len = piece.len();
+        let longest = self.run[0].max(self.run[1]).max(self.run[2]);
+        let fast = (longest as u64 + len as u64) < stuck_limit as u64
+            && (0..3).all(|ch| c.min[ch] != 0 && c.max[ch] < cal.full[ch]);
+        if fast {
+            let codes = |s: &crate::RawSample| [s.rear, s.front, s.accel];
+            let newest = codes(last);
+            for (ch, &c) in newest.iter().enumerate() {
+                let mut k = len - 1;
+                while k > 0 && codes(&piece[k - 1])[ch] == c {
+                    k -= 1;
+                }
+                self.run[ch] = if k == 0 && self.last_code[ch] == c {
+                    self.run[ch] + len as u32
+                } else {
+                    (len - 1 - k) as u32
+                };
+                self.last_code[ch] = c;
+            }
+            return;
+        }
         let mut w = Watch {
             rail: self.rail,
             run: self.run,
             last: self.last_code,
             flags: self.flags,
         };
-        for smp in samples {
-            let p1 = (smp.rear as f32 - cal.zero[0]) * cal.scale[0];
-            let p2 = (smp.front as f32 - cal.zero[1]) * cal.scale[1];
-            let a = (smp.accel as f32 - cal.zero[2]) * cal.scale[2];
-            let force = d.a1 * p1 - d.a2 * p2 + d.fg;
-            let r = d.m * a - force;
-            e *= d.q;
-            if s.n > 0.0 {
-                let v_new = s.v + (force + prev_force) * d.half_dt_over_m;
-                s.w += (s.v + v_new) * d.half_dt;
-                s.v = v_new;
-            } else {
-                self.first_force = force;
-            }
-            jp1 += s.n * p1;
-            jp2 += s.n * p2;
-            s.n += 1.0;
-            s.e += e;
-            s.ee += e * e;
-            s.r += r;
-            s.re += r * e;
-            s.rr += r * r;
-            s.p1 += p1;
-            s.p2 += p2;
-            sl.f += force;
-            sl.ff += force * force;
-            sl.rf += r * force;
-            prev_force = force;
-            peak_p1 = if p1 > peak_p1 { p1 } else { peak_p1 };
-            peak_p2 = if p2 > peak_p2 { p2 } else { peak_p2 };
+        for smp in piece {
             w.check(0, smp.rear, cal.full[0], stuck_limit, cal.bottom_is_fault[0]);
             w.check(1, smp.front, cal.full[1], stuck_limit, cal.bottom_is_fault[1]);
             w.check(2, smp.accel, cal.full[2], stuck_limit, cal.bottom_is_fault[2]);
-            since_cp += 1;
-            if since_cp == d.k {
-                since_cp = 0;
-                if self.cp.push(s).is_err() {
-                    w.flags.insert(Flags::OVERFLOW);
-                }
-                // Once a millisecond: is the accelerometer still believable?
-                sl.n = s.n;
-                sl.r = s.r;
-                self.slope = sl;
-                if self.accel_fault_at.is_none() {
-                    if self.force_slope().is_some_and(|b| math::abs(b) > SLOPE_LIMIT) {
-                        w.flags.insert(Flags::ACCEL_FAULT);
-                    }
-                    if w.flags.intersects(Flags::ACCEL_FAULT | Flags::ACCEL_STUCK) {
-                        self.accel_fault_at = Some(s.n as u32);
-                    }
-                }
-                self.slope_cp[self.slope_cp_len % SLOPE_WINDOW_CP] = sl;
-                self.slope_cp_len += 1;
-                // Pressure extremes per span, sampled once a millisecond:
-                // enough for swings of bars over tens of milliseconds.
-                let sp = &mut self.span_now;
-                *sp = [sp[0].max(p1), sp[1].min(p1), sp[2].max(p2), sp[3].min(p2)];
-                if self.slope_cp_len % SPAN_CP == 0 {
-                    self.spans[self.span_count % SPANS] = self.span_now;
-                    self.span_count += 1;
-                    self.span_now = EMPTY_SPAN;
-                }
-            }
         }
-        self.cur = s;
-        self.e = e;
-        self.prev_force = prev_force;
-        self.last_force = prev_force;
-        self.jp1 = jp1;
-        self.jp2 = jp2;
-        self.peak_p1 = peak_p1;
-        self.peak_p2 = peak_p2;
-        sl.n = s.n;
-        sl.r = s.r;
-        self.slope = sl;
-        self.since_cp = since_cp;
         self.rail = w.rail;
         self.run = w.run;
         self.last_code = w.last;
         self.flags = w.flags;
+    }
+
+    /// Adds the pressures' peaks since the last checkpoint (kept as code
+    /// extremes: the calibration is monotonic, so the peak code reads the
+    /// peak value exactly) to the float ones: at checkpoints and before the
+    /// cycle's peaks are read.
+    pub fn settle(&mut self, cal: &Calibration) {
+        let c = core::mem::take(&mut self.pend);
+        if c.n == 0 {
+            return;
+        }
+        let mut peak = [0.0f32; 2];
+        for (ch, p) in peak.iter_mut().enumerate() {
+            let (z, k) = (cal.zero[ch], cal.scale[ch]);
+            let code = if k < 0.0 { c.min[ch] } else { c.max[ch] };
+            *p = (code as f32 - z) * k;
+        }
+        self.peak_p1 = if peak[0] > self.peak_p1 { peak[0] } else { self.peak_p1 };
+        self.peak_p2 = if peak[1] > self.peak_p2 { peak[1] } else { self.peak_p2 };
+    }
+
+    /// Once a millisecond: the checkpoint's prefix sums, the accelerometer's
+    /// judgement, the recent pressure extremes (`p1`, `p2`: the newest sample's).
+    fn checkpoint(&mut self, p1: f32, p2: f32) {
+        if self.cp.push(self.cur).is_err() {
+            self.flags.insert(Flags::OVERFLOW);
+        }
+        // Once a millisecond: is the accelerometer still believable?
+        if self.accel_fault_at.is_none() {
+            if self.force_slope().is_some_and(|b| math::abs(b) > SLOPE_LIMIT) {
+                self.flags.insert(Flags::ACCEL_FAULT);
+            }
+            if self.flags.intersects(Flags::ACCEL_FAULT | Flags::ACCEL_STUCK) {
+                self.accel_fault_at = Some(self.cur.n as u32);
+            }
+        }
+        self.slope_cp[self.slope_cp_len % SLOPE_WINDOW_CP] = self.slope;
+        self.slope_cp_len += 1;
+        // Pressure extremes per span, sampled once a millisecond:
+        // enough for swings of bars over tens of milliseconds.
+        let sp = &mut self.span_now;
+        *sp = [sp[0].max(p1), sp[1].min(p1), sp[2].max(p2), sp[3].min(p2)];
+        if self.slope_cp_len % SPAN_CP == 0 {
+            self.spans[self.span_count % SPANS] = self.span_now;
+            self.span_count += 1;
+            self.span_now = EMPTY_SPAN;
+        }
     }
 
     /// Time of checkpoint `i` from the first kept sample.

@@ -496,9 +496,8 @@ impl Estimator {
         let n_proc = total - pre;
         let from_delay = self.delay_len.min(n_proc);
         if from_delay > 0 {
-            let held = self.delay;
             self.acc
-                .push_run(&self.d, &self.cal, &held[..from_delay], self.stuck_limit);
+                .push_run(&self.d, &self.cal, &self.delay[..from_delay], self.stuck_limit);
         }
         let from_run = n_proc - from_delay;
         self.acc
@@ -549,6 +548,7 @@ impl Estimator {
 
     /// A record with flags and no numbers: what happened instead of a cycle.
     fn record(&mut self, index: u64, mut flags: Flags) -> CycleReport {
+        self.acc.settle(&self.cal);
         let period_s = index.wrapping_sub(self.cycle_start) as f32 * self.d.dt;
         let n = self.acc.cur.n.max(1.0);
         if self.acc.rail.iter().any(|&r| r as f32 > 0.9 * n) {
@@ -574,6 +574,7 @@ impl Estimator {
     }
 
     fn close_cycle(&mut self, index: u64) -> CycleReport {
+        self.acc.settle(&self.cal);
         let start = self.cycle_start;
         let period_s = index.wrapping_sub(start) as f32 * self.d.dt;
         let tail = self.delay_len as u32;
