@@ -21,26 +21,23 @@ fn read(path: &Path) -> Result<String, String> {
     std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))
 }
 
-/// The workspace's files (tracked and new, not ignored) copied to `to`; the
+/// The workspace's files copied to `to`: git's list (tracked and new, not
+/// ignored) in a git checkout, else every file outside build output. The
 /// firmware and the fuzz crate stay out (not workspace members).
 fn copy_workspace(root: &Path, to: &Path) -> Result<(), String> {
-    let out = Command::new("git")
-        .args(["ls-files", "-co", "--exclude-standard", "-z"])
-        .current_dir(root)
-        .output()
-        .map_err(|e| format!("git ls-files: {e}"))?;
-    if !out.status.success() {
-        return Err("git ls-files failed".into());
-    }
+    let files = git_files(root).unwrap_or_else(|| {
+        let mut out = Vec::new();
+        walk(root, root, &mut out);
+        out
+    });
     if to.exists() {
         std::fs::remove_dir_all(to).map_err(|e| format!("{}: {e}", to.display()))?;
     }
-    for file in out.stdout.split(|b| *b == 0).filter(|f| !f.is_empty()) {
-        let rel = String::from_utf8_lossy(file);
+    for rel in files {
         if rel.starts_with("firmware/") || rel.starts_with("fuzz/") {
             continue;
         }
-        let (src, dst) = (root.join(&*rel), to.join(&*rel));
+        let (src, dst) = (root.join(&rel), to.join(&rel));
         if !src.is_file() {
             continue; // deleted in the work tree
         }
@@ -50,6 +47,38 @@ fn copy_workspace(root: &Path, to: &Path) -> Result<(), String> {
         std::fs::copy(&src, &dst).map_err(|e| format!("{}: {e}", src.display()))?;
     }
     Ok(())
+}
+
+fn git_files(root: &Path) -> Option<Vec<String>> {
+    let out = Command::new("git")
+        .args(["ls-files", "-co", "--exclude-standard", "-z"])
+        .current_dir(root)
+        .output()
+        .ok()
+        .filter(|o| o.status.success())?;
+    let files: Vec<String> = out
+        .stdout
+        .split(|b| *b == 0)
+        .filter(|f| !f.is_empty())
+        .map(|f| String::from_utf8_lossy(f).into_owned())
+        .collect();
+    (!files.is_empty()).then_some(files)
+}
+
+/// Every file under `dir` (relative to `root`), build output and VCS data left out.
+fn walk(root: &Path, dir: &Path, out: &mut Vec<String>) {
+    let Ok(entries) = std::fs::read_dir(dir) else { return };
+    for e in entries.flatten() {
+        let p = e.path();
+        let name = e.file_name().to_string_lossy().into_owned();
+        if p.is_dir() {
+            if !matches!(name.as_str(), "target" | ".git") {
+                walk(root, &p, out);
+            }
+        } else if let Ok(rel) = p.strip_prefix(root) {
+            out.push(rel.to_string_lossy().into_owned());
+        }
+    }
 }
 
 /// Inserts `line` as the last entry of the `catalogue!` invocation.
