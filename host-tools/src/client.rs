@@ -361,19 +361,19 @@ impl<S: Read + Write> Client<S> {
     }
 }
 
+/// Device messages as a test device sends them, for the client's and the
+/// monitor's tests.
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use hammer_wire::CycleReport;
-    use std::sync::{Arc, Mutex};
+pub(crate) mod fixtures {
+    use hammer_wire::{encode, CycleReport, DeviceInfo, DeviceMsg, MAX_FRAME};
 
-    fn frame(m: &DeviceMsg) -> Vec<u8> {
+    pub fn frame(m: &DeviceMsg) -> Vec<u8> {
         let mut buf = [0u8; MAX_FRAME];
         let n = encode(m, &mut buf).unwrap();
         buf[..n].to_vec()
     }
 
-    fn info(v: u16) -> DeviceInfo {
+    pub fn info(v: u16) -> DeviceInfo {
         DeviceInfo {
             protocol_version: v,
             firmware_version: [1, 2, 3],
@@ -382,12 +382,19 @@ mod tests {
         }
     }
 
-    fn report(seq: u32) -> DeviceMsg {
+    pub fn report(seq: u32) -> DeviceMsg {
         DeviceMsg::Report(CycleReport {
             seq,
             ..Default::default()
         })
     }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::fixtures::{frame, info, report};
+    use super::*;
+    use std::sync::{Arc, Mutex};
 
     /// A scripted device in memory: each host frame it decodes is answered
     /// with the bytes `script` returns; reads with nothing to say are

@@ -436,28 +436,11 @@ impl Reader {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use hammer_wire::{encode, CycleReport, DeviceInfo, MAX_FRAME, PROTOCOL_VERSION};
-
-    fn frame(m: &DeviceMsg) -> Vec<u8> {
-        let mut buf = [0u8; MAX_FRAME];
-        let n = encode(m, &mut buf).unwrap();
-        buf[..n].to_vec()
-    }
+    use crate::client::fixtures::{frame, info, report};
+    use hammer_wire::PROTOCOL_VERSION;
 
     fn hello(v: u16) -> DeviceMsg {
-        DeviceMsg::Hello(DeviceInfo {
-            protocol_version: v,
-            firmware_version: [1, 2, 3],
-            board: b"test".iter().copied().collect(),
-            config_hash: 7,
-        })
-    }
-
-    fn report(seq: u32) -> DeviceMsg {
-        DeviceMsg::Report(CycleReport {
-            seq,
-            ..Default::default()
-        })
+        DeviceMsg::Hello(info(v))
     }
 
     fn run(ingest: &mut Ingest, msgs: &[DeviceMsg]) -> Vec<Event> {
