@@ -97,7 +97,7 @@ fn add_docs_row(md: &str, row: &str) -> Result<String, String> {
         .ok_or("no effect catalogue in docs/model.md")?;
     let last_row = md[section..]
         .lines()
-        .take_while(|l| !l.starts_with("### ") || l.is_empty())
+        .take_while(|l| !l.starts_with("### "))
         .filter(|l| l.starts_with("| `"))
         .last()
         .ok_or("no rows in the effect table")?;

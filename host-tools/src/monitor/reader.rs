@@ -39,6 +39,8 @@ pub enum Handshake {
 /// recorded bytes yields the same events as the live link.
 pub struct Ingest {
     inbound: Inbound,
+    /// What one read completed, before it is interpreted.
+    arrived: Vec<Incoming>,
     stats: LinkStats,
     handshake: Handshake,
     held: VecDeque<DeviceMsg>,
@@ -57,6 +59,7 @@ impl Ingest {
     pub fn new() -> Self {
         Self {
             inbound: Inbound::new(),
+            arrived: Vec::new(),
             stats: LinkStats::default(),
             handshake: Handshake::Pending,
             held: VecDeque::new(),
@@ -128,9 +131,9 @@ impl Ingest {
     /// Bytes as they arrived at `t_us`.
     pub fn feed(&mut self, t_us: u64, bytes: &[u8], emit: &mut dyn FnMut(Stamped)) {
         self.stats.bytes += bytes.len() as u64;
-        let mut arrived = Vec::new();
+        let mut arrived = std::mem::take(&mut self.arrived);
         self.inbound.feed(bytes, &mut |i| arrived.push(i));
-        for i in arrived {
+        for i in arrived.drain(..) {
             match i {
                 Incoming::Msg(m) => {
                     self.stats.frames += 1;
@@ -157,6 +160,7 @@ impl Ingest {
                 }
             }
         }
+        self.arrived = arrived; // its capacity, for the next read
         emit(Stamped {
             t_us,
             event: Event::Stats(self.stats),
