@@ -10,7 +10,9 @@
 //!
 //! Module map: [`msg`] (every message; the report, flags and configuration
 //! are `hammer_types`' own, carried as they are), [`frame`] (encode, and a
-//! bounded decoder that counts what it throws away), [`cobs`].
+//! bounded decoder that counts what it throws away), [`cobs`], [`stimulus`]
+//! (the emulated board's ADC samples, through memory shared with the host
+//! instead of the link).
 //!
 //! How to add a message: append a variant to [`HostMsg`] or [`DeviceMsg`]
 //! (never reorder or insert: an old peer would misread every later variant),
@@ -23,6 +25,7 @@
 pub mod cobs;
 pub mod frame;
 pub mod msg;
+pub mod stimulus;
 
 pub use frame::{encode, DecodeError, Decoder, DecoderStats, EncodeError};
 pub use msg::*;

@@ -5,6 +5,7 @@
 //! Under QEMU the counter follows the virtual clock: host time normally,
 //! executed instructions with `-icount`.
 
+use core::cell::Cell;
 use core::future::poll_fn;
 use core::sync::atomic::{AtomicU32, Ordering};
 use core::task::Poll;
@@ -27,6 +28,8 @@ const _: () = assert!(RELOAD <= 0x00FF_FFFF, "SysTick's reload register has 24 b
 
 /// Completed SysTick periods. 32 bits last 13 years at 100 ms a wrap.
 static WRAPS: AtomicU32 = AtomicU32::new(0);
+/// Core cycles spent asleep in WFI, for the CPU load the host reads.
+static IDLE: critical_section::Mutex<Cell<u64>> = critical_section::Mutex::new(Cell::new(0));
 /// The one task waiting in [`next_tick`].
 static TICK_WAKER: AtomicWaker = AtomicWaker::new();
 
@@ -54,7 +57,7 @@ impl hammer_app::Clock for SysTickClock {
 }
 
 /// Core cycles since [`SysTickClock::start`].
-fn cycles() -> u64 {
+pub fn cycles() -> u64 {
     critical_section::with(|_| {
         // The exception cannot run in here, so a wrap since it last ran shows
         // only as its pending bit. The counter pends it on reaching 0 and
@@ -70,6 +73,27 @@ fn cycles() -> u64 {
         }
         u64::from(wraps) * u64::from(TICKS_PER_WRAP) + u64::from(RELOAD - val.min(RELOAD))
     })
+}
+
+/// The low 32 bits of [`cycles`]: enough for differences under 171 s.
+pub fn cycles32() -> u32 {
+    cycles() as u32
+}
+
+/// Counts `n` cycles the core slept (the executor's WFI).
+pub fn add_idle(n: u64) {
+    critical_section::with(|cs| {
+        let idle = IDLE.borrow(cs);
+        idle.set(idle.get() + n);
+    });
+}
+
+/// Time since start and the part of it the core was awake, µs.
+pub fn uptime_and_busy_us() -> (u64, u64) {
+    let now = cycles();
+    let idle = critical_section::with(|cs| IDLE.borrow(cs).get());
+    let per_us = u64::from(SYSCLK_HZ / 1_000_000);
+    (now / per_us, now.saturating_sub(idle) / per_us)
 }
 
 /// Completes at the next SysTick wrap. Only one task may wait at a time

@@ -1,25 +1,31 @@
 //! Board layer for the hammer monitor on QEMU's mps2-an386 (Cortex-M4F).
 //!
-//! The board has no ADC worth modelling, so the host streams sample blocks
-//! over UART0 together with its commands, and the same UART carries the
-//! device's reports back. Everything else is the hardware-independent
-//! `hammer_app`, unchanged: this lets the complete firmware, executor and
-//! all, be tested without a board.
+//! Samples arrive the way the reference board's ADC + DMA deliver them: a
+//! ring the host fills in the board's PSRAM, released half by half by a timer
+//! at 100 kS/s of guest time (`adc.rs`, layout in `hammer_wire::stimulus`).
+//! Started without that shared memory, the board takes `Samples` frames over
+//! UART0 instead, which the tests use to inject gaps and corrupt frames.
+//! UART0 carries commands and the device's reports either way. Everything
+//! else is the hardware-independent `hammer_app`, unchanged: this lets the
+//! complete firmware, executor and all, be tested without a board.
 //!
 //! Run it with `cargo run --release` from this directory (UART0 is then
 //! QEMU's stdin/stdout, binary-clean) or, for a test harness, with UART0 on a
 //! socket:
 //! `qemu-system-arm -M mps2-an386 -nographic -monitor none -semihosting-config enable=on,target=native
-//!  -serial tcp:127.0.0.1:PORT,server=on,wait=on -kernel hammer-firmware-emu`.
+//!  -serial tcp:127.0.0.1:PORT,server=on,wait=on -kernel hammer-firmware-emu`,
+//! plus, for the full-rate samples, `-object memory-backend-file,id=stim,size=16M,mem-path=FILE,share=on
+//! -machine memory-backend=stim` (`hammer demo` does all this).
 //! A panic or fault exits QEMU with a failure status instead of hanging.
 //!
 //! QEMU hands this UART one byte per main-loop turn, which caps host-to-board
-//! traffic at roughly 40 KB/s (about 200 sample blocks, 7 kS/s): streamed
-//! samples run slower than real time, and nothing is lost.
+//! traffic at roughly 40 KB/s (about 7 kS/s of samples): the UART path runs
+//! slower than real time, and nothing is lost.
 
 #![no_std]
 #![no_main]
 
+mod adc;
 mod clock;
 mod executor;
 mod pacing;
@@ -32,9 +38,11 @@ use cortex_m_rt::{entry, exception, ExceptionFrame};
 use cortex_m_semihosting::debug;
 use embassy_executor::raw;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
-use hammer_app::{LinkSamples, Monitor, Shared};
+use hammer_app::{LinkSamples, Monitor, Overrun, SampleSource, Shared};
+use hammer_estimator::RawSample;
 use static_cell::StaticCell;
 
+use crate::adc::{NoStimulus, StimulusAdc};
 use crate::clock::SysTickClock;
 use crate::pacing::Paced;
 use crate::uart::{PanicWriter, UartRx, UartTx};
@@ -50,9 +58,24 @@ static MONITOR: StaticCell<Monitor> = StaticCell::new();
 static CLOCK: StaticCell<SysTickClock> = StaticCell::new();
 static EXECUTOR: StaticCell<raw::Executor> = StaticCell::new();
 
+/// Where this run's samples come from, chosen once at boot.
+enum Samples {
+    Adc(StimulusAdc),
+    Link(LinkSamples<'static, Mutex>),
+}
+
+impl SampleSource for Samples {
+    async fn read(&mut self, buf: &mut [RawSample]) -> Result<usize, Overrun> {
+        match self {
+            Samples::Adc(adc) => adc.read(buf).await,
+            Samples::Link(link) => link.read(buf).await,
+        }
+    }
+}
+
 #[embassy_executor::task]
-async fn sampling(monitor: &'static mut Monitor, clock: &'static SysTickClock) -> ! {
-    let mut source = Paced::new(LinkSamples::new(&SHARED), &SHARED);
+async fn sampling(monitor: &'static mut Monitor, clock: &'static SysTickClock, samples: Samples) -> ! {
+    let mut source = Paced::new(samples, &SHARED);
     hammer_app::sampling(&mut source, monitor, &SHARED, clock).await
 }
 
@@ -82,14 +105,20 @@ fn main() -> ! {
         Err(_) => panic!("default estimator configuration rejected"),
     });
 
+    let (samples, idle) = match StimulusAdc::start() {
+        Ok(adc) => (Samples::Adc(adc), executor::Idle::Spin),
+        Err(NoStimulus::Absent) => (Samples::Link(LinkSamples::new(&SHARED)), executor::Idle::Sleep),
+        Err(NoStimulus::Mismatch) => panic!("the host's sample stimulus has another layout than this firmware's"),
+    };
+
     // The pender ignores the context; the executor is the only one.
     let executor: &'static raw::Executor = EXECUTOR.init(raw::Executor::new(core::ptr::null_mut()));
     let spawner = executor.spawner();
     // Each task has a pool of one and is spawned once, so spawning cannot fail.
-    spawner.spawn(sampling(monitor, clock).expect("sampling task spawned once"));
+    spawner.spawn(sampling(monitor, clock, samples).expect("sampling task spawned once"));
     spawner.spawn(link_rx(rx).expect("link_rx task spawned once"));
     spawner.spawn(link_tx(tx).expect("link_tx task spawned once"));
-    executor::run(executor)
+    executor::run(executor, idle)
 }
 
 /// Reports on UART0 (after a frame delimiter, so a host's decoder drops any
