@@ -150,6 +150,26 @@ impl Stimulus {
         self.header().end_of_stream.store(1, Ordering::Release);
     }
 
+    /// Fault injection: the board's sampling task stalls `us` µs of guest
+    /// time the next time it asks for samples (see `Header::stall_us`).
+    pub fn stall(&self, us: u32) {
+        self.header().stall_us.store(us, Ordering::Release);
+    }
+
+    /// Where the latest overruns (at most `LOST_LOG`) lost samples, oldest
+    /// first: (position of the first sample-set lost, how many).
+    pub fn losses(&self) -> Vec<(u32, u32)> {
+        let h = self.header();
+        let n = h.overruns.load(Ordering::Acquire);
+        let kept = n.min(stimulus::LOST_LOG as u32);
+        (n - kept..n)
+            .map(|k| {
+                let [from, lost] = &h.lost_log[k as usize % stimulus::LOST_LOG];
+                (from.load(Ordering::Relaxed), lost.load(Ordering::Relaxed))
+            })
+            .collect()
+    }
+
     pub fn counters(&self) -> Counters {
         let h = self.header();
         let l = |a: &AtomicU32| a.load(Ordering::Acquire);

@@ -18,7 +18,7 @@
 //! modulo the capacity is its slot in the ring.
 //!
 //! Who writes what: the host writes the samples, then `written_sets`
-//! (release), and `end_of_stream`; the board writes every other counter.
+//! (release), `end_of_stream` and `stall_us`; the board writes every other counter.
 //! `magic` is written last by the host, so a board that finds it finds a
 //! complete header; a board started without the backing file finds zeros and
 //! takes its samples from the UART instead.
@@ -50,6 +50,9 @@ pub const RATE_HZ: u32 = 100_000;
 const _: () = assert!(RING_OFFSET + CAPACITY_SETS as usize * SET_BYTES <= PSRAM_BYTES);
 const _: () = assert!(CAPACITY_SETS.is_power_of_two() && CAPACITY_SETS % BLOCK_SETS == 0);
 const _: () = assert!(core::mem::size_of::<Header>() <= RING_OFFSET);
+
+/// Overruns the header remembers where they happened.
+pub const LOST_LOG: usize = 8;
 
 /// The shared header. `repr(C)` and only 32-bit atomics, which both the
 /// Cortex-M4 and the host have, so each side reads whole values.
@@ -85,8 +88,15 @@ pub struct Header {
     pub latency_max_us: AtomicU32,
     /// Board: guest time since boot, µs (wraps after 71 min; use differences).
     pub uptime_us: AtomicU32,
-    /// Board: of that, time the core was not asleep in WFI, µs (wraps likewise).
+    /// Board: of that, time the core was not idle, µs (wraps likewise).
     pub busy_us: AtomicU32,
+    /// Board: the latest [`LOST_LOG`] overruns, overrun number `n` at
+    /// `n % LOST_LOG`: the position of the first sample-set lost, and how many.
+    pub lost_log: [[AtomicU32; 2]; LOST_LOG],
+    /// Host: fault injection. The board's sampling task, the next time it
+    /// asks for samples, stays busy this long (µs of guest time) and clears
+    /// it: a firmware that is late, to show the overrun it causes.
+    pub stall_us: AtomicU32,
 }
 
 /// The ring slot of sample-set position `pos`.

@@ -1,23 +1,31 @@
 //! The emulated board's ADC + DMA: sample-sets the host writes into the
 //! board's PSRAM (`hammer_wire::stimulus`), released half a DMA ring at a
-//! time by TIMER0 at the reference board's rate and block size.
+//! time at the reference board's rate and block size.
 //!
 //! What is modelled, and why it is enough: the reference board's DMA fills a
 //! two-half ring and interrupts at each half; the firmware must read a half
 //! before the DMA comes back to it, i.e. before the *next* half completes, or
-//! the samples are gone (an overrun). Here TIMER0 (CMSDK APB timer at
-//! 0x4000_0000, IRQ 8, 25 MHz) completes one half per 256 sample-sets of guest
-//! time, and [`StimulusAdc::read`] applies the same rule: only the last
-//! completed half may be read, checked again after the copy. The halves are
-//! read where the host wrote them, so the "DMA" costs no guest instructions,
-//! as a real DMA costs no CPU. The timer does not wait for the firmware.
+//! the samples are gone (an overrun). Here the DMA's position is a function
+//! of guest time, as a real DMA's is: half k completes 2.56 ms × (k + 1)
+//! after the start, whatever the CPU was doing, interrupts masked or not.
+//! TIMER0 (CMSDK APB timer at 0x4000_0000, IRQ 8) interrupts when a half is
+//! due, to publish it and wake the sampling task. [`StimulusAdc::read`] applies the
+//! reference board's rule: only the last completed half may be read, checked
+//! again after the copy. The halves are read where the host wrote them, so
+//! the "DMA" costs no guest instructions, as a real DMA costs no CPU.
+//!
+//! The one departure: if the host has not written a half when it is due,
+//! the DMA's clock slips by a half (counted as late stimulus): the samples
+//! are delayed, never lost, and the firmware's figures stay its own.
 
+use core::cell::Cell;
 use core::future::poll_fn;
 use core::ptr::{read_volatile, write_volatile};
-use core::sync::atomic::{AtomicU32, Ordering};
+use core::sync::atomic::Ordering;
 use core::task::Poll;
 
 use cortex_m::peripheral::NVIC;
+use critical_section::Mutex;
 use embassy_sync::waitqueue::AtomicWaker;
 use hammer_app::{Overrun, SampleSource};
 use hammer_estimator::RawSample;
@@ -29,20 +37,35 @@ use crate::vectors::Interrupt;
 /// TIMER0's registers (CMSDK APB timer; ARM DDI0479C, hw/timer/cmsdk-apb-timer.c).
 const TIMER0: usize = 0x4000_0000;
 const CTRL: usize = 0x00;
+const VALUE: usize = 0x04;
 const RELOAD: usize = 0x08;
 /// INTSTATUS on read, INTCLEAR on write.
 const INTCLEAR: usize = 0x0c;
 const CTRL_ENABLE: u32 = 1 << 0;
 const CTRL_IRQ_ENABLE: u32 = 1 << 3;
 
-/// Timer clocks per half: 64 000, 2.56 ms.
+/// Core (and timer) clocks per half: 64 000, 2.56 ms.
 const CLOCKS_PER_BLOCK: u32 = (SYSCLK_HZ as u64 * BLOCK_SETS as u64 / RATE_HZ as u64) as u32;
 const _: () = assert!(CLOCKS_PER_BLOCK as u64 * RATE_HZ as u64 == SYSCLK_HZ as u64 * BLOCK_SETS as u64);
 
-/// When each of the last four halves completed (SysTick cycles, low 32 bits),
-/// indexed by half number modulo 4: the latency of a half is measured when
-/// the app comes back for more after processing it.
-static DONE_AT: [AtomicU32; 4] = [const { AtomicU32::new(0) }; 4];
+/// The DMA's clock.
+#[derive(Clone, Copy)]
+struct Dma {
+    /// When the first half of this run started, in core cycles; moved on by
+    /// a half each time the host's stimulus was late.
+    epoch: u64,
+    /// Halves completed since `epoch`.
+    completed: u64,
+    /// When each of the last four halves completed (core cycles, low 32
+    /// bits), by half number modulo 4, for the latency of its processing.
+    done_at: [u32; 4],
+}
+
+static DMA: Mutex<Cell<Dma>> = Mutex::new(Cell::new(Dma {
+    epoch: 0,
+    completed: 0,
+    done_at: [0; 4],
+}));
 static WAKER: AtomicWaker = AtomicWaker::new();
 
 fn header() -> &'static Header {
@@ -54,6 +77,35 @@ fn header() -> &'static Header {
 fn timer_write(offset: usize, value: u32) {
     // SAFETY: TIMER0's registers, written only here and in the handler.
     unsafe { write_volatile((TIMER0 + offset) as *mut u32, value) }
+}
+
+/// Completes every half due by now (if the host has written it) and returns
+/// the DMA's position in sample-sets and the core cycles to the next half.
+fn advance(h: &Header) -> (u32, u64) {
+    critical_section::with(|cs| {
+        let cell = DMA.borrow(cs);
+        let mut dma = cell.get();
+        let now = clock::cycles();
+        let period = u64::from(CLOCKS_PER_BLOCK);
+        let mut pos = h.dma_sets.load(Ordering::Relaxed);
+        while dma.completed < now.saturating_sub(dma.epoch) / period {
+            let ahead = h.written_sets.load(Ordering::Acquire).wrapping_sub(pos);
+            if (BLOCK_SETS..=CAPACITY_SETS).contains(&ahead) {
+                dma.completed += 1;
+                let due = dma.epoch + dma.completed * period;
+                dma.done_at[(pos / BLOCK_SETS) as usize % 4] = due as u32;
+                pos = pos.wrapping_add(BLOCK_SETS);
+                h.dma_sets.store(pos, Ordering::Release);
+            } else {
+                if h.end_of_stream.load(Ordering::Acquire) == 0 {
+                    h.starved_blocks.fetch_add(1, Ordering::Relaxed);
+                }
+                dma.epoch += period;
+            }
+        }
+        cell.set(dma);
+        (pos, (dma.epoch + (dma.completed + 1) * period).saturating_sub(now))
+    })
 }
 
 /// One sample-set from the ring, read volatile: the host writes the ring
@@ -88,9 +140,14 @@ pub struct StimulusAdc {
     finished: Option<u32>,
 }
 
+/// `a` is after `b` in wrapping position order.
+fn after(a: u32, b: u32) -> bool {
+    (a.wrapping_sub(b) as i32) > 0
+}
+
 impl StimulusAdc {
-    /// Starts the timer if the host has prepared a stimulus; continues from
-    /// wherever the "DMA" stands, so a reset board picks the stream up again.
+    /// Starts the DMA's clock if the host has prepared a stimulus; continues
+    /// from wherever the DMA stands, so a reset board picks the stream up again.
     pub fn start() -> Result<Self, NoStimulus> {
         let h = header();
         if h.magic.load(Ordering::Acquire) != MAGIC {
@@ -102,53 +159,69 @@ impl StimulusAdc {
             return Err(NoStimulus::Mismatch);
         }
         let next = h.dma_sets.load(Ordering::Acquire);
+        critical_section::with(|cs| {
+            DMA.borrow(cs).set(Dma {
+                epoch: clock::cycles(),
+                completed: 0,
+                done_at: [0; 4],
+            })
+        });
         timer_write(CTRL, 0);
         timer_write(RELOAD, CLOCKS_PER_BLOCK - 1);
         timer_write(INTCLEAR, 1);
-        // QEMU loads VALUE from RELOAD when the timer is enabled with VALUE 0.
         timer_write(CTRL, CTRL_ENABLE | CTRL_IRQ_ENABLE);
-        // SAFETY: the handler only touches the header, DONE_AT and WAKER,
-        // all interrupt-safe.
+        // SAFETY: the handler only touches the header, DMA and WAKER, all
+        // interrupt-safe.
         unsafe { NVIC::unmask(Interrupt::Timer0) };
         Ok(Self { next, finished: None })
     }
 
-    /// Publishes guest time and CPU use for the host's soak figures.
-    fn publish_load(h: &Header) {
+    fn overrun(&mut self, h: &Header, oldest: u32) -> Overrun {
+        let lost = oldest.wrapping_sub(self.next);
+        let n = h.overruns.load(Ordering::Relaxed);
+        let [from_at, lost_at] = &h.lost_log[n as usize % stimulus::LOST_LOG];
+        from_at.store(self.next, Ordering::Relaxed);
+        lost_at.store(lost, Ordering::Relaxed);
+        self.next = oldest;
+        self.finished = None;
+        h.lost_sets.fetch_add(lost, Ordering::Relaxed);
+        h.overruns.store(n.wrapping_add(1), Ordering::Release);
+        Overrun { lost }
+    }
+
+    /// The end of a half's processing: its latency, and the load figures.
+    fn processed(h: &Header, half: u32) {
+        let done_at = critical_section::with(|cs| DMA.borrow(cs).get().done_at[half as usize % 4]);
+        let ticks = clock::cycles32().wrapping_sub(done_at);
+        h.latency_max_us
+            .fetch_max(ticks / (SYSCLK_HZ / 1_000_000), Ordering::Relaxed);
         let (uptime, busy) = clock::uptime_and_busy_us();
         h.uptime_us.store(uptime as u32, Ordering::Relaxed);
         h.busy_us.store(busy as u32, Ordering::Relaxed);
     }
 
-    fn overrun(&mut self, h: &Header, oldest: u32) -> Overrun {
-        let lost = oldest.wrapping_sub(self.next);
-        self.next = oldest;
-        self.finished = None;
-        h.lost_sets.fetch_add(lost, Ordering::Relaxed);
-        h.overruns.fetch_add(1, Ordering::Relaxed);
-        Overrun { lost }
+    /// Fault injection (see `Header::stall_us`): a late firmware.
+    fn stall_if_asked(h: &Header) {
+        let us = h.stall_us.swap(0, Ordering::AcqRel);
+        if us > 0 {
+            let until = clock::cycles() + u64::from(us) * u64::from(SYSCLK_HZ / 1_000_000);
+            while clock::cycles() < until {}
+        }
     }
-}
-
-/// `a` is after `b` in wrapping position order.
-fn after(a: u32, b: u32) -> bool {
-    (a.wrapping_sub(b) as i32) > 0
 }
 
 impl SampleSource for StimulusAdc {
     async fn read(&mut self, buf: &mut [RawSample]) -> Result<usize, Overrun> {
         let h = header();
         if let Some(half) = self.finished.take() {
-            let done_at = DONE_AT[half as usize % 4].load(Ordering::Relaxed);
-            let ticks = clock::cycles32().wrapping_sub(done_at);
-            h.latency_max_us.fetch_max(ticks / (SYSCLK_HZ / 1_000_000), Ordering::Relaxed);
-            Self::publish_load(h);
+            Self::processed(h, half);
         }
+        Self::stall_if_asked(h);
         // Cancel-safe: nothing below the wait is interrupted by an await.
         let next = self.next;
         poll_fn(|cx| {
             WAKER.register(cx.waker());
-            if after(h.dma_sets.load(Ordering::Acquire), next) {
+            if after(advance(h).0, next) {
                 Poll::Ready(())
             } else {
                 Poll::Pending
@@ -156,7 +229,7 @@ impl SampleSource for StimulusAdc {
         })
         .await;
         // Only the last completed half is intact: the DMA is filling the other.
-        let oldest = h.dma_sets.load(Ordering::Acquire).wrapping_sub(BLOCK_SETS);
+        let oldest = advance(h).0.wrapping_sub(BLOCK_SETS);
         if after(oldest, self.next) {
             return Err(self.overrun(h, oldest));
         }
@@ -166,30 +239,25 @@ impl SampleSource for StimulusAdc {
             *dst = ring_set(self.next.wrapping_add(i as u32));
         }
         // A half that completed during the copy may have overwritten it.
-        let oldest = h.dma_sets.load(Ordering::Acquire).wrapping_sub(BLOCK_SETS);
+        let oldest = advance(h).0.wrapping_sub(BLOCK_SETS);
         if after(oldest, self.next) {
             return Err(self.overrun(h, oldest));
         }
         self.next = self.next.wrapping_add(n as u32);
         h.consumed_sets.fetch_add(n as u32, Ordering::Relaxed);
         if self.next == half_end {
-            self.finished = Some(half_end / BLOCK_SETS - 1);
+            self.finished = Some((half_end / BLOCK_SETS).wrapping_sub(1));
         }
         Ok(n)
     }
 }
 
-/// TIMER0 (IRQ 8): one DMA half complete, if the host has written it.
+/// TIMER0 (IRQ 8): a DMA half is due. Completes it, wakes the sampling task
+/// and sets the timer to the next half's due time, so the timer cannot
+/// drift from the DMA's clock.
 pub extern "C" fn on_timer_interrupt() {
     timer_write(INTCLEAR, 1);
-    let h = header();
-    let dma = h.dma_sets.load(Ordering::Relaxed);
-    let written = h.written_sets.load(Ordering::Acquire);
-    if written.wrapping_sub(dma) >= BLOCK_SETS && written.wrapping_sub(dma) <= CAPACITY_SETS {
-        DONE_AT[(dma / BLOCK_SETS) as usize % 4].store(clock::cycles32(), Ordering::Relaxed);
-        h.dma_sets.store(dma.wrapping_add(BLOCK_SETS), Ordering::Release);
-        WAKER.wake();
-    } else if h.end_of_stream.load(Ordering::Acquire) == 0 {
-        h.starved_blocks.fetch_add(1, Ordering::Relaxed);
-    }
+    let (_, to_next) = advance(header());
+    timer_write(VALUE, (to_next as u32).clamp(1, CLOCKS_PER_BLOCK));
+    WAKER.wake();
 }
