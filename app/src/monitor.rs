@@ -5,7 +5,7 @@ use hammer_estimator::tare::Tare;
 use hammer_estimator::{Config, Estimator, Flags, RawSample, WearState, MAX_CONFIRM};
 use hammer_wire::{
     config_hash, Alarm, AlarmKind, CaptureChunk, CommandKind, DeviceConfig, DeviceInfo, DeviceMsg, HostMsg,
-    RejectReason, Status, WearBlob, BLOCK_SAMPLES, PROTOCOL_VERSION, WEAR_STATE_BYTES,
+    RejectReason, ResetCause, Status, WearBlob, BLOCK_SAMPLES, PROTOCOL_VERSION, WEAR_STATE_BYTES,
 };
 
 /// Sample-sets a raw capture holds: one full cycle of the paper's hammer
@@ -65,12 +65,14 @@ pub struct Monitor {
     /// Counters of estimators replaced by a new configuration: the status counts since boot.
     carried: hammer_estimator::Counters,
     config_hash: u32,
+    reset_cause: ResetCause,
 }
 
 impl Monitor {
     pub fn new(cfg: Config, board: &'static str) -> Result<Self, hammer_estimator::ConfigError> {
         let est = Estimator::new(cfg)?;
         Ok(Self {
+            reset_cause: ResetCause::PowerOn,
             config_hash: config_hash(&DeviceConfig::from(&cfg)),
             est,
             board,
@@ -392,7 +394,14 @@ impl Monitor {
             protocol_version: PROTOCOL_VERSION,
             firmware_version: FIRMWARE_VERSION,
             config_hash: self.config_hash,
+            reset_cause: self.reset_cause,
         }
+    }
+
+    /// Why the board last started, as it recorded it before the reset: every
+    /// status carries it until the next reset.
+    pub fn set_reset_cause(&mut self, cause: ResetCause) {
+        self.reset_cause = cause;
     }
 }
 

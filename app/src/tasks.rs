@@ -16,6 +16,7 @@ use hammer_wire::{
 
 use crate::board::{Clock, LinkRx, LinkTx, Overrun, SampleSource};
 use crate::monitor::{LinkCounters, Monitor};
+use crate::supervisor::{Duty, Supervisor};
 
 /// How often the device sends a `Status` without being asked.
 pub const STATUS_PERIOD_US: u64 = 1_000_000;
@@ -76,6 +77,9 @@ pub struct Shared<M: RawMutex> {
     pub wear_snapshot: Signal<M, WearBlob>,
     /// The configuration after a change (set by the host, or by a tare), to persist likewise.
     pub config_snapshot: Signal<M, DeviceConfig>,
+    /// The duties' check-ins (the sampling loop and the link here, a board's
+    /// persistence task there), for the board's watchdog.
+    pub supervisor: Supervisor,
 }
 
 impl<M: RawMutex> Shared<M> {
@@ -87,6 +91,7 @@ impl<M: RawMutex> Shared<M> {
             link: LinkAtomics::new(),
             wear_snapshot: Signal::new(),
             config_snapshot: Signal::new(),
+            supervisor: Supervisor::new(),
         }
     }
 
@@ -124,6 +129,7 @@ pub async fn sampling<S: SampleSource, M: RawMutex, C: Clock>(
     loop {
         // Commands are answered even when no samples flow.
         let first = select(source.read(&mut buf), shared.commands.receive()).await;
+        shared.supervisor.beat(Duty::Sampling);
         let t0 = clock.now_us();
         let mut emit = |m| shared.send(m);
         let mut pending = None;
@@ -225,6 +231,7 @@ pub async fn link_tx<T: LinkTx, M: RawMutex>(tx: &mut T, shared: &Shared<M>) -> 
             Ok(n) => {
                 tx.write_all(&buf[..n]).await;
                 shared.link.frames_sent.fetch_add(1, Ordering::Relaxed);
+                shared.supervisor.beat(Duty::Link);
             }
             Err(_) => {
                 shared.link.frames_dropped.fetch_add(1, Ordering::Relaxed);

@@ -20,11 +20,12 @@
 mod clock;
 mod link;
 mod persist;
+mod reset;
 mod sampler;
 
 use defmt::{error, info, unwrap, warn};
 use embassy_executor::{InterruptExecutor, Spawner};
-use embassy_futures::select::{select, Either};
+use embassy_futures::select::Either;
 use embassy_stm32::gpio::{Level, Output, Speed};
 use embassy_stm32::interrupt;
 use embassy_stm32::interrupt::{InterruptExt, Priority};
@@ -140,12 +141,16 @@ async fn link_tx(mut tx: link::Tx) {
 /// Pets the IWDG only while the board is demonstrably working: this task
 /// runs (the thread executor is not starved by a runaway DSP or a spinning
 /// link task), sample blocks keep arriving (the sampling chain has not
-/// stalled beyond its own recovery), and no link write is stuck. A board
-/// that fails any of these resets within STALL_LIMIT + WATCHDOG_TIMEOUT.
+/// stalled beyond its own recovery), no link write is stuck, and every
+/// supervised duty (sampling loop, link, persistence) has checked in within
+/// its period (`hammer_app::Watch`). A board that fails any of these records
+/// which duty failed (`reset`) and resets within STALL_LIMIT + WATCHDOG_TIMEOUT.
 #[embassy_executor::task]
-async fn watchdog(mut wdg: IndependentWatchdog<'static, IWDG>) {
+async fn watchdog(mut wdg: IndependentWatchdog<'static, IWDG>, persisting: bool) {
     let mut last_blocks = sampler::BLOCKS.load(core::sync::atomic::Ordering::Relaxed);
     let mut last_progress = Instant::now();
+    // In WATCHDOG_CHECK periods (250 ms): sampling 0.5 s, link and persistence 3 s.
+    let mut watch = hammer_app::Watch::new([Some(2), Some(12), persisting.then_some(12)]);
     let mut reported = false;
     loop {
         Timer::after(WATCHDOG_CHECK).await;
@@ -157,17 +162,41 @@ async fn watchdog(mut wdg: IndependentWatchdog<'static, IWDG>) {
         }
         let dsp_ok = now - last_progress < STALL_LIMIT;
         let link_ok = (link::tx_busy_ms(now) as u64) < STALL_LIMIT.as_millis();
-        if dsp_ok && link_ok {
-            wdg.pet();
-            reported = false;
-        } else if !reported {
-            error!(
-                "watchdog: sampling alive {}, link alive {}: letting the IWDG reset the board",
-                dsp_ok, link_ok
-            );
-            reported = true;
+        let duties = watch.tick(&SHARED.supervisor);
+        let overdue = match (dsp_ok, link_ok, duties) {
+            (true, true, Ok(())) => None,
+            (false, _, _) => Some(hammer_app::Duty::Sampling),
+            (_, false, _) => Some(hammer_app::Duty::Link),
+            (_, _, Err(duty)) => Some(duty),
+        };
+        match overdue {
+            None => {
+                wdg.pet();
+                if reported {
+                    reset::record(hammer_wire::ResetCause::PowerOn);
+                }
+                reported = false;
+            }
+            Some(duty) if !reported => {
+                reset::record(hammer_wire::ResetCause::Watchdog { overdue: duty });
+                error!(
+                    "watchdog: {=str} stopped checking in: letting the IWDG reset the board",
+                    reset::name(hammer_wire::ResetCause::Watchdog { overdue: duty })
+                );
+                reported = true;
+            }
+            Some(_) => {}
         }
     }
+}
+
+/// A fault is recorded for the next boot's status, then the board resets.
+#[cortex_m_rt::exception]
+unsafe fn HardFault(frame: &cortex_m_rt::ExceptionFrame) -> ! {
+    // SAFETY: CFSR (0xE000_ED28) is readable at any time.
+    let cfsr = unsafe { core::ptr::read_volatile(0xE000_ED28 as *const u32) };
+    reset::record(hammer_wire::ResetCause::Fault { pc: frame.pc(), cfsr });
+    cortex_m::peripheral::SCB::sys_reset()
 }
 
 /// Visible proof of life, independent of the link.
@@ -224,10 +253,25 @@ fn stored_config(store: &mut persist::Persist, rate_hz: f32) -> Option<hammer_es
 /// (`hammer_app::tasks::WEAR_SAVE_CYCLES`) and the configuration when it
 /// changes. Thread mode: a page erase stalls only this task, the sampling
 /// executor preempts it, and bank 2 is written while the code runs from bank 1.
+///
+/// It checks in with the watchdog's supervisor every second it waits and
+/// after every store, so a store that never returns resets the board.
 #[embassy_executor::task]
 async fn persist_state(mut store: persist::Persist) {
+    use embassy_futures::select::{select3, Either3};
     loop {
-        match select(SHARED.wear_snapshot.wait(), SHARED.config_snapshot.wait()).await {
+        SHARED.supervisor.beat(hammer_app::Duty::Persistence);
+        let snapshot = select3(
+            SHARED.wear_snapshot.wait(),
+            SHARED.config_snapshot.wait(),
+            Timer::after(Duration::from_secs(1)),
+        );
+        let next = match snapshot.await {
+            Either3::First(blob) => Either::First(blob),
+            Either3::Second(cfg) => Either::Second(cfg),
+            Either3::Third(()) => continue,
+        };
+        match next {
             Either::First(blob) => match store.store(&persist::WEAR, &blob.bytes) {
                 Ok(()) => info!("persist: wear state saved"),
                 Err(_) => warn!("persist: saving the wear state failed"),
@@ -301,6 +345,9 @@ async fn main(spawner: Spawner) {
         ),
     });
     let store = restore_wear(monitor, store);
+    let cause = reset::take_cause();
+    info!("reset cause: {=str}", reset::name(cause));
+    monitor.set_reset_cause(cause);
 
     let (tx, rx) = unwrap!(link::new(
         p.USART2,
@@ -319,7 +366,7 @@ async fn main(spawner: Spawner) {
 
     spawner.spawn(unwrap!(link_rx(rx)));
     spawner.spawn(unwrap!(link_tx(tx)));
-    spawner.spawn(unwrap!(watchdog(wdg)));
+    spawner.spawn(unwrap!(watchdog(wdg, store.is_some())));
     if let Some(store) = store {
         spawner.spawn(unwrap!(persist_state(store)));
     }

@@ -429,14 +429,15 @@ fn headless_loop(port: SharedPort, cycles: usize, stimulus: Option<&Stimulus>) -
     })?;
     if let Some(s) = status {
         println!(
-            "status: {} samples, {} cycles ({} invalid), {} dropped samples, {} frames sent, {} dropped, rx errors {}",
+            "status: {} samples, {} cycles ({} invalid), {} dropped samples, {} frames sent, {} dropped, rx errors {}, last reset: {}",
             s.samples,
             s.cycles,
             s.invalid_cycles,
             s.dropped_samples,
             s.frames_sent,
             s.frames_dropped,
-            s.rx_crc_errors + s.rx_cobs_errors + s.rx_decode_errors + s.rx_oversize
+            s.rx_crc_errors + s.rx_cobs_errors + s.rx_decode_errors + s.rx_oversize,
+            crate::numfmt::reset_cause(&s.reset_cause)
         );
     }
     if let Some(stimulus) = stimulus {

@@ -509,6 +509,10 @@ fn the_dashboard_shows_the_emulated_boards_identity_and_health() {
     );
     assert!(s.contains("CPU load"), "{s}");
     assert!(
+        s.contains("Last reset") && s.contains("power-on"),
+        "the reset cause:\n{s}"
+    );
+    assert!(
         s.contains("S/s"),
         "the configuration (GetConfig) arrived and matches the hash:\n{s}"
     );

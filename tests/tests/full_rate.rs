@@ -158,3 +158,56 @@ fn a_late_firmware_loses_whole_halves_counted_to_the_sample_as_the_reference_boa
     );
     assert_eq!(s.adc_overruns, c.overruns);
 }
+
+#[test]
+fn a_stuck_sampling_task_is_reset_by_the_supervised_watchdog_which_says_why() {
+    let samples = codes(5.0, 8.0, 12);
+    let stimulus = Stimulus::create().unwrap();
+    assert!(stimulus.push(&samples, &std::sync::atomic::AtomicBool::new(false)));
+    stimulus.finish();
+    let mut emu = Emulator::start_with(&firmware_elf(), Some(Icount::m4_at_125_mips(false)), Some(&stimulus))
+        .expect("QEMU and the emulated firmware");
+    let mut link = Client::new(emu.connect(T).unwrap());
+    let (info, _) = link.handshake(T).unwrap();
+    let status = |link: &mut Client<std::net::TcpStream>| {
+        link.send(&HostMsg::GetStatus).unwrap();
+        link.recv_until(T, |m| if let DeviceMsg::Status(s) = m { Some(*s) } else { None })
+            .unwrap()
+            .0
+            .expect("status")
+    };
+    assert_eq!(status(&mut link).reset_cause, ResetCause::PowerOn);
+    while stimulus.counters().consumed_sets < RATE_HZ / 2 {
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    // The sampling task hangs for 5 s; interrupts still run, the link task
+    // does not (one executor). The watchdog is fed only while every duty
+    // checks in: sampling is quiet after 0.5 s, the watchdog strikes within
+    // 2 s more, and the board restarts, saying why.
+    stimulus.stall(5_000_000);
+    let deadline = Instant::now() + T;
+    let after = loop {
+        assert!(Instant::now() < deadline, "no status after a reset");
+        let s = status(&mut link);
+        if s.reset_cause != ResetCause::PowerOn {
+            break s;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    assert_eq!(
+        after.reset_cause,
+        ResetCause::Watchdog {
+            overdue: Duty::Sampling
+        }
+    );
+    assert!(after.uptime_us < 3_000_000, "a fresh boot: {after:?}");
+    assert_eq!(after.config_hash, info.config_hash);
+    assert!(emu.is_running(), "a reset, not an exit");
+    // The restarted board samples on where the DMA stands.
+    let before = stimulus.counters().consumed_sets;
+    std::thread::sleep(Duration::from_millis(300));
+    assert!(
+        stimulus.counters().consumed_sets > before,
+        "sampling again after the reset"
+    );
+}

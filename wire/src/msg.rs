@@ -132,6 +132,29 @@ pub struct Status {
     pub protocol_version: u16,
     pub firmware_version: [u8; 3],
     pub config_hash: u32,
+    /// Why the device last started (kept until the next reset).
+    pub reset_cause: ResetCause,
+}
+
+/// A duty of the firmware that the watchdog supervises: each must check in
+/// within its period, or the watchdog is no longer fed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Duty {
+    Sampling,
+    Link,
+    Persistence,
+}
+
+/// Why the device last started, as it recorded it in RAM that survives a reset.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub enum ResetCause {
+    /// Power-on or a reset with nothing recorded.
+    #[default]
+    PowerOn,
+    /// The watchdog: `overdue` had not checked in within its period.
+    Watchdog { overdue: Duty },
+    /// A fault exception: the faulting instruction and the fault status (CFSR).
+    Fault { pc: u32, cfsr: u32 },
 }
 
 /// A piece of a raw capture: ADC codes plus what is needed to turn them into a trace.

@@ -115,4 +115,5 @@ pub async fn next_tick() {
 fn SysTick() {
     WRAPS.fetch_add(1, Ordering::Release);
     TICK_WAKER.wake();
+    crate::watchdog::on_tick();
 }

@@ -31,6 +31,7 @@ mod executor;
 mod pacing;
 mod uart;
 mod vectors;
+mod watchdog;
 
 use core::fmt::Write as _;
 
@@ -52,7 +53,8 @@ const BOARD_NAME: &str = "qemu-mps2-an386";
 
 type Mutex = CriticalSectionRawMutex;
 
-static SHARED: Shared<Mutex> = Shared::new();
+/// `pub(crate)`: the watchdog's feeder reads the duties' check-ins.
+pub(crate) static SHARED: Shared<Mutex> = Shared::new();
 /// The monitor holds a ~40 KB capture buffer: a static, not a task's stack.
 static MONITOR: StaticCell<Monitor> = StaticCell::new();
 static CLOCK: StaticCell<SysTickClock> = StaticCell::new();
@@ -105,6 +107,9 @@ fn main() -> ! {
         Err(_) => panic!("default estimator configuration rejected"),
     });
 
+    monitor.set_reset_cause(watchdog::take_reset_cause());
+    watchdog::start();
+
     let (samples, idle) = match StimulusAdc::start() {
         Ok(adc) => (Samples::Adc(adc), executor::Idle::Spin),
         Err(NoStimulus::Absent) => (Samples::Link(LinkSamples::new(&SHARED)), executor::Idle::Sleep),
@@ -133,12 +138,21 @@ fn panic(info: &core::panic::PanicInfo) -> ! {
     exit_failure()
 }
 
-/// Faults (a bad pointer, an undefined instruction) end QEMU like a panic.
+/// Faults (a bad pointer, an undefined instruction) are recorded for the
+/// next boot's status and reset the board, as on the reference board. The
+/// third since QEMU started ends QEMU like a panic instead, so a fault at
+/// boot cannot loop forever under a test.
 #[exception]
 unsafe fn HardFault(frame: &ExceptionFrame) -> ! {
     let _ = write!(PanicWriter, "\0hard fault at pc {:#010x}\r\n\0", frame.pc());
     cortex_m_semihosting::heprintln!("hard fault: {:?}", frame);
-    exit_failure()
+    // SAFETY: CFSR (0xE000_ED28) is readable at any time.
+    let cfsr = unsafe { core::ptr::read_volatile(0xE000_ED28 as *const u32) };
+    watchdog::record(hammer_wire::ResetCause::Fault { pc: frame.pc(), cfsr });
+    if watchdog::count_fault() >= 3 {
+        exit_failure()
+    }
+    cortex_m::peripheral::SCB::sys_reset()
 }
 
 fn exit_failure() -> ! {
