@@ -8,6 +8,7 @@
 //!   link transmit) and the [`Shared`] state between them;
 //! - [`monitor`]: the synchronous, sans-IO core: samples in, estimator,
 //!   reports, alarms, captures and wear persistence out; commands applied;
+//! - [`persisted`]: the configuration record the boards store;
 //! - [`reset`]: the reset cause as a board keeps it through a reset;
 //! - [`supervisor`]: the duties' check-ins, for a watchdog fed only while
 //!   every duty is alive.
@@ -28,11 +29,12 @@
 
 pub mod board;
 pub mod monitor;
+pub mod persisted;
 pub mod reset;
 pub mod supervisor;
 pub mod tasks;
 
-pub use board::{Clock, LinkRx, LinkTx, Overrun, SampleSource};
+pub use board::{Clock, LinkRx, LinkTx, Overrun, Record, SampleSource, Store};
 pub use monitor::{Monitor, CAPTURE_SAMPLES, FIRMWARE_VERSION};
 pub use supervisor::{Duty, Supervisor, Watch};
-pub use tasks::{link_rx, link_tx, sampling, LinkSamples, Shared};
+pub use tasks::{link_rx, link_tx, persisting, sampling, LinkSamples, Shared};

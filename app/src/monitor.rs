@@ -51,6 +51,8 @@ pub struct Monitor {
     est: Estimator,
     board: &'static str,
     tare: Option<(Tare, u32)>,
+    /// A `MeasureCodes` under way: the same sums as a tare, and samples left.
+    measure: Option<(Tare, u32)>,
     capture: CaptureState,
     capture_buf: [RawSample; CAPTURE_SAMPLES],
     capture_len: usize,
@@ -77,6 +79,7 @@ impl Monitor {
             est,
             board,
             tare: None,
+            measure: None,
             capture: CaptureState::Idle,
             capture_buf: [RawSample::default(); CAPTURE_SAMPLES],
             capture_len: 0,
@@ -130,7 +133,10 @@ impl Monitor {
     pub fn on_samples(&mut self, block: &[RawSample], out: &mut impl FnMut(DeviceMsg)) {
         // The common case: neither a tare nor a capture needs each sample, so
         // the estimator takes whole stretches through its hot loop.
-        if self.tare.is_none() && matches!(self.capture, CaptureState::Idle | CaptureState::Streaming { .. }) {
+        if self.tare.is_none()
+            && self.measure.is_none()
+            && matches!(self.capture, CaptureState::Idle | CaptureState::Streaming { .. })
+        {
             // After an impact the estimator blanks `blank_after` samples, so a
             // piece one longer than that holds at most one report: none is lost.
             let c = self.est.config();
@@ -148,6 +154,15 @@ impl Monitor {
             return;
         }
         for &s in block {
+            if let Some((sums, left)) = &mut self.measure {
+                sums.push(s);
+                *left -= 1;
+                if *left == 0 {
+                    let (samples, mean, std) = sums.code_stats();
+                    self.measure = None;
+                    out(DeviceMsg::CodeStats { samples, mean, std });
+                }
+            }
             if let Some((tare, left)) = &mut self.tare {
                 tare.push(s);
                 *left -= 1;
@@ -360,6 +375,15 @@ impl Monitor {
                 Err(_) => self.reject(CommandKind::RestoreWear, RejectReason::BadWearState, out),
             },
             HostMsg::Samples(_) => self.reject(CommandKind::Samples, RejectReason::Busy, out),
+            HostMsg::MeasureCodes { samples } => {
+                // The sums stop growing at 10⁶ samples (see `Tare::push`).
+                if self.measure.is_some() || samples == 0 || samples > 1_000_000 {
+                    self.reject(CommandKind::MeasureCodes, RejectReason::Busy, out);
+                } else {
+                    self.measure = Some((Tare::default(), samples));
+                    out(DeviceMsg::Ack(CommandKind::MeasureCodes));
+                }
+            }
         }
     }
 

@@ -14,7 +14,7 @@ use hammer_wire::{
     MAX_FRAME,
 };
 
-use crate::board::{Clock, LinkRx, LinkTx, Overrun, SampleSource};
+use crate::board::{Clock, LinkRx, LinkTx, Overrun, SampleSource, Store};
 use crate::monitor::{LinkCounters, Monitor};
 use crate::supervisor::{Duty, Supervisor};
 
@@ -181,6 +181,30 @@ pub async fn sampling<S: SampleSource, M: RawMutex, C: Clock>(
                 busy_total_us,
                 shared.link.snapshot(),
             )));
+        }
+    }
+}
+
+/// Persistence: stores the wear state and the configuration as the sampling
+/// task hands them over, at low priority (a flash erase stalls only this).
+/// Checks in with the supervisor at every `tick` (a board's periodic timer,
+/// at most a second) and after every store, so a store that never returns
+/// stops the watchdog's feeding.
+pub async fn persisting<S: Store, M: RawMutex, F: core::future::Future<Output = ()>>(
+    store: &mut S,
+    shared: &Shared<M>,
+    mut tick: impl FnMut() -> F,
+) -> ! {
+    use embassy_futures::select::{select3, Either3};
+    loop {
+        shared.supervisor.beat(Duty::Persistence);
+        match select3(shared.wear_snapshot.wait(), shared.config_snapshot.wait(), tick()).await {
+            Either3::First(blob) => store.store_wear(&blob),
+            Either3::Second(cfg) => match crate::persisted::config_record(&cfg) {
+                Some(rec) => store.store_config(&rec),
+                None => store.failed(crate::board::Record::Config),
+            },
+            Either3::Third(()) => {}
         }
     }
 }

@@ -25,7 +25,6 @@ mod sampler;
 
 use defmt::{error, info, unwrap, warn};
 use embassy_executor::{InterruptExecutor, Spawner};
-use embassy_futures::select::Either;
 use embassy_stm32::gpio::{Level, Output, Speed};
 use embassy_stm32::interrupt;
 use embassy_stm32::interrupt::{InterruptExt, Priority};
@@ -34,10 +33,10 @@ use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_stm32::{bind_interrupts, dma, pac, usart, Config};
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_time::{Duration, Instant, Ticker, Timer};
-use hammer_app::{Monitor, Shared};
+use hammer_app::{persisted, Monitor, Shared};
 use hammer_estimator::wear::WEAR_STATE_BYTES;
 use hammer_estimator::ConfigError;
-use hammer_wire::{DeviceConfig, DeviceMsg, HostMsg, WearBlob};
+use hammer_wire::{DeviceMsg, HostMsg, WearBlob};
 use static_cell::StaticCell;
 use {defmt_rtt as _, panic_probe as _};
 
@@ -228,24 +227,38 @@ fn restore_wear(monitor: &mut Monitor, store: Option<persist::Persist>) -> Optio
     Some(store)
 }
 
-/// Bytes of a stored configuration record: a length and postcard bytes, padded.
-const CONFIG_RECORD: usize = 200;
-
 /// The configuration saved before the last reset (calibration, tare, thresholds),
 /// if there is one the estimator accepts. The sample rate stays the board's:
 /// TIM6 is set at build time.
 fn stored_config(store: &mut persist::Persist, rate_hz: f32) -> Option<hammer_estimator::Config> {
-    let rec = store.load::<CONFIG_RECORD>(&persist::CONFIG)?;
-    let len = u16::from_le_bytes([rec[0], rec[1]]) as usize;
-    let wire: DeviceConfig = postcard::from_bytes(rec.get(2..2 + len)?).ok()?;
-    let mut cfg = hammer_estimator::Config::default().with_device(&wire);
-    cfg.sample_rate_hz = rate_hz;
-    match cfg.validate() {
-        Ok(()) => Some(cfg),
-        Err(_) => {
-            warn!("persist: stored configuration rejected, using defaults");
-            None
+    let rec = store.load::<{ persisted::CONFIG_RECORD }>(&persist::CONFIG)?;
+    let cfg = persisted::config_from_record(&rec, Some(rate_hz));
+    if cfg.is_none() {
+        warn!("persist: stored configuration rejected, using defaults");
+    }
+    cfg
+}
+
+/// The flash store as the app's `Store`, logging over defmt.
+struct FlashStore(persist::Persist);
+
+impl hammer_app::Store for FlashStore {
+    fn store_wear(&mut self, blob: &WearBlob) {
+        match self.0.store(&persist::WEAR, &blob.bytes) {
+            Ok(()) => info!("persist: wear state saved"),
+            Err(_) => warn!("persist: saving the wear state failed"),
         }
+    }
+
+    fn store_config(&mut self, record: &[u8; persisted::CONFIG_RECORD]) {
+        match self.0.store(&persist::CONFIG, record) {
+            Ok(()) => info!("persist: configuration saved"),
+            Err(_) => warn!("persist: saving the configuration failed"),
+        }
+    }
+
+    fn failed(&mut self, _: hammer_app::Record) {
+        warn!("persist: configuration does not fit a record");
     }
 }
 
@@ -253,43 +266,10 @@ fn stored_config(store: &mut persist::Persist, rate_hz: f32) -> Option<hammer_es
 /// (`hammer_app::tasks::WEAR_SAVE_CYCLES`) and the configuration when it
 /// changes. Thread mode: a page erase stalls only this task, the sampling
 /// executor preempts it, and bank 2 is written while the code runs from bank 1.
-///
-/// It checks in with the watchdog's supervisor every second it waits and
-/// after every store, so a store that never returns resets the board.
 #[embassy_executor::task]
-async fn persist_state(mut store: persist::Persist) {
-    use embassy_futures::select::{select3, Either3};
-    loop {
-        SHARED.supervisor.beat(hammer_app::Duty::Persistence);
-        let snapshot = select3(
-            SHARED.wear_snapshot.wait(),
-            SHARED.config_snapshot.wait(),
-            Timer::after(Duration::from_secs(1)),
-        );
-        let next = match snapshot.await {
-            Either3::First(blob) => Either::First(blob),
-            Either3::Second(cfg) => Either::Second(cfg),
-            Either3::Third(()) => continue,
-        };
-        match next {
-            Either::First(blob) => match store.store(&persist::WEAR, &blob.bytes) {
-                Ok(()) => info!("persist: wear state saved"),
-                Err(_) => warn!("persist: saving the wear state failed"),
-            },
-            Either::Second(cfg) => {
-                let mut rec = [0u8; CONFIG_RECORD];
-                let Ok(used) = postcard::to_slice(&cfg, &mut rec[2..]).map(|b| b.len()) else {
-                    warn!("persist: configuration does not fit a record");
-                    continue;
-                };
-                rec[..2].copy_from_slice(&(used as u16).to_le_bytes());
-                match store.store(&persist::CONFIG, &rec) {
-                    Ok(()) => info!("persist: configuration saved"),
-                    Err(_) => warn!("persist: saving the configuration failed"),
-                }
-            }
-        }
-    }
+async fn persist_state(store: persist::Persist) {
+    let mut store = FlashStore(store);
+    hammer_app::persisting(&mut store, &SHARED, || Timer::after(Duration::from_secs(1))).await
 }
 
 #[embassy_executor::main]

@@ -52,6 +52,10 @@ pub enum Command {
     /// time: every report checked against the host estimator, and the
     /// board's overruns, lost frames, CPU duty and worst latency.
     Soak(crate::soak::SoakArgs),
+    /// Calibrate a board's pressure channels (zero at atmosphere, span
+    /// against a reference you apply and type in) and its accelerometer's
+    /// zero at rest; the board stores the result.
+    Calibrate(crate::calibrate::CalibrateArgs),
     /// Run the estimator (the firmware's no_std crate) over a trace and print
     /// one record per impact cycle: friction (N), impact energy (J) with and
     /// without friction, frequency (Hz), wear index (J), each with its
@@ -264,6 +268,11 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Diagnose(args) => crate::diagnose::command::run(&args),
         Command::DiagnoseBench(args) => crate::diagnose::command::bench(&args),
         Command::Demo(args) => crate::demo::run(&args),
+        Command::Calibrate(args) => {
+            let c = crate::calibrate::run(&args)?;
+            outln!("{}", c.summary());
+            Ok(())
+        }
         Command::Soak(args) => {
             let soak = crate::soak::run(&args, true)?;
             outln!("{}", soak.summary());

@@ -11,7 +11,7 @@
 //! - [`estimate`], [`report`], [`plot`]: offline: per-cycle records, the
 //!   report page, the effect figures;
 //! - [`diagnose`]: the sim-to-real gap diagnosis and its benchmarks;
-//! - [`capture`], [`demo`], [`soak`], [`monitor`]: live: raw captures, the
+//! - [`capture`], [`calibrate`], [`demo`], [`soak`], [`monitor`]: live: raw captures, calibration, the
 //!   no-hardware demo, the full-rate soak, the dashboard, logs and replay;
 //! - [`cli`]: the subcommands, thin over the above.
 
@@ -19,6 +19,7 @@
 mod stdout;
 
 pub mod board;
+pub mod calibrate;
 pub mod capture;
 pub mod chart;
 pub mod cli;

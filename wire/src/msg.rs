@@ -42,6 +42,11 @@ pub enum HostMsg {
     RestoreWear(WearBlob),
     /// The sample stream, where the board has no ADC of its own (the emulated board).
     Samples(SampleBlock),
+    /// Average the next `samples` sample-sets and answer with
+    /// [`DeviceMsg::CodeStats`]: a calibration's span point.
+    MeasureCodes {
+        samples: u32,
+    },
 }
 
 /// Which command an acknowledgement or a rejection is about.
@@ -59,6 +64,7 @@ pub enum CommandKind {
     Samples,
     /// A frame that did not decode (CRC, COBS, unknown message).
     Unknown,
+    MeasureCodes,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -94,6 +100,13 @@ pub enum DeviceMsg {
     Rejected {
         command: CommandKind,
         reason: RejectReason,
+    },
+    /// The answer to [`HostMsg::MeasureCodes`]: per channel (rear, front,
+    /// accel), the mean and standard deviation of the raw codes.
+    CodeStats {
+        samples: u32,
+        mean: [f32; 3],
+        std: [f32; 3],
     },
 }
 

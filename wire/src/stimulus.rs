@@ -47,7 +47,13 @@ pub const BLOCK_SETS: u32 = 256;
 /// The reference board's sample rate.
 pub const RATE_HZ: u32 = 100_000;
 
-const _: () = assert!(RING_OFFSET + CAPACITY_SETS as usize * SET_BYTES <= PSRAM_BYTES);
+/// The emulated board's non-volatile area, past the ring: QEMU keeps RAM
+/// through a board reset, and the host's backing file keeps it beyond QEMU.
+pub const NVM_OFFSET: usize = 13 * 1024 * 1024;
+pub const NVM_BYTES: usize = 64 * 1024;
+
+const _: () = assert!(RING_OFFSET + CAPACITY_SETS as usize * SET_BYTES <= NVM_OFFSET);
+const _: () = assert!(NVM_OFFSET + NVM_BYTES <= PSRAM_BYTES);
 const _: () = assert!(CAPACITY_SETS.is_power_of_two() && CAPACITY_SETS % BLOCK_SETS == 0);
 const _: () = assert!(core::mem::size_of::<Header>() <= RING_OFFSET);
 

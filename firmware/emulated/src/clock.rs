@@ -30,8 +30,17 @@ const _: () = assert!(RELOAD <= 0x00FF_FFFF, "SysTick's reload register has 24 b
 static WRAPS: AtomicU32 = AtomicU32::new(0);
 /// Core cycles spent asleep in WFI, for the CPU load the host reads.
 static IDLE: critical_section::Mutex<Cell<u64>> = critical_section::Mutex::new(Cell::new(0));
-/// The one task waiting in [`next_tick`].
-static TICK_WAKER: AtomicWaker = AtomicWaker::new();
+/// The tasks waiting in [`next_tick`], one per [`Waiter`].
+static TICK_WAKERS: [AtomicWaker; 2] = [const { AtomicWaker::new() }; 2];
+
+/// Who waits for the tick: each may have one wait under way.
+#[derive(Clone, Copy)]
+pub enum Waiter {
+    /// The sampling loop's idle tick (`pacing.rs`).
+    Pacing = 0,
+    /// The persistence task's check-in.
+    Persistence = 1,
+}
 
 /// The app's [`hammer_app::Clock`]; owning SYST keeps anyone else from
 /// reprogramming the counter underneath it.
@@ -96,12 +105,12 @@ pub fn uptime_and_busy_us() -> (u64, u64) {
     (now / per_us, now.saturating_sub(idle) / per_us)
 }
 
-/// Completes at the next SysTick wrap. Only one task may wait at a time
-/// (a second would take over the waker).
-pub async fn next_tick() {
+/// Completes at the next SysTick wrap. One wait per [`Waiter`] at a time
+/// (a second would take over its waker).
+pub async fn next_tick(waiter: Waiter) {
     let start = WRAPS.load(Ordering::Acquire);
     poll_fn(|cx| {
-        TICK_WAKER.register(cx.waker());
+        TICK_WAKERS[waiter as usize].register(cx.waker());
         if WRAPS.load(Ordering::Acquire) != start {
             Poll::Ready(())
         } else {
@@ -114,6 +123,8 @@ pub async fn next_tick() {
 #[exception]
 fn SysTick() {
     WRAPS.fetch_add(1, Ordering::Release);
-    TICK_WAKER.wake();
+    for w in &TICK_WAKERS {
+        w.wake();
+    }
     crate::watchdog::on_tick();
 }

@@ -28,6 +28,7 @@
 mod adc;
 mod clock;
 mod executor;
+mod nvm;
 mod pacing;
 mod uart;
 mod vectors;
@@ -39,7 +40,8 @@ use cortex_m_rt::{entry, exception, ExceptionFrame};
 use cortex_m_semihosting::debug;
 use embassy_executor::raw;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
-use hammer_app::{LinkSamples, Monitor, Overrun, SampleSource, Shared};
+use hammer_app::{persisted, LinkSamples, Monitor, Overrun, Record, SampleSource, Shared};
+use hammer_wire::{HostMsg, WearBlob};
 use hammer_estimator::RawSample;
 use static_cell::StaticCell;
 
@@ -91,6 +93,11 @@ async fn link_tx(mut tx: UartTx) -> ! {
     hammer_app::link_tx(&mut tx, &SHARED).await
 }
 
+#[embassy_executor::task]
+async fn persistence() -> ! {
+    hammer_app::persisting(&mut nvm::Nvm, &SHARED, || clock::next_tick(clock::Waiter::Persistence)).await
+}
+
 #[entry]
 fn main() -> ! {
     let Some(core) = cortex_m::Peripherals::take() else {
@@ -99,14 +106,25 @@ fn main() -> ! {
     let clock: &'static SysTickClock = CLOCK.init(SysTickClock::start(core.SYST));
     let (tx, rx) = uart::init();
 
+    // The configuration stored before the last reset, if any and valid.
+    let stored = nvm::load(Record::Config).and_then(|(rec, len)| persisted::config_from_record(&rec[..len], None));
     // `init_with` lets the compiler build the monitor in place (checked: no
-    // stack frame of its size); the default configuration is valid, so the
-    // error arm is a programming error.
-    let monitor = MONITOR.init_with(|| match Monitor::new(hammer_estimator::Config::default(), BOARD_NAME) {
-        Ok(m) => m,
-        Err(_) => panic!("default estimator configuration rejected"),
+    // stack frame of its size). The default configuration is valid, so the
+    // last error arm is a programming error.
+    let monitor = MONITOR.init_with(|| {
+        match Monitor::new(stored.unwrap_or_default(), BOARD_NAME)
+            .or_else(|_| Monitor::new(hammer_estimator::Config::default(), BOARD_NAME))
+        {
+            Ok(m) => m,
+            Err(_) => panic!("default estimator configuration rejected"),
+        }
     });
-
+    // The wear state, through the command the host would use: validated alike.
+    if let Some((bytes, len)) = nvm::load(Record::Wear) {
+        if let Ok(bytes) = heapless::Vec::from_slice(&bytes[..len]) {
+            monitor.on_command(HostMsg::RestoreWear(WearBlob { bytes }), 0, &mut |_| {});
+        }
+    }
     monitor.set_reset_cause(watchdog::take_reset_cause());
     watchdog::start();
 
@@ -123,6 +141,7 @@ fn main() -> ! {
     spawner.spawn(sampling(monitor, clock, samples).expect("sampling task spawned once"));
     spawner.spawn(link_rx(rx).expect("link_rx task spawned once"));
     spawner.spawn(link_tx(tx).expect("link_tx task spawned once"));
+    spawner.spawn(persistence().expect("persistence task spawned once"));
     executor::run(executor, idle)
 }
 
