@@ -164,7 +164,7 @@ fn panic(info: &core::panic::PanicInfo) -> ! {
 #[exception]
 unsafe fn HardFault(frame: &ExceptionFrame) -> ! {
     let _ = write!(PanicWriter, "\0hard fault at pc {:#010x}\r\n\0", frame.pc());
-    cortex_m_semihosting::heprintln!("hard fault: {:?}", frame);
+    cortex_m_semihosting::heprintln!("hard fault at pc {:#010x}", frame.pc());
     // SAFETY: CFSR (0xE000_ED28) is readable at any time.
     let cfsr = unsafe { core::ptr::read_volatile(0xE000_ED28 as *const u32) };
     watchdog::record(hammer_wire::ResetCause::Fault { pc: frame.pc(), cfsr });
