@@ -30,6 +30,7 @@ mod clock;
 mod executor;
 mod nvm;
 mod pacing;
+#[path = "../../src/stack.rs"]
 mod stack;
 mod uart;
 mod vectors;
