@@ -173,10 +173,7 @@ impl StimulusAdc {
         // SAFETY: the handler only touches the header, DMA and WAKER, all
         // interrupt-safe.
         unsafe { NVIC::unmask(Interrupt::Timer0) };
-        Ok(Self {
-            next,
-            finished: None,
-        })
+        Ok(Self { next, finished: None })
     }
 
     fn overrun(&mut self, h: &Header, oldest: u32) -> Overrun {
