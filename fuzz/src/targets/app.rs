@@ -130,6 +130,8 @@ fn message_code(m: &DeviceMsg) -> u32 {
         DeviceMsg::Wear(_) => 7,
         DeviceMsg::Ack(k) => 8 + *k as u32,
         DeviceMsg::Rejected { command, .. } => 24 + *command as u32,
+        // Between the Acks (8 + up to 11) and the rejections.
+        DeviceMsg::CodeStats { .. } => 21,
     }
 }
 
@@ -171,6 +173,7 @@ pub(crate) fn host_commands() -> Vec<HostMsg> {
         HostMsg::GetWear,
         HostMsg::RestoreWear(mon.wear_blob()),
         HostMsg::Samples(blocks[0].clone()),
+        HostMsg::MeasureCodes { samples: 64 },
     ]
 }
 

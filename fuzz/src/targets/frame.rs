@@ -75,6 +75,7 @@ fn device_variant(m: &DeviceMsg) -> u32 {
         DeviceMsg::Wear(_) => 6,
         DeviceMsg::Ack(_) => 7,
         DeviceMsg::Rejected { .. } => 8,
+        DeviceMsg::CodeStats { .. } => 9,
     }
 }
 
@@ -90,6 +91,7 @@ fn host_variant(m: &HostMsg) -> u32 {
         HostMsg::GetWear => 7,
         HostMsg::RestoreWear(_) => 8,
         HostMsg::Samples(_) => 9,
+        HostMsg::MeasureCodes { .. } => 10,
     }
 }
 
