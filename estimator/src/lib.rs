@@ -548,7 +548,7 @@ impl Estimator {
 
     /// A record with flags and no numbers: what happened instead of a cycle.
     fn record(&mut self, index: u64, mut flags: Flags) -> CycleReport {
-        self.acc.settle(&self.cal);
+        self.acc.settle(&self.d, &self.cal);
         let period_s = index.wrapping_sub(self.cycle_start) as f32 * self.d.dt;
         let n = self.acc.cur.n.max(1.0);
         if self.acc.rail.iter().any(|&r| r as f32 > 0.9 * n) {
@@ -574,7 +574,7 @@ impl Estimator {
     }
 
     fn close_cycle(&mut self, index: u64) -> CycleReport {
-        self.acc.settle(&self.cal);
+        self.acc.settle(&self.d, &self.cal);
         let start = self.cycle_start;
         let period_s = index.wrapping_sub(start) as f32 * self.d.dt;
         let tail = self.delay_len as u32;
