@@ -338,9 +338,12 @@ impl CycleAcc {
     /// sample; see [`pass`]), the sensor watches (see [`Self::watch`]), then
     /// at a checkpoint the float conversion of the integer sums and the
     /// checkpoint's work.
+    ///
+    /// The run is given as two slices that follow each other (the delay
+    /// line's samples, then the new ones): one call, one set-up.
     #[inline]
-    pub fn push_run(&mut self, d: &Derived, cal: &Calibration, samples: &[crate::RawSample], stuck_limit: u32) {
-        let Some(first) = samples.first() else {
+    pub fn push_run(&mut self, d: &Derived, cal: &Calibration, run: [&[crate::RawSample]; 2], stuck_limit: u32) {
+        let Some(first) = run[0].first().or(run[1].first()) else {
             return;
         };
         let b = Balance::new(d, cal);
@@ -348,19 +351,21 @@ impl CycleAcc {
             // The cycle's first sample: the integrals start at rest there.
             self.first_force = b.force(first.rear, first.front);
         }
-        let mut rest = samples;
-        while !rest.is_empty() {
-            let room = (d.k - self.since_cp) as usize;
-            let (piece, tail) = rest.split_at(rest.len().min(room));
-            rest = tail;
+        let [mut head, mut body] = run;
+        while !(head.is_empty() && body.is_empty()) {
+            let room = ((d.k - self.since_cp) as usize).min(pass::MAX_PIECE);
+            let (h, h_rest) = head.split_at(head.len().min(room));
+            let (t, t_rest) = body.split_at(body.len().min(room - h.len()));
+            (head, body) = (h_rest, t_rest);
+            let piece = [h, t];
             let c = pass::pass(d, cal, &b, piece, &mut self.sq);
             self.watch(cal, &c, piece, stuck_limit);
             self.pend.merge(&c);
-            self.since_cp += piece.len() as u32;
+            self.since_cp += c.n;
             if self.since_cp == d.k {
                 self.since_cp = 0;
                 self.settle(d, cal);
-                if let Some(last) = piece.last() {
+                if let Some(last) = t.last().or(h.last()) {
                     let p1 = (last.rear as f32 - cal.zero[0]) * cal.scale[0];
                     let p2 = (last.front as f32 - cal.zero[1]) * cal.scale[1];
                     self.checkpoint(p1, p2);
@@ -369,17 +374,18 @@ impl CycleAcc {
         }
     }
 
-    /// Rails and stuck codes over `piece`. When no channel's run of equal
-    /// codes can reach the stuck limit within the piece and no sample is at
-    /// a rail (one integer pass), nothing is flagged and only the run
-    /// lengths at its end are needed (a scan back from its end); otherwise
-    /// sample by sample.
+    /// Rails and stuck codes over `piece` (two slices that follow each
+    /// other). When no channel's run of equal codes can reach the stuck
+    /// limit within the piece and no sample is at a rail (from the pass's
+    /// extremes), nothing is flagged and only the run lengths at its end are
+    /// needed (a scan back from its end); otherwise sample by sample.
     #[inline(always)]
-    fn watch(&mut self, cal: &Calibration, c: &CodeSums, piece: &[crate::RawSample], stuck_limit: u32) {
-        let Some(last) = piece.last() else {
+    fn watch(&mut self, cal: &Calibration, c: &CodeSums, piece: [&[crate::RawSample]; 2], stuck_limit: u32) {
+        let [head, body] = piece;
+        let Some(last) = body.last().or(head.last()) else {
             return;
         };
-        let len = piece.len();
+        let len = head.len() + body.len();
         let longest = self.run[0].max(self.run[1]).max(self.run[2]);
         let fast = (longest as u64 + len as u64) < stuck_limit as u64
             && (0..3).all(|ch| c.min[ch] != 0 && c.max[ch] < cal.full[ch]);
@@ -387,14 +393,18 @@ impl CycleAcc {
             let codes = |s: &crate::RawSample| [s.rear, s.front, s.accel];
             let newest = codes(last);
             for (ch, &c) in newest.iter().enumerate() {
-                let mut k = len - 1;
-                while k > 0 && codes(&piece[k - 1])[ch] == c {
-                    k -= 1;
-                }
-                self.run[ch] = if k == 0 && self.last_code[ch] == c {
+                // Samples before the last that hold its code, back to the first that does not.
+                let same = body
+                    .iter()
+                    .chain(head)
+                    .rev()
+                    .skip(1)
+                    .take_while(|s| codes(s)[ch] == c)
+                    .count();
+                self.run[ch] = if same == len - 1 && self.last_code[ch] == c {
                     self.run[ch] + len as u32
                 } else {
-                    (len - 1 - k) as u32
+                    same as u32
                 };
                 self.last_code[ch] = c;
             }
@@ -406,7 +416,7 @@ impl CycleAcc {
             last: self.last_code,
             flags: self.flags,
         };
-        for smp in piece {
+        for smp in head.iter().chain(body) {
             w.check(0, smp.rear, cal.full[0], stuck_limit, cal.bottom_is_fault[0]);
             w.check(1, smp.front, cal.full[1], stuck_limit, cal.bottom_is_fault[1]);
             w.check(2, smp.accel, cal.full[2], stuck_limit, cal.bottom_is_fault[2]);
@@ -445,20 +455,20 @@ impl CycleAcc {
 
         let n = c.n as f32;
         let n0 = self.cur.n;
-        let nn = u64::from(c.n);
         // Σ p, Σ (2n−1−2j)·p and Σ j·p of the interval, per channel.
+        let nn = c.n;
         let sum = |ch: usize| (c.s[ch] as f32 - cal.zero[ch] * n) * cal.scale[ch];
         let weighted = |ch: usize| {
             let w = (2 * c.q[ch]).wrapping_sub(u64::from(c.s[ch]));
-            (w as f32 - cal.zero[ch] * (nn * nn) as f32) * cal.scale[ch]
+            (pass::to_f32(w) - cal.zero[ch] * nn.wrapping_mul(nn) as f32) * cal.scale[ch]
         };
         let indexed = |ch: usize| {
-            let t = (nn * u64::from(c.s[ch])).wrapping_sub(c.q[ch]);
-            (t as f32 - cal.zero[ch] * (nn * (nn - 1) / 2) as f32) * cal.scale[ch]
+            let t = (u64::from(nn) * u64::from(c.s[ch])).wrapping_sub(c.q[ch]);
+            (pass::to_f32(t) - cal.zero[ch] * (nn.wrapping_mul(nn - 1) / 2) as f32) * cal.scale[ch]
         };
         let (p1, p2, a) = (sum(0), sum(1), sum(2));
         let f = d.a1 * p1 - d.a2 * p2 + d.fg * n;
-        let fw = d.a1 * weighted(0) - d.a2 * weighted(1) + d.fg * (nn * nn) as f32;
+        let fw = d.a1 * weighted(0) - d.a2 * weighted(1) + d.fg * nn.wrapping_mul(nn) as f32;
         let f_before = if n0 <= 0.0 {
             -self.first_force
         } else {

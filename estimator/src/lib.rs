@@ -265,7 +265,13 @@ impl Estimator {
                 let to_stall = (self.cycle_start + self.max_period_samples + 1).saturating_sub(self.next_index);
                 let to_cp = self.acc.to_checkpoint(&self.d) as usize + self.pre_samples.saturating_sub(self.delay_len);
                 let limit = rest.len().min(to_stall.min(usize::MAX as u64) as usize).min(to_cp);
-                let n = rest[..limit].iter().position(|s| self.is_impact(s)).unwrap_or(limit);
+                let scan = &rest[..limit];
+                let n = match self.impact_code {
+                    // The common case: one integer compare per sample.
+                    Some(max) => scan.iter().position(|s| s.accel <= max),
+                    None => scan.iter().position(|s| self.is_impact(s)),
+                }
+                .unwrap_or(limit);
                 if n > 0 {
                     self.next_index = self.next_index.wrapping_add(n as u64);
                     self.counters.samples = self.counters.samples.wrapping_add(n as u64);
@@ -495,13 +501,13 @@ impl Estimator {
         }
         let n_proc = total - pre;
         let from_delay = self.delay_len.min(n_proc);
-        if from_delay > 0 {
-            self.acc
-                .push_run(&self.d, &self.cal, &self.delay[..from_delay], self.stuck_limit);
-        }
         let from_run = n_proc - from_delay;
-        self.acc
-            .push_run(&self.d, &self.cal, &run[..from_run], self.stuck_limit);
+        self.acc.push_run(
+            &self.d,
+            &self.cal,
+            [&self.delay[..from_delay], &run[..from_run]],
+            self.stuck_limit,
+        );
         // The new delay line: what is left of the old one, then the run's tail.
         let keep_old = self.delay_len - from_delay;
         self.delay.copy_within(from_delay..from_delay + keep_old, 0);
