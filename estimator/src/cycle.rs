@@ -394,13 +394,13 @@ impl CycleAcc {
             let newest = codes(last);
             for (ch, &c) in newest.iter().enumerate() {
                 // Samples before the last that hold its code, back to the first that does not.
-                let same = body
-                    .iter()
-                    .chain(head)
-                    .rev()
-                    .skip(1)
-                    .take_while(|s| codes(s)[ch] == c)
-                    .count();
+                let tail = |part: &[crate::RawSample]| part.iter().rev().take_while(|s| codes(s)[ch] == c).count();
+                let in_body = tail(body);
+                let same = if in_body == body.len() {
+                    in_body + tail(head)
+                } else {
+                    in_body
+                } - 1;
                 self.run[ch] = if same == len - 1 && self.last_code[ch] == c {
                     self.run[ch] + len as u32
                 } else {

@@ -81,6 +81,34 @@ fn impact_code(cfg: &Config) -> Option<u16> {
     Some(code.unwrap_or(0))
 }
 
+/// The first sample whose accelerometer code is at or below `max` (an
+/// impact), two samples a turn.
+#[inline(always)]
+fn first_at_or_below(scan: &[RawSample], max: u16) -> Option<usize> {
+    let pairs = scan.chunks_exact(2);
+    let odd = pairs.remainder();
+    for (k, p) in pairs.enumerate() {
+        if p[0].accel <= max {
+            return Some(2 * k);
+        }
+        if p[1].accel <= max {
+            return Some(2 * k + 1);
+        }
+    }
+    odd.iter()
+        .position(|s| s.accel <= max)
+        .map(|i| scan.len() - odd.len() + i)
+}
+
+/// Copies a few samples (the delay line's): element by element, as
+/// `copy_from_slice` on 6-byte samples calls a byte-wise `memcpy`.
+#[inline(always)]
+fn copy(dst: &mut [RawSample], src: &[RawSample]) {
+    for (d, s) in dst.iter_mut().zip(src) {
+        *d = *s;
+    }
+}
+
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Phase {
     /// An accelerometer sample crossed the impact threshold; the next few
@@ -268,7 +296,7 @@ impl Estimator {
                 let scan = &rest[..limit];
                 let n = match self.impact_code {
                     // The common case: one integer compare per sample.
-                    Some(max) => scan.iter().position(|s| s.accel <= max),
+                    Some(max) => first_at_or_below(scan, max),
                     None => scan.iter().position(|s| self.is_impact(s)),
                 }
                 .unwrap_or(limit);
@@ -495,7 +523,7 @@ impl Estimator {
         let pre = self.pre_samples;
         let total = self.delay_len + run.len();
         if total <= pre {
-            self.delay[self.delay_len..total].copy_from_slice(run);
+            copy(&mut self.delay[self.delay_len..total], run);
             self.delay_len = total;
             return;
         }
@@ -510,9 +538,11 @@ impl Estimator {
         );
         // The new delay line: what is left of the old one, then the run's tail.
         let keep_old = self.delay_len - from_delay;
-        self.delay.copy_within(from_delay..from_delay + keep_old, 0);
+        for k in 0..keep_old {
+            self.delay[k] = self.delay[from_delay + k];
+        }
         let tail = &run[from_run..];
-        self.delay[keep_old..keep_old + tail.len()].copy_from_slice(tail);
+        copy(&mut self.delay[keep_old..keep_old + tail.len()], tail);
         self.delay_len = keep_old + tail.len();
     }
 
