@@ -251,51 +251,29 @@ impl<'a, M: RawMutex> LinkSamples<'a, M> {
     }
 }
 
-impl<M: RawMutex> LinkSamples<'_, M> {
-    /// The samples lost before `b` (a block went missing, or the host
-    /// restarted its count); `b` is then the one expected next.
-    fn gap_before(&mut self, b: &SampleBlock) -> Option<u32> {
-        let exp = self.expected_seq?;
-        if b.seq == exp {
-            return None;
-        }
-        self.expected_seq = Some(b.seq);
-        Some(b.seq.wrapping_sub(exp).min(1 << 20) * BLOCK_SAMPLES as u32)
-    }
-}
-
 impl<M: RawMutex> SampleSource for LinkSamples<'_, M> {
     async fn read(&mut self, buf: &mut [RawSample]) -> Result<usize, Overrun> {
         let block = match self.pending.take() {
             Some(b) => b,
-            None => self.shared.samples.receive().await,
-        };
-        if let Some(lost) = self.gap_before(&block) {
-            self.pending = Some(block);
-            return Err(Overrun { lost });
-        }
-        self.expected_seq = Some(block.seq.wrapping_add(1));
-        let mut n = copy_block(&block, buf);
-        // Blocks already queued go along (in order, while they fit): the
-        // monitor's cost per call is paid once for several link blocks, as
-        // for the reference board's 128-set blocks. No waiting here.
-        while let Ok(b) = self.shared.samples.try_receive() {
-            if Some(b.seq) != self.expected_seq || n + b.samples.len() > buf.len() {
-                // A gap (reported by the next read), or no room.
-                self.pending = Some(b);
-                break;
+            None => {
+                let b = self.shared.samples.receive().await;
+                if let Some(exp) = self.expected_seq {
+                    if b.seq != exp {
+                        // A block went missing (or the host restarted its count).
+                        let lost = b.seq.wrapping_sub(exp).min(1 << 20) * BLOCK_SAMPLES as u32;
+                        self.expected_seq = Some(b.seq.wrapping_add(1));
+                        self.pending = Some(b);
+                        return Err(Overrun { lost });
+                    }
+                }
+                b
             }
-            self.expected_seq = Some(b.seq.wrapping_add(1));
-            n += copy_block(&b, &mut buf[n..]);
+        };
+        self.expected_seq = Some(block.seq.wrapping_add(1));
+        let n = block.samples.len().min(buf.len());
+        for (dst, c) in buf.iter_mut().zip(block.samples.iter()) {
+            *dst = RawSample::from(*c);
         }
         Ok(n)
     }
-}
-
-/// Copies a link block's codes into `buf`; returns how many fitted.
-fn copy_block(block: &SampleBlock, buf: &mut [RawSample]) -> usize {
-    for (dst, c) in buf.iter_mut().zip(block.samples.iter()) {
-        *dst = RawSample::from(*c);
-    }
-    block.samples.len().min(buf.len())
 }
