@@ -33,3 +33,21 @@ pub trait LinkRx {
 pub trait Clock {
     fn now_us(&self) -> u64;
 }
+
+/// What a [`Store`] keeps.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Record {
+    Wear,
+    Config,
+}
+
+/// Where a board keeps state across resets (flash, the emulated board's
+/// PSRAM). The calls report their own failures (a log line, a counter):
+/// persistence must never stop the monitor.
+pub trait Store {
+    fn store_wear(&mut self, blob: &hammer_wire::WearBlob);
+    /// `record`: [`crate::persisted::config_record`]'s bytes.
+    fn store_config(&mut self, record: &[u8; crate::persisted::CONFIG_RECORD]);
+    /// A record that could not even be made.
+    fn failed(&mut self, what: Record);
+}

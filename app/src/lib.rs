@@ -7,7 +7,11 @@
 //! - [`tasks`]: the async tasks over those traits (sampling, link receive,
 //!   link transmit) and the [`Shared`] state between them;
 //! - [`monitor`]: the synchronous, sans-IO core: samples in, estimator,
-//!   reports, alarms, captures and wear persistence out; commands applied.
+//!   reports, alarms, captures and wear persistence out; commands applied;
+//! - [`persisted`]: the configuration record the boards store;
+//! - [`reset`]: the reset cause as a board keeps it through a reset;
+//! - [`supervisor`]: the duties' check-ins, for a watchdog fed only while
+//!   every duty is alive.
 //!
 //! How to add a board: implement the four traits of [`board`] over its
 //! peripherals in a firmware binary (`firmware/src/main.rs` is the reference
@@ -25,8 +29,12 @@
 
 pub mod board;
 pub mod monitor;
+pub mod persisted;
+pub mod reset;
+pub mod supervisor;
 pub mod tasks;
 
-pub use board::{Clock, LinkRx, LinkTx, Overrun, SampleSource};
+pub use board::{Clock, LinkRx, LinkTx, Overrun, Record, SampleSource, Store};
 pub use monitor::{Monitor, CAPTURE_SAMPLES, FIRMWARE_VERSION};
-pub use tasks::{link_rx, link_tx, sampling, LinkSamples, Shared};
+pub use supervisor::{Duty, Supervisor, Watch};
+pub use tasks::{link_rx, link_tx, persisting, sampling, LinkSamples, Shared};

@@ -5,7 +5,7 @@ use hammer_estimator::tare::Tare;
 use hammer_estimator::{Config, Estimator, Flags, RawSample, WearState, MAX_CONFIRM};
 use hammer_wire::{
     config_hash, Alarm, AlarmKind, CaptureChunk, CommandKind, DeviceConfig, DeviceInfo, DeviceMsg, HostMsg,
-    RejectReason, Status, WearBlob, BLOCK_SAMPLES, PROTOCOL_VERSION, WEAR_STATE_BYTES,
+    RejectReason, ResetCause, Status, WearBlob, BLOCK_SAMPLES, PROTOCOL_VERSION, WEAR_STATE_BYTES,
 };
 
 /// Sample-sets a raw capture holds: one full cycle of the paper's hammer
@@ -51,6 +51,8 @@ pub struct Monitor {
     est: Estimator,
     board: &'static str,
     tare: Option<(Tare, u32)>,
+    /// A `MeasureCodes` under way: the same sums as a tare, and samples left.
+    measure: Option<(Tare, u32)>,
     capture: CaptureState,
     capture_buf: [RawSample; CAPTURE_SAMPLES],
     capture_len: usize,
@@ -65,16 +67,19 @@ pub struct Monitor {
     /// Counters of estimators replaced by a new configuration: the status counts since boot.
     carried: hammer_estimator::Counters,
     config_hash: u32,
+    reset_cause: ResetCause,
 }
 
 impl Monitor {
     pub fn new(cfg: Config, board: &'static str) -> Result<Self, hammer_estimator::ConfigError> {
         let est = Estimator::new(cfg)?;
         Ok(Self {
+            reset_cause: ResetCause::PowerOn,
             config_hash: config_hash(&DeviceConfig::from(&cfg)),
             est,
             board,
             tare: None,
+            measure: None,
             capture: CaptureState::Idle,
             capture_buf: [RawSample::default(); CAPTURE_SAMPLES],
             capture_len: 0,
@@ -128,7 +133,10 @@ impl Monitor {
     pub fn on_samples(&mut self, block: &[RawSample], out: &mut impl FnMut(DeviceMsg)) {
         // The common case: neither a tare nor a capture needs each sample, so
         // the estimator takes whole stretches through its hot loop.
-        if self.tare.is_none() && matches!(self.capture, CaptureState::Idle | CaptureState::Streaming { .. }) {
+        if self.tare.is_none()
+            && self.measure.is_none()
+            && matches!(self.capture, CaptureState::Idle | CaptureState::Streaming { .. })
+        {
             // After an impact the estimator blanks `blank_after` samples, so a
             // piece one longer than that holds at most one report: none is lost.
             let c = self.est.config();
@@ -146,6 +154,15 @@ impl Monitor {
             return;
         }
         for &s in block {
+            if let Some((sums, left)) = &mut self.measure {
+                sums.push(s);
+                *left -= 1;
+                if *left == 0 {
+                    let (samples, mean, std) = sums.code_stats();
+                    self.measure = None;
+                    out(DeviceMsg::CodeStats { samples, mean, std });
+                }
+            }
             if let Some((tare, left)) = &mut self.tare {
                 tare.push(s);
                 *left -= 1;
@@ -358,6 +375,15 @@ impl Monitor {
                 Err(_) => self.reject(CommandKind::RestoreWear, RejectReason::BadWearState, out),
             },
             HostMsg::Samples(_) => self.reject(CommandKind::Samples, RejectReason::Busy, out),
+            HostMsg::MeasureCodes { samples } => {
+                // The sums stop growing at 10⁶ samples (see `Tare::push`).
+                if self.measure.is_some() || samples == 0 || samples > 1_000_000 {
+                    self.reject(CommandKind::MeasureCodes, RejectReason::Busy, out);
+                } else {
+                    self.measure = Some((Tare::default(), samples));
+                    out(DeviceMsg::Ack(CommandKind::MeasureCodes));
+                }
+            }
         }
     }
 
@@ -392,7 +418,14 @@ impl Monitor {
             protocol_version: PROTOCOL_VERSION,
             firmware_version: FIRMWARE_VERSION,
             config_hash: self.config_hash,
+            reset_cause: self.reset_cause,
         }
+    }
+
+    /// Why the board last started, as it recorded it before the reset: every
+    /// status carries it until the next reset.
+    pub fn set_reset_cause(&mut self, cause: ResetCause) {
+        self.reset_cause = cause;
     }
 }
 

@@ -14,8 +14,9 @@ use hammer_wire::{
     MAX_FRAME,
 };
 
-use crate::board::{Clock, LinkRx, LinkTx, Overrun, SampleSource};
+use crate::board::{Clock, LinkRx, LinkTx, Overrun, SampleSource, Store};
 use crate::monitor::{LinkCounters, Monitor};
+use crate::supervisor::{Duty, Supervisor};
 
 /// How often the device sends a `Status` without being asked.
 pub const STATUS_PERIOD_US: u64 = 1_000_000;
@@ -76,6 +77,9 @@ pub struct Shared<M: RawMutex> {
     pub wear_snapshot: Signal<M, WearBlob>,
     /// The configuration after a change (set by the host, or by a tare), to persist likewise.
     pub config_snapshot: Signal<M, DeviceConfig>,
+    /// The duties' check-ins (the sampling loop and the link here, a board's
+    /// persistence task there), for the board's watchdog.
+    pub supervisor: Supervisor,
 }
 
 impl<M: RawMutex> Shared<M> {
@@ -87,6 +91,7 @@ impl<M: RawMutex> Shared<M> {
             link: LinkAtomics::new(),
             wear_snapshot: Signal::new(),
             config_snapshot: Signal::new(),
+            supervisor: Supervisor::new(),
         }
     }
 
@@ -124,6 +129,7 @@ pub async fn sampling<S: SampleSource, M: RawMutex, C: Clock>(
     loop {
         // Commands are answered even when no samples flow.
         let first = select(source.read(&mut buf), shared.commands.receive()).await;
+        shared.supervisor.beat(Duty::Sampling);
         let t0 = clock.now_us();
         let mut emit = |m| shared.send(m);
         let mut pending = None;
@@ -179,6 +185,30 @@ pub async fn sampling<S: SampleSource, M: RawMutex, C: Clock>(
     }
 }
 
+/// Persistence: stores the wear state and the configuration as the sampling
+/// task hands them over, at low priority (a flash erase stalls only this).
+/// Checks in with the supervisor at every `tick` (a board's periodic timer,
+/// at most a second) and after every store, so a store that never returns
+/// stops the watchdog's feeding.
+pub async fn persisting<S: Store, M: RawMutex, F: core::future::Future<Output = ()>>(
+    store: &mut S,
+    shared: &Shared<M>,
+    mut tick: impl FnMut() -> F,
+) -> ! {
+    use embassy_futures::select::{select3, Either3};
+    loop {
+        shared.supervisor.beat(Duty::Persistence);
+        match select3(shared.wear_snapshot.wait(), shared.config_snapshot.wait(), tick()).await {
+            Either3::First(blob) => store.store_wear(&blob),
+            Either3::Second(cfg) => match crate::persisted::config_record(&cfg) {
+                Some(rec) => store.store_config(&rec),
+                None => store.failed(crate::board::Record::Config),
+            },
+            Either3::Third(()) => {}
+        }
+    }
+}
+
 /// Link receive: frames → commands and sample blocks. Garbage is counted,
 /// answered with a rejection, and the decoder resynchronises at the next frame.
 pub async fn link_rx<R: LinkRx, M: RawMutex>(rx: &mut R, shared: &Shared<M>) -> ! {
@@ -225,6 +255,7 @@ pub async fn link_tx<T: LinkTx, M: RawMutex>(tx: &mut T, shared: &Shared<M>) -> 
             Ok(n) => {
                 tx.write_all(&buf[..n]).await;
                 shared.link.frames_sent.fetch_add(1, Ordering::Relaxed);
+                shared.supervisor.beat(Duty::Link);
             }
             Err(_) => {
                 shared.link.frames_dropped.fetch_add(1, Ordering::Relaxed);

@@ -69,6 +69,22 @@ impl Tare {
         }
     }
 
+    /// Samples taken, and each channel's mean and standard deviation in
+    /// codes: what a calibration's span point needs from the board.
+    pub fn code_stats(&self) -> (u32, [f32; 3], [f32; 3]) {
+        let mut mean = [0.0f32; 3];
+        let mut std = [0.0f32; 3];
+        if self.n > 0 {
+            let n = self.n as f64;
+            for ch in 0..3 {
+                let m = self.sum[ch] as f64 / n;
+                mean[ch] = m as f32;
+                std[ch] = math::sqrt((self.sum_sq[ch] as f64 / n - m * m).max(0.0) as f32);
+            }
+        }
+        (self.n, mean, std)
+    }
+
     /// New zero codes for `cfg`: pressures read 0 gauge, the accelerometer reads
     /// the gravity component along the axis.
     pub fn finish(&self, cfg: &Config) -> Result<TareResult, TareError> {

@@ -20,11 +20,11 @@
 mod clock;
 mod link;
 mod persist;
+mod reset;
 mod sampler;
 
 use defmt::{error, info, unwrap, warn};
 use embassy_executor::{InterruptExecutor, Spawner};
-use embassy_futures::select::{select, Either};
 use embassy_stm32::gpio::{Level, Output, Speed};
 use embassy_stm32::interrupt;
 use embassy_stm32::interrupt::{InterruptExt, Priority};
@@ -33,10 +33,10 @@ use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_stm32::{bind_interrupts, dma, pac, usart, Config};
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_time::{Duration, Instant, Ticker, Timer};
-use hammer_app::{Monitor, Shared};
+use hammer_app::{persisted, Monitor, Shared};
 use hammer_estimator::wear::WEAR_STATE_BYTES;
 use hammer_estimator::ConfigError;
-use hammer_wire::{DeviceConfig, DeviceMsg, HostMsg, WearBlob};
+use hammer_wire::{DeviceMsg, HostMsg, WearBlob};
 use static_cell::StaticCell;
 use {defmt_rtt as _, panic_probe as _};
 
@@ -140,12 +140,16 @@ async fn link_tx(mut tx: link::Tx) {
 /// Pets the IWDG only while the board is demonstrably working: this task
 /// runs (the thread executor is not starved by a runaway DSP or a spinning
 /// link task), sample blocks keep arriving (the sampling chain has not
-/// stalled beyond its own recovery), and no link write is stuck. A board
-/// that fails any of these resets within STALL_LIMIT + WATCHDOG_TIMEOUT.
+/// stalled beyond its own recovery), no link write is stuck, and every
+/// supervised duty (sampling loop, link, persistence) has checked in within
+/// its period (`hammer_app::Watch`). A board that fails any of these records
+/// which duty failed (`reset`) and resets within STALL_LIMIT + WATCHDOG_TIMEOUT.
 #[embassy_executor::task]
-async fn watchdog(mut wdg: IndependentWatchdog<'static, IWDG>) {
+async fn watchdog(mut wdg: IndependentWatchdog<'static, IWDG>, persisting: bool) {
     let mut last_blocks = sampler::BLOCKS.load(core::sync::atomic::Ordering::Relaxed);
     let mut last_progress = Instant::now();
+    // In WATCHDOG_CHECK periods (250 ms): sampling 0.5 s, link and persistence 3 s.
+    let mut watch = hammer_app::Watch::new([Some(2), Some(12), persisting.then_some(12)]);
     let mut reported = false;
     loop {
         Timer::after(WATCHDOG_CHECK).await;
@@ -157,17 +161,41 @@ async fn watchdog(mut wdg: IndependentWatchdog<'static, IWDG>) {
         }
         let dsp_ok = now - last_progress < STALL_LIMIT;
         let link_ok = (link::tx_busy_ms(now) as u64) < STALL_LIMIT.as_millis();
-        if dsp_ok && link_ok {
-            wdg.pet();
-            reported = false;
-        } else if !reported {
-            error!(
-                "watchdog: sampling alive {}, link alive {}: letting the IWDG reset the board",
-                dsp_ok, link_ok
-            );
-            reported = true;
+        let duties = watch.tick(&SHARED.supervisor);
+        let overdue = match (dsp_ok, link_ok, duties) {
+            (true, true, Ok(())) => None,
+            (false, _, _) => Some(hammer_app::Duty::Sampling),
+            (_, false, _) => Some(hammer_app::Duty::Link),
+            (_, _, Err(duty)) => Some(duty),
+        };
+        match overdue {
+            None => {
+                wdg.pet();
+                if reported {
+                    reset::record(hammer_wire::ResetCause::PowerOn);
+                }
+                reported = false;
+            }
+            Some(duty) if !reported => {
+                reset::record(hammer_wire::ResetCause::Watchdog { overdue: duty });
+                error!(
+                    "watchdog: {=str} stopped checking in: letting the IWDG reset the board",
+                    reset::name(hammer_wire::ResetCause::Watchdog { overdue: duty })
+                );
+                reported = true;
+            }
+            Some(_) => {}
         }
     }
+}
+
+/// A fault is recorded for the next boot's status, then the board resets.
+#[cortex_m_rt::exception]
+unsafe fn HardFault(frame: &cortex_m_rt::ExceptionFrame) -> ! {
+    // SAFETY: CFSR (0xE000_ED28) is readable at any time.
+    let cfsr = unsafe { core::ptr::read_volatile(0xE000_ED28 as *const u32) };
+    reset::record(hammer_wire::ResetCause::Fault { pc: frame.pc(), cfsr });
+    cortex_m::peripheral::SCB::sys_reset()
 }
 
 /// Visible proof of life, independent of the link.
@@ -199,24 +227,38 @@ fn restore_wear(monitor: &mut Monitor, store: Option<persist::Persist>) -> Optio
     Some(store)
 }
 
-/// Bytes of a stored configuration record: a length and postcard bytes, padded.
-const CONFIG_RECORD: usize = 200;
-
 /// The configuration saved before the last reset (calibration, tare, thresholds),
 /// if there is one the estimator accepts. The sample rate stays the board's:
 /// TIM6 is set at build time.
 fn stored_config(store: &mut persist::Persist, rate_hz: f32) -> Option<hammer_estimator::Config> {
-    let rec = store.load::<CONFIG_RECORD>(&persist::CONFIG)?;
-    let len = u16::from_le_bytes([rec[0], rec[1]]) as usize;
-    let wire: DeviceConfig = postcard::from_bytes(rec.get(2..2 + len)?).ok()?;
-    let mut cfg = hammer_estimator::Config::default().with_device(&wire);
-    cfg.sample_rate_hz = rate_hz;
-    match cfg.validate() {
-        Ok(()) => Some(cfg),
-        Err(_) => {
-            warn!("persist: stored configuration rejected, using defaults");
-            None
+    let rec = store.load::<{ persisted::CONFIG_RECORD }>(&persist::CONFIG)?;
+    let cfg = persisted::config_from_record(&rec, Some(rate_hz));
+    if cfg.is_none() {
+        warn!("persist: stored configuration rejected, using defaults");
+    }
+    cfg
+}
+
+/// The flash store as the app's `Store`, logging over defmt.
+struct FlashStore(persist::Persist);
+
+impl hammer_app::Store for FlashStore {
+    fn store_wear(&mut self, blob: &WearBlob) {
+        match self.0.store(&persist::WEAR, &blob.bytes) {
+            Ok(()) => info!("persist: wear state saved"),
+            Err(_) => warn!("persist: saving the wear state failed"),
         }
+    }
+
+    fn store_config(&mut self, record: &[u8; persisted::CONFIG_RECORD]) {
+        match self.0.store(&persist::CONFIG, record) {
+            Ok(()) => info!("persist: configuration saved"),
+            Err(_) => warn!("persist: saving the configuration failed"),
+        }
+    }
+
+    fn failed(&mut self, _: hammer_app::Record) {
+        warn!("persist: configuration does not fit a record");
     }
 }
 
@@ -225,27 +267,9 @@ fn stored_config(store: &mut persist::Persist, rate_hz: f32) -> Option<hammer_es
 /// changes. Thread mode: a page erase stalls only this task, the sampling
 /// executor preempts it, and bank 2 is written while the code runs from bank 1.
 #[embassy_executor::task]
-async fn persist_state(mut store: persist::Persist) {
-    loop {
-        match select(SHARED.wear_snapshot.wait(), SHARED.config_snapshot.wait()).await {
-            Either::First(blob) => match store.store(&persist::WEAR, &blob.bytes) {
-                Ok(()) => info!("persist: wear state saved"),
-                Err(_) => warn!("persist: saving the wear state failed"),
-            },
-            Either::Second(cfg) => {
-                let mut rec = [0u8; CONFIG_RECORD];
-                let Ok(used) = postcard::to_slice(&cfg, &mut rec[2..]).map(|b| b.len()) else {
-                    warn!("persist: configuration does not fit a record");
-                    continue;
-                };
-                rec[..2].copy_from_slice(&(used as u16).to_le_bytes());
-                match store.store(&persist::CONFIG, &rec) {
-                    Ok(()) => info!("persist: configuration saved"),
-                    Err(_) => warn!("persist: saving the configuration failed"),
-                }
-            }
-        }
-    }
+async fn persist_state(store: persist::Persist) {
+    let mut store = FlashStore(store);
+    hammer_app::persisting(&mut store, &SHARED, || Timer::after(Duration::from_secs(1))).await
 }
 
 #[embassy_executor::main]
@@ -301,6 +325,9 @@ async fn main(spawner: Spawner) {
         ),
     });
     let store = restore_wear(monitor, store);
+    let cause = reset::take_cause();
+    info!("reset cause: {=str}", reset::name(cause));
+    monitor.set_reset_cause(cause);
 
     let (tx, rx) = unwrap!(link::new(
         p.USART2,
@@ -319,7 +346,7 @@ async fn main(spawner: Spawner) {
 
     spawner.spawn(unwrap!(link_rx(rx)));
     spawner.spawn(unwrap!(link_tx(tx)));
-    spawner.spawn(unwrap!(watchdog(wdg)));
+    spawner.spawn(unwrap!(watchdog(wdg, store.is_some())));
     if let Some(store) = store {
         spawner.spawn(unwrap!(persist_state(store)));
     }

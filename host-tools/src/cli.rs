@@ -48,6 +48,14 @@ pub enum Command {
     /// firmware (emulated board under QEMU, or the app natively if QEMU is
     /// missing), its reports on the dashboard or, with --headless, as lines.
     Demo(crate::demo::DemoArgs),
+    /// The emulated board at the full 100 kS/s × 3 for minutes of hammer
+    /// time: every report checked against the host estimator, and the
+    /// board's overruns, lost frames, CPU duty and worst latency.
+    Soak(crate::soak::SoakArgs),
+    /// Calibrate a board's pressure channels (zero at atmosphere, span
+    /// against a reference you apply and type in) and its accelerometer's
+    /// zero at rest; the board stores the result.
+    Calibrate(crate::calibrate::CalibrateArgs),
     /// Run the estimator (the firmware's no_std crate) over a trace and print
     /// one record per impact cycle: friction (N), impact energy (J) with and
     /// without friction, frequency (Hz), wear index (J), each with its
@@ -260,6 +268,19 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Diagnose(args) => crate::diagnose::command::run(&args),
         Command::DiagnoseBench(args) => crate::diagnose::command::bench(&args),
         Command::Demo(args) => crate::demo::run(&args),
+        Command::Calibrate(args) => {
+            let c = crate::calibrate::run(&args)?;
+            outln!("{}", c.summary());
+            Ok(())
+        }
+        Command::Soak(args) => {
+            let soak = crate::soak::run(&args, true)?;
+            outln!("{}", soak.summary());
+            if !soak.clean() {
+                anyhow::bail!("the soak lost samples, frames or reports, or a report differed from the host's");
+            }
+            Ok(())
+        }
         Command::Config(ConfigCommand::Check { file }) => config_check(&file),
         Command::Monitor(args) => crate::monitor::run(&args),
         Command::Replay(args) => crate::monitor::replay(&args),
@@ -287,7 +308,7 @@ fn capture_cmd(args: &CaptureArgs) -> Result<()> {
         Some(bar) => {
             let demo = crate::demo::DemoArgs::for_capture(bar);
             let codes = crate::demo::hammer_codes(&demo, 0.25 + 0.06 * args.cycles as f64)?;
-            let (board, read, write) = crate::demo::start_board(false)?;
+            let (board, read, write) = crate::demo::start_board(false, None, false)?;
             let writer = std::sync::Arc::new(std::sync::Mutex::new(write));
             let mut link = Client::new(crate::demo::SharedPort::new(read, writer.clone()));
             link.handshake(timeout)?;

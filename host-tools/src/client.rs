@@ -74,6 +74,7 @@ pub fn command_kind(msg: &HostMsg) -> CommandKind {
         HostMsg::GetWear => CommandKind::GetWear,
         HostMsg::RestoreWear(_) => CommandKind::RestoreWear,
         HostMsg::Samples(_) => CommandKind::Samples,
+        HostMsg::MeasureCodes { .. } => CommandKind::MeasureCodes,
     }
 }
 

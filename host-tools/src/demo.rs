@@ -5,6 +5,8 @@
 
 use std::io::{self, Read, Write};
 use std::net::TcpStream;
+use std::ops::ControlFlow;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
@@ -14,9 +16,10 @@ use hammer_estimator::RawSample;
 use hammer_wire::{DeviceMsg, HostMsg, SampleBlock, BLOCK_SAMPLES};
 
 use crate::client::{write_frame, Client};
-use crate::emulator::{firmware_elf, qemu_available, Emulator};
+use crate::emulator::{firmware_elf, qemu_available, Emulator, Icount};
+use crate::stimulus::Stimulus;
 use hammer_sim::effects::CoulombFriction;
-use hammer_sim::simulate::simulate;
+use hammer_sim::simulate::{simulate, stream_codes};
 use hammer_sim::SimConfig;
 
 #[derive(Args, Debug, Clone)]
@@ -47,6 +50,11 @@ pub struct DemoArgs {
     /// Seed of the sensor noise.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Headless on the emulated board: keep the hammer's own pace, as the
+    /// dashboard does. By default a headless run goes as fast as the host
+    /// allows; the board's timing is instruction-counted either way.
+    #[arg(long)]
+    pub real_time: bool,
 }
 
 /// Where the firmware runs.
@@ -80,6 +88,7 @@ impl DemoArgs {
             cycles: 1,
             native: false,
             seed: 1,
+            real_time: false,
         }
     }
 }
@@ -101,8 +110,8 @@ impl Write for SharedPort {
     }
 }
 
-/// The simulated hammer as the ADC codes the board would sample.
-pub fn hammer_codes(args: &DemoArgs, seconds: f64) -> Result<Vec<RawSample>> {
+/// The demo's hammer: the paper's, with its friction growing at the wear rate.
+fn demo_config(args: &DemoArgs, seconds: f64) -> Result<SimConfig> {
     let mut cfg = SimConfig::nominal(args.supply_bar);
     cfg.solver.duration_s = seconds;
     cfg.seed = args.seed;
@@ -115,21 +124,160 @@ pub fn hammer_codes(args: &DemoArgs, seconds: f64) -> Result<Vec<RawSample>> {
         cfg.effects.apply_spec(e)?;
     }
     cfg.validate()?;
-    let sim = simulate(&cfg).context("simulation failed")?;
+    Ok(cfg)
+}
+
+/// The simulated hammer as the ADC codes the board would sample.
+pub fn hammer_codes(args: &DemoArgs, seconds: f64) -> Result<Vec<RawSample>> {
+    let sim = simulate(&demo_config(args, seconds)?).context("simulation failed")?;
     Ok(sim.measured.codes)
 }
 
+/// Runs the demo's hammer into the emulated board's ADC as fast as the ring
+/// takes it: `seconds` of it, or without end (`None`) until `stop`. `tap`
+/// sees every sample-set the board will see, in order, once written.
+pub fn stream_hammer(
+    args: &DemoArgs,
+    seconds: Option<f64>,
+    stimulus: &Stimulus,
+    stop: &AtomicBool,
+    mut tap: impl FnMut(&[RawSample]),
+) -> Result<()> {
+    let cfg = demo_config(args, seconds.unwrap_or(1.0))?;
+    const CHUNK: usize = 4096;
+    let mut chunk = Vec::with_capacity(CHUNK);
+    let mut stopped = false;
+    stream_codes(&cfg, seconds.is_none(), |s| {
+        chunk.push(s);
+        if chunk.len() == CHUNK {
+            stopped = !stimulus.push(&chunk, stop);
+            if !stopped {
+                tap(&chunk);
+            }
+            chunk.clear();
+        }
+        if stopped {
+            ControlFlow::Break(())
+        } else {
+            ControlFlow::Continue(())
+        }
+    })
+    .context("simulation failed")?;
+    if !stopped && stimulus.push(&chunk, stop) {
+        tap(&chunk);
+        stimulus.finish();
+    }
+    Ok(())
+}
+
+/// Sample-sets written before the board boots, so that its first halves
+/// never wait for the simulator: 0.2 s.
+const PREFILL_SETS: u32 = 20_000;
+
+/// The emulated board's ADC fed at the full rate: the simulator streams into
+/// its ring from a thread, which ends with the stream or when this is dropped.
+pub struct FullRate {
+    pub stimulus: Arc<Stimulus>,
+    stop: Arc<AtomicBool>,
+    producer: Option<std::thread::JoinHandle<Result<()>>>,
+}
+
+impl FullRate {
+    pub fn start(args: &DemoArgs, seconds: Option<f64>) -> Result<Self> {
+        Self::start_tapped(args, seconds, |_| {})
+    }
+
+    /// As [`FullRate::start`], with `tap` seeing every sample-set written (see [`stream_hammer`]).
+    pub fn start_tapped(
+        args: &DemoArgs,
+        seconds: Option<f64>,
+        tap: impl FnMut(&[RawSample]) + Send + 'static,
+    ) -> Result<Self> {
+        let stimulus = Arc::new(Stimulus::create()?);
+        let stop = Arc::new(AtomicBool::new(false));
+        let producer = std::thread::spawn({
+            let (args, stimulus, stop) = (args.clone(), stimulus.clone(), stop.clone());
+            move || stream_hammer(&args, seconds, &stimulus, &stop, tap)
+        });
+        let deadline = Instant::now() + Duration::from_secs(20);
+        while stimulus.counters().written_sets < PREFILL_SETS && !producer.is_finished() {
+            if Instant::now() > deadline {
+                bail!("the simulator did not produce 0.2 s of samples within 20 s");
+            }
+            std::thread::sleep(Duration::from_millis(2));
+        }
+        Ok(Self {
+            stimulus,
+            stop,
+            producer: Some(producer),
+        })
+    }
+
+    /// Stops the producer and returns its error, if it had one.
+    pub fn stop(&mut self) -> Result<()> {
+        self.stop.store(true, Ordering::Relaxed);
+        match self.producer.take().map(|p| p.join()) {
+            Some(Ok(r)) => r,
+            Some(Err(_)) => bail!("the sample producer panicked"),
+            None => Ok(()),
+        }
+    }
+}
+
+impl Drop for FullRate {
+    fn drop(&mut self) {
+        let _ = self.stop();
+    }
+}
+
+/// The board's ADC counters as one line, for people. The core's duty is
+/// per second of samples, not of guest uptime: the board idles for as long
+/// as the host takes to start it, and that says nothing about the firmware.
+pub fn adc_line(c: &crate::stimulus::Counters) -> String {
+    let hammer_us = f64::from(c.consumed_sets) * 1e6 / f64::from(hammer_wire::stimulus::RATE_HZ);
+    format!(
+        "board ADC: {} sample-sets processed, {} overruns ({} sets lost), {} late stimulus blocks, \
+         worst block latency {} us, core awake {:.1} % of the hammer's time",
+        c.consumed_sets,
+        c.overruns,
+        c.lost_sets,
+        c.starved_blocks,
+        c.latency_max_us,
+        f64::from(c.busy_us) / hammer_us.max(1.0) * 100.0,
+    )
+}
+
+/// Whether the demo's board is the emulated one (QEMU and its firmware are
+/// there, and `--native` was not asked for).
+pub fn emulated_board_available(native: bool) -> bool {
+    !native && qemu_available() && firmware_elf().exists()
+}
+
 /// Starts the board and returns it with its link's read and write halves.
-pub fn start_board(native: bool) -> Result<(Board, Box<dyn Read + Send>, Box<dyn Write + Send>)> {
+/// With `stimulus`, the emulated board samples it at the full rate; without,
+/// it takes samples over its UART.
+/// `real_time` keeps a full-rate board to host time while it sleeps (see [`Icount`]).
+pub fn start_board(
+    native: bool,
+    stimulus: Option<&Stimulus>,
+    real_time: bool,
+) -> Result<(Board, Box<dyn Read + Send>, Box<dyn Write + Send>)> {
     let elf = firmware_elf();
-    if !native && qemu_available() && elf.exists() {
-        let mut emu = Emulator::start(&elf, false)?;
+    if emulated_board_available(native) {
+        // Timed by instructions at (below) the M4's pace, whatever the host does.
+        let icount = stimulus.is_some().then_some(Icount::m4_at_125_mips(real_time));
+        let mut emu = Emulator::start_with(&elf, icount, stimulus)?;
         let s: TcpStream = emu.connect(Duration::from_secs(20))?;
         s.set_read_timeout(Some(Duration::from_millis(50)))?;
         let r = s.try_clone()?;
         eprintln!(
-            "demo: firmware on the emulated board (QEMU mps2-an386, {})",
-            elf.display()
+            "demo: firmware on the emulated board (QEMU mps2-an386, {}), samples {}",
+            elf.display(),
+            if stimulus.is_some() {
+                "through its ADC model at 100 kS/s"
+            } else {
+                "over its UART"
+            }
         );
         return Ok((Board::Qemu(emu), Box::new(r), Box::new(s)));
     }
@@ -183,8 +331,14 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     } else {
         60.0
     });
+    let emulated = emulated_board_available(args.native);
     eprintln!(
-        "demo: simulating {seconds} s of the paper's hammer at {} bar (friction{}{})",
+        "demo: simulating {} the paper's hammer at {} bar (friction{}{})",
+        if emulated && args.seconds.is_none() {
+            "without end".to_string()
+        } else {
+            format!("{seconds} s of")
+        },
         args.supply_bar,
         if args.wear_rate > 0.0 {
             format!(", rising {:.1} %/min", args.wear_rate * 100.0)
@@ -197,27 +351,44 @@ pub fn run(args: &DemoArgs) -> Result<()> {
             format!(", {}", args.effects.join(", "))
         }
     );
-    let codes = hammer_codes(args, seconds)?;
-    let (board, read, write) = start_board(args.native)?;
+    // The emulated board samples the simulator's stream through its ADC
+    // model, without end unless --seconds; the native app takes it over its link.
+    let mut full_rate = None;
+    let mut feeder = None;
+    let (board, read, write) = if emulated {
+        let fr = FullRate::start(args, args.seconds)?;
+        let board = start_board(false, Some(&fr.stimulus), args.real_time || !headless)?;
+        full_rate = Some(fr);
+        board
+    } else {
+        let codes = hammer_codes(args, seconds)?;
+        let board = start_board(args.native, None, false)?;
+        feeder = Some(codes);
+        board
+    };
     let writer = Arc::new(Mutex::new(write));
     let port = SharedPort {
         read,
         write: writer.clone(),
     };
-    let feeder_writer = writer.clone();
-    let paced = !headless;
-    let feeder = std::thread::spawn(move || feed(codes, feeder_writer, paced, 1e5));
+    let feeder = feeder.map(|codes| {
+        let (writer, paced) = (writer.clone(), !headless);
+        std::thread::spawn(move || feed(codes, writer, paced, 1e5))
+    });
     let result = if headless {
-        headless_loop(port, args.cycles)
+        headless_loop(port, args.cycles, full_rate.as_ref().map(|f| &*f.stimulus))
     } else {
         dashboard(port, &board)
     };
     drop(board); // stops QEMU
-    let _ = feeder.join();
-    result
+    let produced = full_rate.as_mut().map_or(Ok(()), FullRate::stop);
+    if let Some(f) = feeder {
+        let _ = f.join();
+    }
+    result.and(produced)
 }
 
-fn headless_loop(port: SharedPort, cycles: usize) -> Result<()> {
+fn headless_loop(port: SharedPort, cycles: usize, stimulus: Option<&Stimulus>) -> Result<()> {
     let mut link = Client::new(port);
     let deadline = Duration::from_secs(30);
     let (info, _) = link.handshake(deadline)?;
@@ -258,15 +429,19 @@ fn headless_loop(port: SharedPort, cycles: usize) -> Result<()> {
     })?;
     if let Some(s) = status {
         println!(
-            "status: {} samples, {} cycles ({} invalid), {} dropped samples, {} frames sent, {} dropped, rx errors {}",
+            "status: {} samples, {} cycles ({} invalid), {} dropped samples, {} frames sent, {} dropped, rx errors {}, last reset: {}",
             s.samples,
             s.cycles,
             s.invalid_cycles,
             s.dropped_samples,
             s.frames_sent,
             s.frames_dropped,
-            s.rx_crc_errors + s.rx_cobs_errors + s.rx_decode_errors + s.rx_oversize
+            s.rx_crc_errors + s.rx_cobs_errors + s.rx_decode_errors + s.rx_oversize,
+            crate::numfmt::reset_cause(&s.reset_cause)
         );
+    }
+    if let Some(stimulus) = stimulus {
+        println!("{}", adc_line(&stimulus.counters()));
     }
     Ok(())
 }

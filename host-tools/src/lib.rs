@@ -6,18 +6,20 @@
 //! - [`numfmt`], [`chart`]: numbers for people, the one chart model and renderer;
 //! - [`records`]: every rendering of a cycle report, from `hammer_types::fields::FIELDS`;
 //! - [`client`]: the one protocol client (its sans-IO decoding core, the blocking client);
-//! - [`board`], [`emulator`]: the firmware's app natively, and on QEMU's mps2-an386;
+//! - [`board`], [`stimulus`], [`emulator`]: the firmware's app natively, the
+//!   emulated board's ADC ring, and the board on QEMU's mps2-an386;
 //! - [`estimate`], [`report`], [`plot`]: offline: per-cycle records, the
 //!   report page, the effect figures;
 //! - [`diagnose`]: the sim-to-real gap diagnosis and its benchmarks;
-//! - [`capture`], [`demo`], [`monitor`]: live: raw captures, the no-hardware
-//!   demo, the dashboard, logs and replay;
+//! - [`capture`], [`calibrate`], [`demo`], [`soak`], [`monitor`]: live: raw captures, calibration, the
+//!   no-hardware demo, the full-rate soak, the dashboard, logs and replay;
 //! - [`cli`]: the subcommands, thin over the above.
 
 #[macro_use]
 mod stdout;
 
 pub mod board;
+pub mod calibrate;
 pub mod capture;
 pub mod chart;
 pub mod cli;
@@ -31,3 +33,5 @@ pub mod numfmt;
 pub mod plot;
 pub mod records;
 pub mod report;
+pub mod soak;
+pub mod stimulus;

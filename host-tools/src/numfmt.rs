@@ -184,3 +184,20 @@ mod tests {
         assert_eq!(fraction((0, 0)), "-");
     }
 }
+
+/// Why a device last started, for people.
+pub fn reset_cause(c: &hammer_wire::ResetCause) -> String {
+    use hammer_wire::{Duty, ResetCause};
+    match c {
+        ResetCause::PowerOn => "power-on".into(),
+        ResetCause::Watchdog { overdue } => format!(
+            "watchdog: the {} stopped",
+            match overdue {
+                Duty::Sampling => "sampling loop",
+                Duty::Link => "link",
+                Duty::Persistence => "persistence task",
+            }
+        ),
+        ResetCause::Fault { pc, cfsr } => format!("fault at pc {pc:#010x} (CFSR {cfsr:#010x})"),
+    }
+}

@@ -284,20 +284,68 @@ fn demo_headless_runs_the_firmware_app_natively() {
     assert!(out.contains("0 dropped samples"), "{out}");
 }
 
-#[test]
-fn demo_headless_uses_the_emulated_board_when_qemu_is_there() {
+fn emulated_board_is_there() {
     let emulated = hammer_host::emulator::qemu_available() && hammer_host::emulator::firmware_elf().exists();
     assert!(
         emulated,
         "CI installs qemu-system-arm and builds the firmware before the tests (cargo xtask ci)"
     );
-    let (code, out, err) = hammer(&["demo", "--headless", "--cycles", "3", "--supply-bar", "6"]);
-    assert_eq!(code, 0, "{err}");
-    assert!(err.contains("emulated board"), "{err}");
+}
+
+/// The demo's figures a run must show: every report, nothing dropped.
+fn assert_demo_lossless(out: &str, err: &str, cycles: usize) {
+    assert!(
+        err.contains("emulated board") && err.contains("ADC model at 100 kS/s"),
+        "{err}"
+    );
     assert!(out.contains("device: qemu-mps2-an386"), "{out}");
+    assert_eq!(report_lines(out).len(), cycles, "{out}");
+    assert!(out.contains(" 0 dropped samples"), "{out}");
+    assert!(out.contains(" 0 overruns (0 sets lost)"), "{out}");
+}
+
+#[test]
+fn demo_headless_on_the_emulated_board_keeps_up_with_the_full_rate() {
+    emulated_board_is_there();
+    // The acceptance command: 40 cycles at 4 bar, about 1.9 s of
+    // hammer, within 1.5x that plus a few seconds of start-up.
+    let started = std::time::Instant::now();
+    let (code, out, err) = hammer(&["demo", "--headless", "--cycles", "40", "--supply-bar", "4"]);
+    let wall_s = started.elapsed().as_secs_f64();
+    assert_eq!(code, 0, "{err}");
+    assert_demo_lossless(&out, &err, 40);
     let lines = report_lines(&out);
-    assert_eq!(lines.len(), 3);
+    for l in &lines[1..] {
+        assert!((friction_of(l) - 10.27).abs() < 0.4, "the paper's 4 bar friction: {l}");
+    }
+    let hammer_s = 40.0 / 21.1 + 0.15;
+    assert!(
+        wall_s < 1.5 * hammer_s + 4.0,
+        "{wall_s:.1} s of wall time for {hammer_s:.1} s of hammer"
+    );
+}
+
+#[test]
+fn demo_real_time_keeps_the_hammers_own_pace() {
+    emulated_board_is_there();
+    let started = std::time::Instant::now();
+    let (code, out, err) = hammer(&[
+        "demo",
+        "--headless",
+        "--real-time",
+        "--cycles",
+        "20",
+        "--supply-bar",
+        "6",
+    ]);
+    let wall_s = started.elapsed().as_secs_f64();
+    assert_eq!(code, 0, "{err}");
+    assert_demo_lossless(&out, &err, 20);
+    let lines = report_lines(&out);
     assert!((friction_of(lines[2]) - 14.55).abs() < 0.4, "{}", lines[2]);
+    // 20 cycles of a ~23 Hz hammer take ~0.9 s of its time: not less on the
+    // wall clock (the board waits for host time), and not much more.
+    assert!((0.8..0.9 * 1.5 + 4.0).contains(&wall_s), "{wall_s:.2} s");
 }
 
 #[test]

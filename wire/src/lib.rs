@@ -10,7 +10,9 @@
 //!
 //! Module map: [`msg`] (every message; the report, flags and configuration
 //! are `hammer_types`' own, carried as they are), [`frame`] (encode, and a
-//! bounded decoder that counts what it throws away), [`cobs`].
+//! bounded decoder that counts what it throws away), [`cobs`], [`stimulus`]
+//! (the emulated board's ADC samples, through memory shared with the host
+//! instead of the link).
 //!
 //! How to add a message: append a variant to [`HostMsg`] or [`DeviceMsg`]
 //! (never reorder or insert: an old peer would misread every later variant),
@@ -23,6 +25,7 @@
 pub mod cobs;
 pub mod frame;
 pub mod msg;
+pub mod stimulus;
 
 pub use frame::{encode, DecodeError, Decoder, DecoderStats, EncodeError};
 pub use msg::*;
@@ -31,7 +34,7 @@ pub use msg::*;
 /// the leading delimiter: decoders of either framing read the other's frames
 /// (an extra 0x00 is an empty frame, which they ignore), so a bump would only
 /// make hosts and devices refuse each other needlessly.
-pub const PROTOCOL_VERSION: u16 = 1;
+pub const PROTOCOL_VERSION: u16 = 2;
 /// Largest frame on the wire, both delimiters included. Bounds every buffer.
 pub const MAX_FRAME: usize = 400;
 /// Sample-sets per `Samples` or `Capture` block.

@@ -42,6 +42,11 @@ pub enum HostMsg {
     RestoreWear(WearBlob),
     /// The sample stream, where the board has no ADC of its own (the emulated board).
     Samples(SampleBlock),
+    /// Average the next `samples` sample-sets and answer with
+    /// [`DeviceMsg::CodeStats`]: a calibration's span point.
+    MeasureCodes {
+        samples: u32,
+    },
 }
 
 /// Which command an acknowledgement or a rejection is about.
@@ -59,6 +64,7 @@ pub enum CommandKind {
     Samples,
     /// A frame that did not decode (CRC, COBS, unknown message).
     Unknown,
+    MeasureCodes,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -94,6 +100,13 @@ pub enum DeviceMsg {
     Rejected {
         command: CommandKind,
         reason: RejectReason,
+    },
+    /// The answer to [`HostMsg::MeasureCodes`]: per channel (rear, front,
+    /// accel), the mean and standard deviation of the raw codes.
+    CodeStats {
+        samples: u32,
+        mean: [f32; 3],
+        std: [f32; 3],
     },
 }
 
@@ -132,6 +145,29 @@ pub struct Status {
     pub protocol_version: u16,
     pub firmware_version: [u8; 3],
     pub config_hash: u32,
+    /// Why the device last started (kept until the next reset).
+    pub reset_cause: ResetCause,
+}
+
+/// A duty of the firmware that the watchdog supervises: each must check in
+/// within its period, or the watchdog is no longer fed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Duty {
+    Sampling,
+    Link,
+    Persistence,
+}
+
+/// Why the device last started, as it recorded it in RAM that survives a reset.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub enum ResetCause {
+    /// Power-on or a reset with nothing recorded.
+    #[default]
+    PowerOn,
+    /// The watchdog: `overdue` had not checked in within its period.
+    Watchdog { overdue: Duty },
+    /// A fault exception: the faulting instruction and the fault status (CFSR).
+    Fault { pc: u32, cfsr: u32 },
 }
 
 /// A piece of a raw capture: ADC codes plus what is needed to turn them into a trace.

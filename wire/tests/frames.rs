@@ -90,7 +90,7 @@ const GOLDEN_CONFIG_HASH: u32 = 2_188_404_417;
 /// update docs/wire-protocol.md, and only then update the snapshot.
 #[test]
 fn golden_frames() {
-    assert_eq!(PROTOCOL_VERSION, 1);
+    assert_eq!(PROTOCOL_VERSION, 2);
     assert_eq!(
         hex(&frame(&HostMsg::Hello { protocol_version: 1 })),
         "000106016922de3600"
@@ -120,6 +120,22 @@ fn golden_frames() {
         reason: RejectReason::CorruptFrame,
     };
     assert_eq!(hex(&frame(&rej)), "0008080a0439a4d00c00");
+    // A status after a watchdog reset (protocol 2 added the cause).
+    let status = Status {
+        uptime_us: 1_000_000,
+        samples: 100_000,
+        protocol_version: 2,
+        firmware_version: [0, 1, 0],
+        config_hash: 0x20DC_CE35,
+        reset_cause: ResetCause::Watchdog {
+            overdue: Duty::Sampling,
+        },
+        ..Default::default()
+    };
+    assert_eq!(
+        hex(&frame(&DeviceMsg::Status(status))),
+        "000802c0843da08d0601010101010101010101010101010202020107b59cf386020105b35e161400"
+    );
 }
 
 #[test]
@@ -131,6 +147,10 @@ fn every_message_round_trips() {
             samples: 99,
             rx_crc_errors: 2,
             config_hash: 0xDEAD_BEEF,
+            reset_cause: ResetCause::Fault {
+                pc: 0x0800_1234,
+                cfsr: 0x0000_8200,
+            },
             ..Default::default()
         }),
         DeviceMsg::Alarm(Alarm {

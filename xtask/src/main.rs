@@ -253,6 +253,9 @@ const USAGE: &str = "usage: cargo xtask <command>
   firmware        build both firmware binaries and print their flash and RAM
   size            flash and static RAM of the built firmware binaries
   bench-firmware  estimator cost on the Cortex-M4 ISA under QEMU (-icount), with sizes
+  soak [--minutes N] [hammer soak options]
+                  the emulated board at the full 100 kS/s x 3 for N minutes of hammer time (default 10):
+                  overruns, lost frames, parity with the host estimator, CPU duty, worst latency
   ninth-effect    adds a test effect to a copy of the workspace through the registry alone
                   (xtask/fixtures/ninth-effect) and runs its tests: drawn, simulated, fitted
   fuzz [--execs N | --minutes M] [--seed S] [--target NAME]
@@ -268,6 +271,15 @@ fn main() -> ExitCode {
         Some("firmware") => build_firmware(),
         Some("size") => size(),
         Some("ninth-effect") => ninth_effect::run(&root(), &mut (0, 0)),
+        Some("soak") => build_firmware().and_then(|_| {
+            let mut cmd = vec!["run", "--release", "-p", "hammer-host", "--bin", "hammer", "--", "soak"];
+            let rest: Vec<&str> = args[1..].iter().map(String::as_str).collect();
+            if !rest.contains(&"--minutes") {
+                cmd.extend(["--minutes", "10"]);
+            }
+            cmd.extend(rest);
+            run(&root(), "cargo", &cmd)
+        }),
         Some("bench-firmware") => {
             build_firmware().and_then(|_| run(&root(), "cargo", &["bench", "-p", "hammer-host", "--bench", "firmware"]))
         }

@@ -5,6 +5,7 @@
 //! Under QEMU the counter follows the virtual clock: host time normally,
 //! executed instructions with `-icount`.
 
+use core::cell::Cell;
 use core::future::poll_fn;
 use core::sync::atomic::{AtomicU32, Ordering};
 use core::task::Poll;
@@ -27,8 +28,19 @@ const _: () = assert!(RELOAD <= 0x00FF_FFFF, "SysTick's reload register has 24 b
 
 /// Completed SysTick periods. 32 bits last 13 years at 100 ms a wrap.
 static WRAPS: AtomicU32 = AtomicU32::new(0);
-/// The one task waiting in [`next_tick`].
-static TICK_WAKER: AtomicWaker = AtomicWaker::new();
+/// Core cycles spent asleep in WFI, for the CPU load the host reads.
+static IDLE: critical_section::Mutex<Cell<u64>> = critical_section::Mutex::new(Cell::new(0));
+/// The tasks waiting in [`next_tick`], one per [`Waiter`].
+static TICK_WAKERS: [AtomicWaker; 2] = [const { AtomicWaker::new() }; 2];
+
+/// Who waits for the tick: each may have one wait under way.
+#[derive(Clone, Copy)]
+pub enum Waiter {
+    /// The sampling loop's idle tick (`pacing.rs`).
+    Pacing = 0,
+    /// The persistence task's check-in.
+    Persistence = 1,
+}
 
 /// The app's [`hammer_app::Clock`]; owning SYST keeps anyone else from
 /// reprogramming the counter underneath it.
@@ -54,7 +66,7 @@ impl hammer_app::Clock for SysTickClock {
 }
 
 /// Core cycles since [`SysTickClock::start`].
-fn cycles() -> u64 {
+pub fn cycles() -> u64 {
     critical_section::with(|_| {
         // The exception cannot run in here, so a wrap since it last ran shows
         // only as its pending bit. The counter pends it on reaching 0 and
@@ -72,12 +84,33 @@ fn cycles() -> u64 {
     })
 }
 
-/// Completes at the next SysTick wrap. Only one task may wait at a time
-/// (a second would take over the waker).
-pub async fn next_tick() {
+/// The low 32 bits of [`cycles`]: enough for differences under 171 s.
+pub fn cycles32() -> u32 {
+    cycles() as u32
+}
+
+/// Counts `n` cycles the core slept (the executor's WFI).
+pub fn add_idle(n: u64) {
+    critical_section::with(|cs| {
+        let idle = IDLE.borrow(cs);
+        idle.set(idle.get() + n);
+    });
+}
+
+/// Time since start and the part of it the core was awake, µs.
+pub fn uptime_and_busy_us() -> (u64, u64) {
+    let now = cycles();
+    let idle = critical_section::with(|cs| IDLE.borrow(cs).get());
+    let per_us = u64::from(SYSCLK_HZ / 1_000_000);
+    (now / per_us, now.saturating_sub(idle) / per_us)
+}
+
+/// Completes at the next SysTick wrap. One wait per [`Waiter`] at a time
+/// (a second would take over its waker).
+pub async fn next_tick(waiter: Waiter) {
     let start = WRAPS.load(Ordering::Acquire);
     poll_fn(|cx| {
-        TICK_WAKER.register(cx.waker());
+        TICK_WAKERS[waiter as usize].register(cx.waker());
         if WRAPS.load(Ordering::Acquire) != start {
             Poll::Ready(())
         } else {
@@ -90,5 +123,8 @@ pub async fn next_tick() {
 #[exception]
 fn SysTick() {
     WRAPS.fetch_add(1, Ordering::Release);
-    TICK_WAKER.wake();
+    for w in &TICK_WAKERS {
+        w.wake();
+    }
+    crate::watchdog::on_tick();
 }

@@ -1,30 +1,38 @@
 //! Board layer for the hammer monitor on QEMU's mps2-an386 (Cortex-M4F).
 //!
-//! The board has no ADC worth modelling, so the host streams sample blocks
-//! over UART0 together with its commands, and the same UART carries the
-//! device's reports back. Everything else is the hardware-independent
-//! `hammer_app`, unchanged: this lets the complete firmware, executor and
-//! all, be tested without a board.
+//! Samples arrive the way the reference board's ADC + DMA deliver them: a
+//! ring the host fills in the board's PSRAM, released half by half by a timer
+//! at 100 kS/s of guest time (`adc.rs`, layout in `hammer_wire::stimulus`).
+//! Started without that shared memory, the board takes `Samples` frames over
+//! UART0 instead, which the tests use to inject gaps and corrupt frames.
+//! UART0 carries commands and the device's reports either way. Everything
+//! else is the hardware-independent `hammer_app`, unchanged: this lets the
+//! complete firmware, executor and all, be tested without a board.
 //!
 //! Run it with `cargo run --release` from this directory (UART0 is then
 //! QEMU's stdin/stdout, binary-clean) or, for a test harness, with UART0 on a
 //! socket:
 //! `qemu-system-arm -M mps2-an386 -nographic -monitor none -semihosting-config enable=on,target=native
-//!  -serial tcp:127.0.0.1:PORT,server=on,wait=on -kernel hammer-firmware-emu`.
+//!  -serial tcp:127.0.0.1:PORT,server=on,wait=on -kernel hammer-firmware-emu`,
+//! plus, for the full-rate samples, `-object memory-backend-file,id=stim,size=16M,mem-path=FILE,share=on
+//! -machine memory-backend=stim` (`hammer demo` does all this).
 //! A panic or fault exits QEMU with a failure status instead of hanging.
 //!
 //! QEMU hands this UART one byte per main-loop turn, which caps host-to-board
-//! traffic at roughly 40 KB/s (about 200 sample blocks, 7 kS/s): streamed
-//! samples run slower than real time, and nothing is lost.
+//! traffic at roughly 40 KB/s (about 7 kS/s of samples): the UART path runs
+//! slower than real time, and nothing is lost.
 
 #![no_std]
 #![no_main]
 
+mod adc;
 mod clock;
 mod executor;
+mod nvm;
 mod pacing;
 mod uart;
 mod vectors;
+mod watchdog;
 
 use core::fmt::Write as _;
 
@@ -32,9 +40,12 @@ use cortex_m_rt::{entry, exception, ExceptionFrame};
 use cortex_m_semihosting::debug;
 use embassy_executor::raw;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
-use hammer_app::{LinkSamples, Monitor, Shared};
+use hammer_app::{persisted, LinkSamples, Monitor, Overrun, Record, SampleSource, Shared};
+use hammer_wire::{HostMsg, WearBlob};
+use hammer_estimator::RawSample;
 use static_cell::StaticCell;
 
+use crate::adc::{NoStimulus, StimulusAdc};
 use crate::clock::SysTickClock;
 use crate::pacing::Paced;
 use crate::uart::{PanicWriter, UartRx, UartTx};
@@ -44,15 +55,31 @@ const BOARD_NAME: &str = "qemu-mps2-an386";
 
 type Mutex = CriticalSectionRawMutex;
 
-static SHARED: Shared<Mutex> = Shared::new();
+/// `pub(crate)`: the watchdog's feeder reads the duties' check-ins.
+pub(crate) static SHARED: Shared<Mutex> = Shared::new();
 /// The monitor holds a ~40 KB capture buffer: a static, not a task's stack.
 static MONITOR: StaticCell<Monitor> = StaticCell::new();
 static CLOCK: StaticCell<SysTickClock> = StaticCell::new();
 static EXECUTOR: StaticCell<raw::Executor> = StaticCell::new();
 
+/// Where this run's samples come from, chosen once at boot.
+enum Samples {
+    Adc(StimulusAdc),
+    Link(LinkSamples<'static, Mutex>),
+}
+
+impl SampleSource for Samples {
+    async fn read(&mut self, buf: &mut [RawSample]) -> Result<usize, Overrun> {
+        match self {
+            Samples::Adc(adc) => adc.read(buf).await,
+            Samples::Link(link) => link.read(buf).await,
+        }
+    }
+}
+
 #[embassy_executor::task]
-async fn sampling(monitor: &'static mut Monitor, clock: &'static SysTickClock) -> ! {
-    let mut source = Paced::new(LinkSamples::new(&SHARED), &SHARED);
+async fn sampling(monitor: &'static mut Monitor, clock: &'static SysTickClock, samples: Samples) -> ! {
+    let mut source = Paced::new(samples, &SHARED);
     hammer_app::sampling(&mut source, monitor, &SHARED, clock).await
 }
 
@@ -66,6 +93,11 @@ async fn link_tx(mut tx: UartTx) -> ! {
     hammer_app::link_tx(&mut tx, &SHARED).await
 }
 
+#[embassy_executor::task]
+async fn persistence() -> ! {
+    hammer_app::persisting(&mut nvm::Nvm, &SHARED, || clock::next_tick(clock::Waiter::Persistence)).await
+}
+
 #[entry]
 fn main() -> ! {
     let Some(core) = cortex_m::Peripherals::take() else {
@@ -74,22 +106,43 @@ fn main() -> ! {
     let clock: &'static SysTickClock = CLOCK.init(SysTickClock::start(core.SYST));
     let (tx, rx) = uart::init();
 
+    // The configuration stored before the last reset, if any and valid.
+    let stored = nvm::load(Record::Config).and_then(|(rec, len)| persisted::config_from_record(&rec[..len], None));
     // `init_with` lets the compiler build the monitor in place (checked: no
-    // stack frame of its size); the default configuration is valid, so the
-    // error arm is a programming error.
-    let monitor = MONITOR.init_with(|| match Monitor::new(hammer_estimator::Config::default(), BOARD_NAME) {
-        Ok(m) => m,
-        Err(_) => panic!("default estimator configuration rejected"),
+    // stack frame of its size). The default configuration is valid, so the
+    // last error arm is a programming error.
+    let monitor = MONITOR.init_with(|| {
+        match Monitor::new(stored.unwrap_or_default(), BOARD_NAME)
+            .or_else(|_| Monitor::new(hammer_estimator::Config::default(), BOARD_NAME))
+        {
+            Ok(m) => m,
+            Err(_) => panic!("default estimator configuration rejected"),
+        }
     });
+    // The wear state, through the command the host would use: validated alike.
+    if let Some((bytes, len)) = nvm::load(Record::Wear) {
+        if let Ok(bytes) = heapless::Vec::from_slice(&bytes[..len]) {
+            monitor.on_command(HostMsg::RestoreWear(WearBlob { bytes }), 0, &mut |_| {});
+        }
+    }
+    monitor.set_reset_cause(watchdog::take_reset_cause());
+    watchdog::start();
+
+    let (samples, idle) = match StimulusAdc::start() {
+        Ok(adc) => (Samples::Adc(adc), executor::Idle::Spin),
+        Err(NoStimulus::Absent) => (Samples::Link(LinkSamples::new(&SHARED)), executor::Idle::Sleep),
+        Err(NoStimulus::Mismatch) => panic!("the host's sample stimulus has another layout than this firmware's"),
+    };
 
     // The pender ignores the context; the executor is the only one.
     let executor: &'static raw::Executor = EXECUTOR.init(raw::Executor::new(core::ptr::null_mut()));
     let spawner = executor.spawner();
     // Each task has a pool of one and is spawned once, so spawning cannot fail.
-    spawner.spawn(sampling(monitor, clock).expect("sampling task spawned once"));
+    spawner.spawn(sampling(monitor, clock, samples).expect("sampling task spawned once"));
     spawner.spawn(link_rx(rx).expect("link_rx task spawned once"));
     spawner.spawn(link_tx(tx).expect("link_tx task spawned once"));
-    executor::run(executor)
+    spawner.spawn(persistence().expect("persistence task spawned once"));
+    executor::run(executor, idle)
 }
 
 /// Reports on UART0 (after a frame delimiter, so a host's decoder drops any
@@ -104,12 +157,21 @@ fn panic(info: &core::panic::PanicInfo) -> ! {
     exit_failure()
 }
 
-/// Faults (a bad pointer, an undefined instruction) end QEMU like a panic.
+/// Faults (a bad pointer, an undefined instruction) are recorded for the
+/// next boot's status and reset the board, as on the reference board. The
+/// third since QEMU started ends QEMU like a panic instead, so a fault at
+/// boot cannot loop forever under a test.
 #[exception]
 unsafe fn HardFault(frame: &ExceptionFrame) -> ! {
     let _ = write!(PanicWriter, "\0hard fault at pc {:#010x}\r\n\0", frame.pc());
     cortex_m_semihosting::heprintln!("hard fault: {:?}", frame);
-    exit_failure()
+    // SAFETY: CFSR (0xE000_ED28) is readable at any time.
+    let cfsr = unsafe { core::ptr::read_volatile(0xE000_ED28 as *const u32) };
+    watchdog::record(hammer_wire::ResetCause::Fault { pc: frame.pc(), cfsr });
+    if watchdog::count_fault() >= 3 {
+        exit_failure()
+    }
+    cortex_m::peripheral::SCB::sys_reset()
 }
 
 fn exit_failure() -> ! {

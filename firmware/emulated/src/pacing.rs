@@ -31,7 +31,7 @@ impl<S: SampleSource, M: RawMutex> SampleSource for Paced<'_, S, M> {
         // The sampling loop is the commands channel's only receiver, so this
         // wait does not take the channel's receive waker from anyone.
         let commands = self.shared.commands.ready_to_receive();
-        match select3(self.inner.read(buf), commands, clock::next_tick()).await {
+        match select3(self.inner.read(buf), commands, clock::next_tick(clock::Waiter::Pacing)).await {
             Either3::First(r) => r,
             Either3::Second(()) | Either3::Third(()) => Ok(0),
         }

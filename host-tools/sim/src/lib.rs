@@ -26,4 +26,4 @@ pub mod solver;
 pub use effects::{Effects, EFFECT_NAMES, REGISTRY};
 pub use params::SimConfig;
 pub use run::{simulate_truth, CycleTruth, SimRun, TruthTrace};
-pub use simulate::{simulate, simulate_to_file, SimulateError, Simulation, SimulationInfo};
+pub use simulate::{simulate, simulate_to_file, stream_codes, SimulateError, Simulation, SimulationInfo};

@@ -1,6 +1,7 @@
 //! A complete simulated measurement: truth, sensor chain, trace and sidecar.
 
 use std::fmt::Write as _;
+use std::ops::ControlFlow;
 
 use serde::{Deserialize, Serialize};
 
@@ -169,6 +170,48 @@ pub fn simulate(config: &SimConfig) -> Result<Simulation, SolverError> {
         },
         measured,
     })
+}
+
+/// A streamed run ended by its consumer.
+#[derive(Debug)]
+pub struct Stopped;
+
+/// The measured codes to a closure, nothing kept per sample.
+struct CodeStream<F>(F);
+
+impl<F: FnMut(RawSample) -> ControlFlow<()>> MeasuredSink for CodeStream<F> {
+    type Error = Stopped;
+    fn sample(&mut self, _: &TruthSample, m: ChainSample) -> Result<(), Stopped> {
+        match (self.0)(m.codes) {
+            ControlFlow::Continue(()) => Ok(()),
+            ControlFlow::Break(()) => Err(Stopped),
+        }
+    }
+}
+
+/// Simulated time of an endless [`stream_codes`] run: 115 days, past any
+/// demo or soak, and still a finite output grid.
+pub const ENDLESS_S: f64 = 1e7;
+
+/// The ADC codes a board would sample, handed to `sink` as the run makes
+/// them: memory does not grow with the run's length beyond the per-cycle
+/// records, so a board can be fed for as long as it runs. With `endless`
+/// the run goes on past `solver.duration_s` until `sink` breaks; effects
+/// that drift with time (wear) keep drifting. `Ok` when `sink` ended it or
+/// the duration was reached.
+pub fn stream_codes(
+    config: &SimConfig,
+    endless: bool,
+    sink: impl FnMut(RawSample) -> ControlFlow<()>,
+) -> Result<(), SolverError> {
+    let mut cfg = config.clone();
+    if endless {
+        cfg.solver.duration_s = ENDLESS_S;
+    }
+    match run_measured(&cfg, CodeStream(sink)) {
+        Ok(_) | Err(RunError::Sink(Stopped)) => Ok(()),
+        Err(RunError::Solver(e)) => Err(e),
+    }
 }
 
 /// With no trace to write the samples are dropped as they are made.

@@ -440,6 +440,7 @@ fn device_panel(v: &View) -> Paragraph<'static> {
             st.cycles.to_string(),
             &format!(" ({} invalid)", st.invalid_cycles),
         ));
+        lines.push(row("Last reset", crate::numfmt::reset_cause(&st.reset_cause), ""));
     }
     if v.captures > 0 {
         lines.push(row("Capture chunks", v.captures.to_string(), ""));

@@ -1,0 +1,111 @@
+//! The emulated board's ADC, as a ring of sample-sets in memory both sides map.
+//!
+//! The reference board's ADC + DMA fill a ring at 100 kS/s × 3 whatever the
+//! CPU does; the UART of QEMU's mps2-an386 carries about 40 KB/s, a fifteenth
+//! of that. So on the emulated board the host writes the ADC's codes into the
+//! board's 16 MiB PSRAM, which QEMU backs with a file the host maps too
+//! (`-object memory-backend-file,share=on` + `-machine memory-backend=…`),
+//! and a timer in the board plays the DMA: every [`Header::block_sets`]
+//! sample-sets of guest time it completes one half of a notional two-half DMA
+//! ring and interrupts. The firmware then reads that half under the reference
+//! board's rule: a half stays intact until the next half completes, so
+//! reading it later is an overrun, counted as lost samples.
+//!
+//! The layout is here, once, for the board (`firmware/emulated/src/adc.rs`)
+//! and the host (`host-tools/src/stimulus.rs`). Positions are free-running
+//! `u32` counts of sample-sets that wrap (11.9 h at 100 kS/s); only their
+//! differences are used, and [`CAPACITY_SETS`] divides 2^32, so a position
+//! modulo the capacity is its slot in the ring.
+//!
+//! Who writes what: the host writes the samples, then `written_sets`
+//! (release), `end_of_stream` and `stall_us`; the board writes every other counter.
+//! `magic` is written last by the host, so a board that finds it finds a
+//! complete header; a board started without the backing file finds zeros and
+//! takes its samples from the UART instead.
+
+use core::sync::atomic::AtomicU32;
+
+/// Where the board's PSRAM (QEMU's machine RAM, `mps.ram`) starts.
+pub const PSRAM_BASE: usize = 0x2100_0000;
+/// Its size; the backing file must have exactly this size.
+pub const PSRAM_BYTES: usize = 16 * 1024 * 1024;
+/// The header's place in the PSRAM; the ring follows at [`RING_OFFSET`].
+pub const HEADER_OFFSET: usize = 0;
+pub const RING_OFFSET: usize = 4096;
+/// Sample-sets in the ring: 2^21, 21 s at 100 kS/s, 12 MiB of codes.
+pub const CAPACITY_SETS: u32 = 1 << 21;
+/// Bytes per sample-set in the ring: rear, front, accel as little-endian u16,
+/// the order the reference board's ADC scan writes them.
+pub const SET_BYTES: usize = 6;
+/// "HSTM", little-endian.
+pub const MAGIC: u32 = u32::from_le_bytes(*b"HSTM");
+/// Bumped on any change of the header's layout or meaning.
+pub const VERSION: u32 = 1;
+/// The reference board's DMA half-buffer (firmware/src/sampler.rs), so the
+/// emulated board sees the same block size and has the same slack.
+pub const BLOCK_SETS: u32 = 256;
+/// The reference board's sample rate.
+pub const RATE_HZ: u32 = 100_000;
+
+/// The emulated board's non-volatile area, past the ring: QEMU keeps RAM
+/// through a board reset, and the host's backing file keeps it beyond QEMU.
+pub const NVM_OFFSET: usize = 13 * 1024 * 1024;
+pub const NVM_BYTES: usize = 64 * 1024;
+
+const _: () = assert!(RING_OFFSET + CAPACITY_SETS as usize * SET_BYTES <= NVM_OFFSET);
+const _: () = assert!(NVM_OFFSET + NVM_BYTES <= PSRAM_BYTES);
+const _: () = assert!(CAPACITY_SETS.is_power_of_two() && CAPACITY_SETS % BLOCK_SETS == 0);
+const _: () = assert!(core::mem::size_of::<Header>() <= RING_OFFSET);
+
+/// Overruns the header remembers where they happened.
+pub const LOST_LOG: usize = 8;
+
+/// The shared header. `repr(C)` and only 32-bit atomics, which both the
+/// Cortex-M4 and the host have, so each side reads whole values.
+#[repr(C)]
+pub struct Header {
+    /// [`MAGIC`] once the host has filled the header.
+    pub magic: AtomicU32,
+    pub version: AtomicU32,
+    /// Ring length in sample-sets ([`CAPACITY_SETS`]).
+    pub capacity_sets: AtomicU32,
+    /// Sample-sets per DMA half ([`BLOCK_SETS`]).
+    pub block_sets: AtomicU32,
+    /// Sample rate the board's timer reproduces.
+    pub rate_hz: AtomicU32,
+    /// Host: sample-sets written so far.
+    pub written_sets: AtomicU32,
+    /// Host: non-zero once nothing follows `written_sets`.
+    pub end_of_stream: AtomicU32,
+    /// Board: sample-sets the "DMA" has completed (whole halves).
+    pub dma_sets: AtomicU32,
+    /// Board: halves the timer had to skip because the host had not written
+    /// them yet. Not the firmware's fault: the stimulus was late, and the
+    /// samples are only delayed, never lost. Non-zero invalidates timing figures.
+    pub starved_blocks: AtomicU32,
+    /// Board: sample-sets handed to the app.
+    pub consumed_sets: AtomicU32,
+    /// Board: sample-sets lost to overruns (the app was too late for a half).
+    pub lost_sets: AtomicU32,
+    /// Board: overrun events.
+    pub overruns: AtomicU32,
+    /// Board: the longest time from a half's completion to the end of its
+    /// processing, in microseconds of guest time.
+    pub latency_max_us: AtomicU32,
+    /// Board: guest time since boot, µs (wraps after 71 min; use differences).
+    pub uptime_us: AtomicU32,
+    /// Board: of that, time the core was not idle, µs (wraps likewise).
+    pub busy_us: AtomicU32,
+    /// Board: the latest [`LOST_LOG`] overruns, overrun number `n` at
+    /// `n % LOST_LOG`: the position of the first sample-set lost, and how many.
+    pub lost_log: [[AtomicU32; 2]; LOST_LOG],
+    /// Host: fault injection. The board's sampling task, the next time it
+    /// asks for samples, stays busy this long (µs of guest time) and clears
+    /// it: a firmware that is late, to show the overrun it causes.
+    pub stall_us: AtomicU32,
+}
+
+/// The ring slot of sample-set position `pos`.
+pub const fn slot(pos: u32) -> usize {
+    (pos % CAPACITY_SETS) as usize
+}
