@@ -8,6 +8,7 @@
 //!   link transmit) and the [`Shared`] state between them;
 //! - [`monitor`]: the synchronous, sans-IO core: samples in, estimator,
 //!   reports, alarms, captures and wear persistence out; commands applied;
+//! - [`packed`]: sample-sets at 12 bits a code, for the capture buffer;
 //! - [`persisted`]: the configuration record the boards store;
 //! - [`reset`]: the reset cause as a board keeps it through a reset;
 //! - [`supervisor`]: the duties' check-ins, for a watchdog fed only while
@@ -29,6 +30,7 @@
 
 pub mod board;
 pub mod monitor;
+pub mod packed;
 pub mod persisted;
 pub mod reset;
 pub mod supervisor;

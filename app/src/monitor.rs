@@ -1,6 +1,7 @@
 //! The monitor's synchronous core: samples in, messages out, commands applied.
 //! No I/O and no time source of its own, so it is tested on the host as is.
 
+use crate::packed::{self, Packed};
 use hammer_estimator::tare::Tare;
 use hammer_estimator::{Config, Estimator, Flags, RawSample, WearState, MAX_CONFIRM};
 use hammer_wire::{
@@ -9,8 +10,10 @@ use hammer_wire::{
 };
 
 /// Sample-sets a raw capture holds: one full cycle of the paper's hammer
-/// (≤ 50 ms at 4 bar) at 100 kS/s, with margin. 6 bytes each.
+/// (≤ 50 ms at 4 bar) at 100 kS/s, with margin. 4.5 bytes each (12-bit
+/// codes, `packed`): 25.2 KB.
 pub const CAPTURE_SAMPLES: usize = 5_600;
+const CAPTURE_BYTES: usize = packed::bytes_for(CAPTURE_SAMPLES);
 
 /// Samples kept after the impact that closes a capture: its shock and the
 /// few samples before it make the capture a complete cycle for the estimator.
@@ -54,7 +57,7 @@ pub struct Monitor {
     /// A `MeasureCodes` under way: the same sums as a tare, and samples left.
     measure: Option<(Tare, u32)>,
     capture: CaptureState,
-    capture_buf: [RawSample; CAPTURE_SAMPLES],
+    capture_buf: Packed<CAPTURE_SAMPLES, CAPTURE_BYTES>,
     capture_len: usize,
     capture_id: u16,
     /// The latest samples, so a capture starts at the impact's first shock
@@ -81,7 +84,7 @@ impl Monitor {
             tare: None,
             measure: None,
             capture: CaptureState::Idle,
-            capture_buf: [RawSample::default(); CAPTURE_SAMPLES],
+            capture_buf: Packed::new(),
             capture_len: 0,
             capture_id: 0,
             preroll: [RawSample::default(); MAX_CONFIRM],
@@ -185,7 +188,7 @@ impl Monitor {
             }
             if matches!(self.capture, CaptureState::Recording { .. } | CaptureState::Tail { .. }) {
                 if self.capture_len < CAPTURE_SAMPLES {
-                    self.capture_buf[self.capture_len] = s;
+                    self.capture_buf.set(self.capture_len, s);
                     self.capture_len += 1;
                 } else {
                     // Longer than the buffer: stream what there is.
@@ -211,8 +214,9 @@ impl Monitor {
         self.capture = match self.capture {
             CaptureState::Armed { cycles } => {
                 // The last `since` samples, oldest first, out of the ring.
-                for (k, dst) in self.capture_buf[..since].iter_mut().enumerate() {
-                    *dst = self.preroll[(self.preroll_next + MAX_CONFIRM - since + k) % MAX_CONFIRM];
+                for k in 0..since {
+                    let s = self.preroll[(self.preroll_next + MAX_CONFIRM - since + k) % MAX_CONFIRM];
+                    self.capture_buf.set(k, s);
                 }
                 self.capture_len = since;
                 self.capture_id = self.capture_id.wrapping_add(1);
@@ -263,7 +267,8 @@ impl Monitor {
         }
         let end = (sent + BLOCK_SAMPLES).min(self.capture_len);
         let mut samples = heapless::Vec::new();
-        for s in &self.capture_buf[sent..end] {
+        for i in sent..end {
+            let s = self.capture_buf.get(i);
             let _ = samples.push([s.rear, s.front, s.accel]);
         }
         self.capture = CaptureState::Streaming { sent: end };

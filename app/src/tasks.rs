@@ -68,8 +68,9 @@ impl LinkAtomics {
 pub struct Shared<M: RawMutex> {
     pub commands: Channel<M, HostMsg, 4>,
     pub outgoing: Channel<M, DeviceMsg, OUTGOING>,
-    /// Sample blocks that arrive over the link (boards without an ADC).
-    pub samples: Channel<M, SampleBlock, 4>,
+    /// Sample blocks that arrive over the link (boards without an ADC). Two:
+    /// the link task waits while both are taken, which holds the host back.
+    pub samples: Channel<M, SampleBlock, 2>,
     pub link: LinkAtomics,
     /// The latest wear state to persist. A board with flash stores it from a
     /// low-priority task (a page erase must never stall sampling); a board

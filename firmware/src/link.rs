@@ -22,10 +22,12 @@ use crate::Irqs;
 /// USART's divider of 184 gives 923 913 Bd, 0.25 % fast: well inside what
 /// a UART receiver tolerates (several percent at 16x oversampling).
 pub const BAUD: u32 = 921_600;
-/// Receive ring: 11 ms of back-to-back bytes at 921 600 Bd, or two and a
-/// half maximum-size frames; the host sends commands one at a time and waits
-/// for the answer, so this only fills if the thread executor stalls.
-pub const RX_RING: usize = 1024;
+/// Receive ring: 5.5 ms of back-to-back bytes at 921 600 Bd, more than the
+/// largest frame (400 B); the host sends commands one at a time and waits
+/// for the answer (this board takes no samples over the link), so this only
+/// fills if the thread executor stalls, and a lost command is counted and
+/// answered with a rejection.
+pub const RX_RING: usize = 512;
 
 /// Receive errors (framing, noise, overrun) since boot. The app counts the
 /// frames these corrupt; this says why.
