@@ -335,7 +335,7 @@ impl CycleAcc {
     /// Adds a run of consecutive samples. The hot loop of the estimator, in
     /// pieces that end at checkpoints: one pass over the piece (exact
     /// integer sums of its codes, and the few float sums that need each
-    /// sample; see [`pass`]), the sensor watches (see [`Self::watch`]), then
+    /// sample; see `pass`), the sensor watches (see `Self::watch`), then
     /// at a checkpoint the float conversion of the integer sums and the
     /// checkpoint's work.
     ///

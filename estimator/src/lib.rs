@@ -13,10 +13,12 @@
 //! - [`tare`]: zero offsets from the hammer at rest;
 //! - this file: [`Estimator`], impact detection (shock confirmation, spike
 //!   rejection, blanking), the cycle's phases, stalls and gaps;
-//! - [`cycle`]: the running sums of the cycle under way and the sensor
-//!   watches (rails, stuck channels, the accelerometer's force-balance slope);
+//! - [`cycle`]: the running sums of the cycle under way (exact integer sums
+//!   of the codes per checkpoint, the per-sample pass in `cycle::pass`) and the
+//!   sensor watches (rails, stuck channels, the accelerometer's force-balance slope);
 //! - [`estimate`]: what a closed cycle's sums give (friction per phase, zero
 //!   shift, impact velocity and energy, their uncertainties);
+//! - `run`: the impact scan and the delay line's copies, as plain loops;
 //! - `history`: the neighbour check on period and stroke;
 //! - [`wear`]: the wear index, the drift CUSUM and their saved state;
 //! - [`math`]: the one path for transcendental functions (host = target).
@@ -32,6 +34,7 @@ pub mod estimate;
 pub mod geometry;
 mod history;
 pub mod math;
+mod run;
 pub mod tare;
 pub mod wear;
 
@@ -44,6 +47,7 @@ pub use wear::{WearState, WearStateError};
 
 use cycle::{CycleAcc, Derived};
 use history::History;
+use run::{copy, first_at_or_below};
 
 /// Longest pre-impact blanking in samples (the delay line's size).
 pub const MAX_PRE_BLANK: usize = 64;
@@ -79,34 +83,6 @@ fn impact_code(cfg: &Config) -> Option<u16> {
     }
     // Code 0 (the bottom rail) is always an impact.
     Some(code.unwrap_or(0))
-}
-
-/// The first sample whose accelerometer code is at or below `max` (an
-/// impact), two samples a turn.
-#[inline(always)]
-fn first_at_or_below(scan: &[RawSample], max: u16) -> Option<usize> {
-    let pairs = scan.chunks_exact(2);
-    let odd = pairs.remainder();
-    for (k, p) in pairs.enumerate() {
-        if p[0].accel <= max {
-            return Some(2 * k);
-        }
-        if p[1].accel <= max {
-            return Some(2 * k + 1);
-        }
-    }
-    odd.iter()
-        .position(|s| s.accel <= max)
-        .map(|i| scan.len() - odd.len() + i)
-}
-
-/// Copies a few samples (the delay line's): element by element, as
-/// `copy_from_slice` on 6-byte samples calls a byte-wise `memcpy`.
-#[inline(always)]
-fn copy(dst: &mut [RawSample], src: &[RawSample]) {
-    for (d, s) in dst.iter_mut().zip(src) {
-        *d = *s;
-    }
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
