@@ -325,7 +325,10 @@ impl CycleAcc {
         *self = Self::new();
         // e(t) = exp(−(t − t_impact)/τ); the first push multiplies by q once.
         self.e_before = if d.q > 0.0 {
-            math::pow(d.q, samples_since_impact as f32 - 1.0)
+            match samples_since_impact {
+                0 => 1.0 / d.q,
+                n => math::powi(d.q, n - 1),
+            }
         } else {
             0.0
         };

@@ -99,7 +99,8 @@ impl Tare {
         let limits = [5_000.0f32, 5_000.0, 10.0];
         let mut out = *cfg;
         let mut zeroed = [false; 3];
-        let g_axis = (STANDARD_GRAVITY_MPS2 as f32) * math::sin(cfg.inclination_deg * (core::f32::consts::PI / 180.0));
+        let g_axis =
+            (STANDARD_GRAVITY_MPS2 as f32) * math::sin_small(cfg.inclination_deg * (core::f32::consts::PI / 180.0));
         for ch in 0..3 {
             let n = self.n as f64;
             let mean = self.sum[ch] as f64 / n;

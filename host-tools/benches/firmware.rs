@@ -69,6 +69,12 @@ fn main() {
     );
     let hammer_s = f64::from(c.consumed_sets) / f64::from(RATE_HZ);
     println!(
+        "stack: {} B at the deepest of {} B reserved (margin {} B), measured from the painted stack",
+        c.stack_used_bytes,
+        c.stack_reserved_bytes,
+        c.stack_reserved_bytes.saturating_sub(c.stack_used_bytes)
+    );
+    println!(
         "at 100 kS/s: sampling loop {:.1} M instructions/s, whole board {:.1} M instructions/s \
          ({:.1} % of the STM32G474's 170 MHz at one instruction per cycle, a lower bound on the cost)",
         per_set * f64::from(RATE_HZ) / 1e6,

@@ -56,6 +56,10 @@ pub enum Command {
     /// against a reference you apply and type in) and its accelerometer's
     /// zero at rest; the board stores the result.
     Calibrate(crate::calibrate::CalibrateArgs),
+    /// A board's first-boot checks at rest (vented, supply off): each
+    /// channel in its idle range, 10 s of sampling without loss at the
+    /// configured rate. Exits non-zero when a check fails.
+    Selftest(crate::selftest::SelftestArgs),
     /// Run the estimator (the firmware's no_std crate) over a trace and print
     /// one record per impact cycle: friction (N), impact energy (J) with and
     /// without friction, frequency (Hz), wear index (J), each with its
@@ -271,6 +275,14 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Calibrate(args) => {
             let c = crate::calibrate::run(&args)?;
             outln!("{}", c.summary());
+            Ok(())
+        }
+        Command::Selftest(args) => {
+            let checks = crate::selftest::run(&args)?;
+            outln!("{}", crate::selftest::summary(&checks));
+            if checks.iter().any(|c| !c.pass) {
+                anyhow::bail!("the self-test failed");
+            }
             Ok(())
         }
         Command::Soak(args) => {

@@ -11,7 +11,7 @@
 //! - [`estimate`], [`report`], [`plot`]: offline: per-cycle records, the
 //!   report page, the effect figures;
 //! - [`diagnose`]: the sim-to-real gap diagnosis and its benchmarks;
-//! - [`capture`], [`calibrate`], [`demo`], [`soak`], [`monitor`]: live: raw captures, calibration, the
+//! - [`capture`], [`calibrate`], [`selftest`], [`demo`], [`soak`], [`monitor`]: live: raw captures, calibration, the
 //!   no-hardware demo, the full-rate soak, the dashboard, logs and replay;
 //! - [`cli`]: the subcommands, thin over the above.
 
@@ -33,5 +33,6 @@ pub mod numfmt;
 pub mod plot;
 pub mod records;
 pub mod report;
+pub mod selftest;
 pub mod soak;
 pub mod stimulus;

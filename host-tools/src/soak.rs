@@ -56,6 +56,9 @@ pub struct Soak {
     pub mismatches: u64,
     pub first_mismatch: Option<String>,
     pub latency_max_us: u32,
+    /// The deepest the board's stack has been, and the stack region, bytes.
+    pub stack_used_bytes: u32,
+    pub stack_reserved_bytes: u32,
     /// Guest µs the core was awake / since boot (accumulated across wraps).
     pub busy_us: u64,
     pub uptime_us: u64,
@@ -135,6 +138,12 @@ impl Soak {
             "  latency: worst {} us from a DMA half's completion to the end of its processing (deadline {} us)\n",
             self.latency_max_us,
             u64::from(hammer_wire::stimulus::BLOCK_SETS) * 1_000_000 / u64::from(hammer_wire::stimulus::RATE_HZ)
+        );
+        out += &format!(
+            "  stack: {} B at the deepest of {} B reserved (margin {} B), measured from the painted stack\n",
+            self.stack_used_bytes,
+            self.stack_reserved_bytes,
+            self.stack_reserved_bytes.saturating_sub(self.stack_used_bytes)
         );
         out += if self.clean() {
             "  verdict: clean"
@@ -281,6 +290,8 @@ pub fn run(args: &SoakArgs, progress: bool) -> Result<Soak> {
     soak.lost_sets = c.lost_sets;
     soak.late_stimulus_blocks = c.starved_blocks;
     soak.latency_max_us = c.latency_max_us;
+    soak.stack_used_bytes = c.stack_used_bytes;
+    soak.stack_reserved_bytes = c.stack_reserved_bytes;
     soak.busy_us = unwrap.busy_us;
     soak.uptime_us = unwrap.uptime_us;
     soak.reports_lost = link.lost_reports;

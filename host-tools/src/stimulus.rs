@@ -29,6 +29,8 @@ pub struct Counters {
     pub latency_max_us: u32,
     pub uptime_us: u32,
     pub busy_us: u32,
+    pub stack_used_bytes: u32,
+    pub stack_reserved_bytes: u32,
 }
 
 /// The shared file and its mapping; removed when dropped.
@@ -183,6 +185,8 @@ impl Stimulus {
             latency_max_us: l(&h.latency_max_us),
             uptime_us: l(&h.uptime_us),
             busy_us: l(&h.busy_us),
+            stack_used_bytes: l(&h.stack_used_bytes),
+            stack_reserved_bytes: l(&h.stack_reserved_bytes),
         }
     }
 }

@@ -16,6 +16,7 @@ use hammer_estimator::{Config, RawSample};
 use hammer_host::calibrate::{calibrate, Operator};
 use hammer_host::client::Client;
 use hammer_host::emulator::{firmware_elf, Emulator, Icount};
+use hammer_host::selftest::selftest;
 use hammer_host::stimulus::Stimulus;
 use hammer_wire::*;
 
@@ -206,5 +207,32 @@ fn calibration_finds_the_applied_gains_and_survives_a_reset() {
     let back = get_config(&mut link);
     assert_eq!(back.rear.scale.to_bits(), cal.after.rear.scale.to_bits());
     assert_eq!(back.front.zero_code.to_bits(), cal.after.front.zero_code.to_bits());
+    drop(emu);
+}
+
+#[test]
+fn the_self_test_passes_a_vented_board_and_names_a_pressurised_chamber() {
+    let stimulus = Arc::new(Stimulus::create().unwrap());
+    let feeder = Feeder::start(stimulus.clone());
+    let mut emu = Emulator::start_with(&firmware_elf(), Some(Icount::m4_at_125_mips(false)), Some(&stimulus))
+        .expect("QEMU and the emulated firmware");
+    let mut link = Client::new(emu.connect(T).unwrap());
+    link.handshake(T).unwrap();
+    // The truth's offsets are within the idle limits with the default calibration.
+    feeder.apply(0);
+    let checks = selftest(&mut link, 2.0).expect("self-test runs");
+    println!("{}", hammer_host::selftest::summary(&checks));
+    assert_eq!(checks.len(), 5);
+    assert!(checks.iter().all(|c| c.pass), "{checks:?}");
+    // 1 bar left in the chambers: both pressure checks fail and say why.
+    feeder.apply(100_000);
+    let checks = selftest(&mut link, 1.0).expect("self-test runs");
+    let failed: Vec<&str> = checks.iter().filter(|c| !c.pass).map(|c| c.name.as_str()).collect();
+    assert_eq!(
+        failed,
+        ["rear pressure at rest", "front pressure at rest"],
+        "{checks:?}"
+    );
+    assert!(checks[0].detail.contains("not vented"), "{}", checks[0].detail);
     drop(emu);
 }

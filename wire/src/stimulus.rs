@@ -99,6 +99,10 @@ pub struct Header {
     /// Board: the latest [`LOST_LOG`] overruns, overrun number `n` at
     /// `n % LOST_LOG`: the position of the first sample-set lost, and how many.
     pub lost_log: [[AtomicU32; 2]; LOST_LOG],
+    /// Board: the deepest its stack has been, and the stack region's size,
+    /// bytes (measured about once a second from the painted stack).
+    pub stack_used_bytes: AtomicU32,
+    pub stack_reserved_bytes: AtomicU32,
     /// Host: fault injection. The board's sampling task, the next time it
     /// asks for samples, stays busy this long (µs of guest time) and clears
     /// it: a firmware that is late, to show the overrun it causes.

@@ -138,6 +138,8 @@ pub struct StimulusAdc {
     next: u32,
     /// The half whose processing ends when the app next asks for samples.
     finished: Option<u32>,
+    /// The second of guest time of the last stack scan.
+    stack_scanned_s: u64,
 }
 
 /// `a` is after `b` in wrapping position order.
@@ -173,7 +175,11 @@ impl StimulusAdc {
         // SAFETY: the handler only touches the header, DMA and WAKER, all
         // interrupt-safe.
         unsafe { NVIC::unmask(Interrupt::Timer0) };
-        Ok(Self { next, finished: None })
+        Ok(Self {
+            next,
+            finished: None,
+            stack_scanned_s: u64::MAX,
+        })
     }
 
     fn overrun(&mut self, h: &Header, oldest: u32) -> Overrun {
@@ -190,12 +196,19 @@ impl StimulusAdc {
     }
 
     /// The end of a half's processing: its latency, and the load figures.
-    fn processed(h: &Header, half: u32) {
+    fn processed(&mut self, h: &Header, half: u32) {
         let done_at = critical_section::with(|cs| DMA.borrow(cs).get().done_at[half as usize % 4]);
         let ticks = clock::cycles32().wrapping_sub(done_at);
         h.latency_max_us
             .fetch_max(ticks / (SYSCLK_HZ / 1_000_000), Ordering::Relaxed);
         let (uptime, busy) = clock::uptime_and_busy_us();
+        // The stack's scan (≈ 8 000 words) once a second of guest time.
+        if uptime / 1_000_000 != self.stack_scanned_s {
+            self.stack_scanned_s = uptime / 1_000_000;
+            let (used, reserved) = crate::stack::high_water();
+            h.stack_used_bytes.store(used, Ordering::Relaxed);
+            h.stack_reserved_bytes.store(reserved, Ordering::Relaxed);
+        }
         h.uptime_us.store(uptime as u32, Ordering::Relaxed);
         h.busy_us.store(busy as u32, Ordering::Relaxed);
     }
@@ -214,7 +227,7 @@ impl SampleSource for StimulusAdc {
     async fn read(&mut self, buf: &mut [RawSample]) -> Result<usize, Overrun> {
         let h = header();
         if let Some(half) = self.finished.take() {
-            Self::processed(h, half);
+            self.processed(h, half);
         }
         Self::stall_if_asked(h);
         // Cancel-safe: nothing below the wait is interrupted by an await.
