@@ -81,6 +81,10 @@ pub struct Shared<M: RawMutex> {
     /// The duties' check-ins (the sampling loop and the link here, a board's
     /// persistence task there), for the board's watchdog.
     pub supervisor: Supervisor,
+    /// The stack's high-water mark and region, bytes, as the board last
+    /// measured them (painted stack); reported in every `Status`.
+    pub stack_used_bytes: AtomicU32,
+    pub stack_reserved_bytes: AtomicU32,
 }
 
 impl<M: RawMutex> Shared<M> {
@@ -93,6 +97,17 @@ impl<M: RawMutex> Shared<M> {
             wear_snapshot: Signal::new(),
             config_snapshot: Signal::new(),
             supervisor: Supervisor::new(),
+            stack_used_bytes: AtomicU32::new(0),
+            stack_reserved_bytes: AtomicU32::new(0),
+        }
+    }
+
+    /// `status` with the board's stack figures.
+    pub fn with_stack(&self, status: hammer_wire::Status) -> hammer_wire::Status {
+        hammer_wire::Status {
+            stack_used_bytes: self.stack_used_bytes.load(Ordering::Relaxed),
+            stack_reserved_bytes: self.stack_reserved_bytes.load(Ordering::Relaxed),
+            ..status
         }
     }
 
@@ -141,12 +156,12 @@ pub async fn sampling<S: SampleSource, M: RawMutex, C: Clock>(
         }
         while let Some(cmd) = pending.take().or_else(|| shared.commands.try_receive().ok()) {
             if cmd == HostMsg::GetStatus {
-                emit(DeviceMsg::Status(monitor.status(
+                emit(DeviceMsg::Status(shared.with_stack(monitor.status(
                     t0,
                     load_permille,
                     busy_total_us,
                     shared.link.snapshot(),
-                )));
+                ))));
             } else {
                 monitor.on_command(cmd, t0, &mut emit);
             }
@@ -176,12 +191,12 @@ pub async fn sampling<S: SampleSource, M: RawMutex, C: Clock>(
             window_start = t1;
             busy_us = 0;
             next_status = t1 + STATUS_PERIOD_US;
-            emit(DeviceMsg::Status(monitor.status(
+            emit(DeviceMsg::Status(shared.with_stack(monitor.status(
                 t1,
                 load_permille,
                 busy_total_us,
                 shared.link.snapshot(),
-            )));
+            ))));
         }
     }
 }

@@ -22,6 +22,7 @@ mod link;
 mod persist;
 mod reset;
 mod sampler;
+mod stack;
 
 use defmt::{error, info, unwrap, warn};
 use embassy_executor::{InterruptExecutor, Spawner};
@@ -151,8 +152,14 @@ async fn watchdog(mut wdg: IndependentWatchdog<'static, IWDG>, persisting: bool)
     // In WATCHDOG_CHECK periods (250 ms): sampling 0.5 s, link and persistence 3 s.
     let mut watch = hammer_app::Watch::new([Some(2), Some(12), persisting.then_some(12)]);
     let mut reported = false;
+    let mut checks = 0u32;
     loop {
         Timer::after(WATCHDOG_CHECK).await;
+        // The stack's high-water mark for `Status`, once a second.
+        if checks % 4 == 0 {
+            stack::publish();
+        }
+        checks = checks.wrapping_add(1);
         let now = Instant::now();
         let blocks = sampler::BLOCKS.load(core::sync::atomic::Ordering::Relaxed);
         if blocks != last_blocks {

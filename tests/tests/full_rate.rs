@@ -47,6 +47,14 @@ fn half_a_minute_at_full_rate_loses_nothing_and_matches_the_host_bit_for_bit() {
     assert!(soak.latency_max_us < HALF_US / 2, "{}", soak.summary());
     assert!(soak.instructions_per_s() < 0.5 * 125e6, "{}", soak.summary());
     assert_eq!(soak.late_stimulus_blocks, 0, "the host kept ahead of the board");
+    // The board's own stack measurement, in its status: used, and within its region.
+    let s = soak.status.expect("a final status");
+    assert!(
+        s.stack_used_bytes > 1_000 && s.stack_used_bytes < s.stack_reserved_bytes,
+        "stack {} of {}",
+        s.stack_used_bytes,
+        s.stack_reserved_bytes
+    );
 }
 
 fn codes(bar: f64, seconds: f64, seed: u64) -> Vec<RawSample> {

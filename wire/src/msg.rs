@@ -147,6 +147,10 @@ pub struct Status {
     pub config_hash: u32,
     /// Why the device last started (kept until the next reset).
     pub reset_cause: ResetCause,
+    /// The deepest the stack has been since boot, and the stack region's
+    /// size, bytes (from the stack painted at boot; 0 where not measured).
+    pub stack_used_bytes: u32,
+    pub stack_reserved_bytes: u32,
 }
 
 /// A duty of the firmware that the watchdog supervises: each must check in

@@ -120,7 +120,7 @@ fn golden_frames() {
         reason: RejectReason::CorruptFrame,
     };
     assert_eq!(hex(&frame(&rej)), "0008080a0439a4d00c00");
-    // A status after a watchdog reset (protocol 2 added the cause).
+    // A status after a watchdog reset (protocol 2 added the cause and the stack).
     let status = Status {
         uptime_us: 1_000_000,
         samples: 100_000,
@@ -130,11 +130,13 @@ fn golden_frames() {
         reset_cause: ResetCause::Watchdog {
             overdue: Duty::Sampling,
         },
+        stack_used_bytes: 18_292,
+        stack_reserved_bytes: 32_768,
         ..Default::default()
     };
     assert_eq!(
         hex(&frame(&DeviceMsg::Status(status))),
-        "000802c0843da08d0601010101010101010101010101010202020107b59cf386020105b35e161400"
+        "000802c0843da08d0601010101010101010101010101010202020107b59cf38602010bf48e01808002436233c800"
     );
 }
 

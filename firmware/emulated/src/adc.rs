@@ -138,8 +138,6 @@ pub struct StimulusAdc {
     next: u32,
     /// The half whose processing ends when the app next asks for samples.
     finished: Option<u32>,
-    /// The second of guest time of the last stack scan.
-    stack_scanned_s: u64,
 }
 
 /// `a` is after `b` in wrapping position order.
@@ -175,11 +173,7 @@ impl StimulusAdc {
         // SAFETY: the handler only touches the header, DMA and WAKER, all
         // interrupt-safe.
         unsafe { NVIC::unmask(Interrupt::Timer0) };
-        Ok(Self {
-            next,
-            finished: None,
-            stack_scanned_s: u64::MAX,
-        })
+        Ok(Self { next, finished: None })
     }
 
     fn overrun(&mut self, h: &Header, oldest: u32) -> Overrun {
@@ -202,13 +196,12 @@ impl StimulusAdc {
         h.latency_max_us
             .fetch_max(ticks / (SYSCLK_HZ / 1_000_000), Ordering::Relaxed);
         let (uptime, busy) = clock::uptime_and_busy_us();
-        // The stack's scan (≈ 8 000 words) once a second of guest time.
-        if uptime / 1_000_000 != self.stack_scanned_s {
-            self.stack_scanned_s = uptime / 1_000_000;
-            let (used, reserved) = crate::stack::high_water();
-            h.stack_used_bytes.store(used, Ordering::Relaxed);
-            h.stack_reserved_bytes.store(reserved, Ordering::Relaxed);
-        }
+        // The stack's figures, as the SysTick measures them (stack.rs).
+        let shared = &crate::SHARED;
+        h.stack_used_bytes
+            .store(shared.stack_used_bytes.load(Ordering::Relaxed), Ordering::Relaxed);
+        h.stack_reserved_bytes
+            .store(shared.stack_reserved_bytes.load(Ordering::Relaxed), Ordering::Relaxed);
         h.uptime_us.store(uptime as u32, Ordering::Relaxed);
         h.busy_us.store(busy as u32, Ordering::Relaxed);
     }

@@ -122,7 +122,10 @@ pub async fn next_tick(waiter: Waiter) {
 
 #[exception]
 fn SysTick() {
-    WRAPS.fetch_add(1, Ordering::Release);
+    let wraps = WRAPS.fetch_add(1, Ordering::Release);
+    if wraps % 10 == 0 {
+        crate::stack::publish();
+    }
     for w in &TICK_WAKERS {
         w.wake();
     }

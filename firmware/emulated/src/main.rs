@@ -30,6 +30,7 @@ mod clock;
 mod executor;
 mod nvm;
 mod pacing;
+#[path = "../../src/stack.rs"]
 mod stack;
 mod uart;
 mod vectors;
@@ -42,8 +43,8 @@ use cortex_m_semihosting::debug;
 use embassy_executor::raw;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use hammer_app::{persisted, LinkSamples, Monitor, Overrun, Record, SampleSource, Shared};
-use hammer_wire::{HostMsg, WearBlob};
 use hammer_estimator::RawSample;
+use hammer_wire::{HostMsg, WearBlob};
 use static_cell::StaticCell;
 
 use crate::adc::{NoStimulus, StimulusAdc};

@@ -441,6 +441,16 @@ fn device_panel(v: &View) -> Paragraph<'static> {
             &format!(" ({} invalid)", st.invalid_cycles),
         ));
         lines.push(row("Last reset", crate::numfmt::reset_cause(&st.reset_cause), ""));
+        if st.stack_reserved_bytes > 0 {
+            lines.push(row(
+                "Stack",
+                format!("{:.1} KiB", f64::from(st.stack_used_bytes) / 1024.0),
+                &format!(
+                    " of {:.1} KiB at the deepest",
+                    f64::from(st.stack_reserved_bytes) / 1024.0
+                ),
+            ));
+        }
     }
     if v.captures > 0 {
         lines.push(row("Capture chunks", v.captures.to_string(), ""));
