@@ -14,6 +14,9 @@ use crate::config::Config;
 use crate::math;
 use crate::Flags;
 
+mod pass;
+use pass::{Balance, CodeSums, Squares};
+
 /// Checkpoints per cycle: with one per millisecond, cycles up to 128 ms.
 pub const MAX_CHECKPOINTS: usize = 128;
 
@@ -76,6 +79,9 @@ pub struct Derived {
     /// Per-sample decay of the zero-shift regressor (0 when the fit is off).
     pub q: f32,
     pub k: u32,
+    /// Σ q^j and Σ q^2j over one checkpoint's samples (j = 1..=k).
+    pub e_k: f32,
+    pub ee_k: f32,
 }
 
 impl Derived {
@@ -87,6 +93,8 @@ impl Derived {
         } else {
             0.0
         };
+        let k = c.checkpoint_samples();
+        let (e_k, ee_k) = pass::geometric(q, k);
         Self {
             dt,
             m,
@@ -96,7 +104,9 @@ impl Derived {
             half_dt_over_m: 0.5 * dt / m,
             half_dt: 0.5 * dt,
             q,
-            k: c.checkpoint_samples(),
+            k,
+            e_k,
+            ee_k,
         }
     }
 }
@@ -178,117 +188,22 @@ impl Watch {
     }
 }
 
-/// A piece's integer pass: the codes' extremes (the pressures' peaks; a
-/// rail touched).
-#[derive(Debug, Clone, Copy)]
-struct CodeSums {
-    n: u32,
-    min: [u16; 3],
-    max: [u16; 3],
-}
-
-impl Default for CodeSums {
-    fn default() -> Self {
-        CodeSums {
-            n: 0,
-            min: [u16::MAX; 3],
-            max: [0; 3],
-        }
-    }
-}
-
-impl CodeSums {
-    #[inline(always)]
-    fn of(piece: &[crate::RawSample]) -> Self {
-        let mut c = CodeSums {
-            n: piece.len() as u32,
-            ..Default::default()
-        };
-        // In u32: no narrowing per sample.
-        let mut min = [u16::MAX as u32; 3];
-        let mut max = [0u32; 3];
-        for smp in piece {
-            let x = [smp.rear as u32, smp.front as u32, smp.accel as u32];
-            for ch in 0..3 {
-                min[ch] = min[ch].min(x[ch]);
-                max[ch] = max[ch].max(x[ch]);
-            }
-        }
-        c.min = min.map(|v| v as u16);
-        c.max = max.map(|v| v as u16);
-        c
-    }
-
-    /// Appends the sums of the samples that follow.
-    #[inline(always)]
-    fn merge(&mut self, o: &CodeSums) {
-        for ch in 0..3 {
-            self.min[ch] = self.min[ch].min(o.min[ch]);
-            self.max[ch] = self.max[ch].max(o.max[ch]);
-        }
-        self.n += o.n;
-    }
-}
-
-/// The running sums of [`CycleAcc::push_run`]'s float pass, kept in
-/// registers for a piece.
-struct Locals {
-    s: Sums,
-    e: f32,
-    prev_force: f32,
-    jp1: f32,
-    jp2: f32,
-    f: f32,
-    ff: f32,
-    rf: f32,
-}
-
-impl Locals {
-    /// One sample; `FIRST`: the cycle's first (no integration step). Returns its force.
-    #[inline(always)]
-    fn add<const FIRST: bool>(&mut self, d: &Derived, cal: &Calibration, smp: &crate::RawSample) -> f32 {
-        let s = &mut self.s;
-        let p1 = (smp.rear as f32 - cal.zero[0]) * cal.scale[0];
-        let p2 = (smp.front as f32 - cal.zero[1]) * cal.scale[1];
-        let a = (smp.accel as f32 - cal.zero[2]) * cal.scale[2];
-        let force = d.a1 * p1 - d.a2 * p2 + d.fg;
-        let r = d.m * a - force;
-        self.e *= d.q;
-        if !FIRST {
-            let v_new = s.v + (force + self.prev_force) * d.half_dt_over_m;
-            s.w += (s.v + v_new) * d.half_dt;
-            s.v = v_new;
-        }
-        self.jp1 += s.n * p1;
-        self.jp2 += s.n * p2;
-        s.n += 1.0;
-        s.e += self.e;
-        s.ee += self.e * self.e;
-        s.r += r;
-        s.re += r * self.e;
-        s.rr += r * r;
-        s.p1 += p1;
-        s.p2 += p2;
-        self.f += force;
-        self.ff += force * force;
-        self.rf += r * force;
-        self.prev_force = force;
-        force
-    }
-}
-
 /// The running state of the cycle under way.
 #[derive(Debug, Clone)]
 pub struct CycleAcc {
     pub cp: Vec<Sums, MAX_CHECKPOINTS>,
     pub cur: Sums,
     since_cp: u32,
-    prev_force: f32,
     /// Σ j·p1 and Σ j·p2 (j = sample index): with Σp1, Σp2 they give the
-    /// pressure integrals the gain sensitivities need, at two flops a channel.
+    /// pressure integrals the gain sensitivities need.
     pub jp1: f32,
     pub jp2: f32,
-    e: f32,
+    /// The float sums that need every sample, up to the newest one.
+    sq: Squares,
+    /// The regressor e and the pressure force at the last sample before the
+    /// samples in `pend` (where `settle` continues the integrals from).
+    e_before: f32,
+    force_before: f32,
     pub last_force: f32,
     pub first_force: f32,
     pub peak_p1: f32,
@@ -308,7 +223,7 @@ pub struct CycleAcc {
     span_now: [f32; 4],
     /// Kept samples at which an accelerometer fault was first seen.
     pub accel_fault_at: Option<u32>,
-    /// The codes' extremes since the last checkpoint (see [`Self::settle`]).
+    /// The codes' exact sums since the last checkpoint (see [`Self::settle`]).
     pend: CodeSums,
 }
 
@@ -381,10 +296,11 @@ impl CycleAcc {
             cp: Vec::new(),
             cur: Sums::default(),
             since_cp: 0,
-            prev_force: 0.0,
             jp1: 0.0,
             jp2: 0.0,
-            e: 0.0,
+            sq: Squares::default(),
+            e_before: 0.0,
+            force_before: 0.0,
             last_force: 0.0,
             first_force: 0.0,
             peak_p1: f32::NEG_INFINITY,
@@ -408,7 +324,7 @@ impl CycleAcc {
     pub fn start(&mut self, d: &Derived, samples_since_impact: u32) {
         *self = Self::new();
         // e(t) = exp(−(t − t_impact)/τ); the first push multiplies by q once.
-        self.e = if d.q > 0.0 {
+        self.e_before = if d.q > 0.0 {
             match samples_since_impact {
                 0 => 1.0 / d.q,
                 n => math::powi(d.q, n - 1),
@@ -416,28 +332,43 @@ impl CycleAcc {
         } else {
             0.0
         };
+        self.sq.e = self.e_before;
     }
 
     /// Adds a run of consecutive samples. The hot loop of the estimator, in
-    /// pieces that end at checkpoints: the sensor watches first (an integer
-    /// pass; see [`Self::watch`]), then the running sums (a float pass
-    /// without branches, its sums in registers), then the checkpoint's work.
+    /// pieces that end at checkpoints: one pass over the piece (exact
+    /// integer sums of its codes, and the few float sums that need each
+    /// sample; see `pass`), the sensor watches (see `Self::watch`), then
+    /// at a checkpoint the float conversion of the integer sums and the
+    /// checkpoint's work.
+    ///
+    /// The run is given as two slices that follow each other (the delay
+    /// line's samples, then the new ones): one call, one set-up.
     #[inline]
-    pub fn push_run(&mut self, d: &Derived, cal: &Calibration, samples: &[crate::RawSample], stuck_limit: u32) {
-        let mut rest = samples;
-        while !rest.is_empty() {
-            let room = (d.k - self.since_cp) as usize;
-            let (piece, tail) = rest.split_at(rest.len().min(room));
-            rest = tail;
-            let c = CodeSums::of(piece);
+    pub fn push_run(&mut self, d: &Derived, cal: &Calibration, run: [&[crate::RawSample]; 2], stuck_limit: u32) {
+        let Some(first) = run[0].first().or(run[1].first()) else {
+            return;
+        };
+        let b = Balance::new(d, cal);
+        if self.pend.n == 0 && self.cur.n <= 0.0 {
+            // The cycle's first sample: the integrals start at rest there.
+            self.first_force = b.force(first.rear, first.front);
+        }
+        let [mut head, mut body] = run;
+        while !(head.is_empty() && body.is_empty()) {
+            let room = ((d.k - self.since_cp) as usize).min(pass::MAX_PIECE);
+            let (h, h_rest) = head.split_at(head.len().min(room));
+            let (t, t_rest) = body.split_at(body.len().min(room - h.len()));
+            (head, body) = (h_rest, t_rest);
+            let piece = [h, t];
+            let c = pass::pass(d, cal, &b, piece, &mut self.sq);
             self.watch(cal, &c, piece, stuck_limit);
             self.pend.merge(&c);
-            self.sums(d, cal, piece);
-            self.since_cp += piece.len() as u32;
+            self.since_cp += c.n;
             if self.since_cp == d.k {
                 self.since_cp = 0;
-                self.settle(cal);
-                if let Some(last) = piece.last() {
+                self.settle(d, cal);
+                if let Some(last) = t.last().or(h.last()) {
                     let p1 = (last.rear as f32 - cal.zero[0]) * cal.scale[0];
                     let p2 = (last.front as f32 - cal.zero[1]) * cal.scale[1];
                     self.checkpoint(p1, p2);
@@ -446,54 +377,18 @@ impl CycleAcc {
         }
     }
 
-    /// The running sums over `piece`, exactly as one sample at a time.
+    /// Rails and stuck codes over `piece` (two slices that follow each
+    /// other). When no channel's run of equal codes can reach the stuck
+    /// limit within the piece and no sample is at a rail (from the pass's
+    /// extremes), nothing is flagged and only the run lengths at its end are
+    /// needed (a scan back from its end); otherwise sample by sample.
     #[inline(always)]
-    fn sums(&mut self, d: &Derived, cal: &Calibration, piece: &[crate::RawSample]) {
-        let mut l = Locals {
-            s: self.cur,
-            e: self.e,
-            prev_force: self.prev_force,
-            jp1: self.jp1,
-            jp2: self.jp2,
-            f: self.slope.f,
-            ff: self.slope.ff,
-            rf: self.slope.rf,
-        };
-        let mut it = piece.iter();
-        if l.s.n <= 0.0 {
-            if let Some(smp) = it.next() {
-                self.first_force = l.add::<true>(d, cal, smp);
-            }
-        }
-        for smp in it {
-            l.add::<false>(d, cal, smp);
-        }
-        self.cur = l.s;
-        self.e = l.e;
-        self.prev_force = l.prev_force;
-        self.last_force = l.prev_force;
-        self.jp1 = l.jp1;
-        self.jp2 = l.jp2;
-        self.slope = SlopeSums {
-            n: l.s.n,
-            r: l.s.r,
-            f: l.f,
-            ff: l.ff,
-            rf: l.rf,
-        };
-    }
-
-    /// Rails and stuck codes over `piece`. When no channel's run of equal
-    /// codes can reach the stuck limit within the piece and no sample is at
-    /// a rail (one integer pass), nothing is flagged and only the run
-    /// lengths at its end are needed (a scan back from its end); otherwise
-    /// sample by sample.
-    #[inline(always)]
-    fn watch(&mut self, cal: &Calibration, c: &CodeSums, piece: &[crate::RawSample], stuck_limit: u32) {
-        let Some(last) = piece.last() else {
+    fn watch(&mut self, cal: &Calibration, c: &CodeSums, piece: [&[crate::RawSample]; 2], stuck_limit: u32) {
+        let [head, body] = piece;
+        let Some(last) = body.last().or(head.last()) else {
             return;
         };
-        let len = piece.len();
+        let len = head.len() + body.len();
         let longest = self.run[0].max(self.run[1]).max(self.run[2]);
         let fast = (longest as u64 + len as u64) < stuck_limit as u64
             && (0..3).all(|ch| c.min[ch] != 0 && c.max[ch] < cal.full[ch]);
@@ -501,14 +396,18 @@ impl CycleAcc {
             let codes = |s: &crate::RawSample| [s.rear, s.front, s.accel];
             let newest = codes(last);
             for (ch, &c) in newest.iter().enumerate() {
-                let mut k = len - 1;
-                while k > 0 && codes(&piece[k - 1])[ch] == c {
-                    k -= 1;
-                }
-                self.run[ch] = if k == 0 && self.last_code[ch] == c {
+                // Samples before the last that hold its code, back to the first that does not.
+                let tail = |part: &[crate::RawSample]| part.iter().rev().take_while(|s| codes(s)[ch] == c).count();
+                let in_body = tail(body);
+                let same = if in_body == body.len() {
+                    in_body + tail(head)
+                } else {
+                    in_body
+                } - 1;
+                self.run[ch] = if same == len - 1 && self.last_code[ch] == c {
                     self.run[ch] + len as u32
                 } else {
-                    (len - 1 - k) as u32
+                    same as u32
                 };
                 self.last_code[ch] = c;
             }
@@ -520,7 +419,7 @@ impl CycleAcc {
             last: self.last_code,
             flags: self.flags,
         };
-        for smp in piece {
+        for smp in head.iter().chain(body) {
             w.check(0, smp.rear, cal.full[0], stuck_limit, cal.bottom_is_fault[0]);
             w.check(1, smp.front, cal.full[1], stuck_limit, cal.bottom_is_fault[1]);
             w.check(2, smp.accel, cal.full[2], stuck_limit, cal.bottom_is_fault[2]);
@@ -531,11 +430,19 @@ impl CycleAcc {
         self.flags = w.flags;
     }
 
-    /// Adds the pressures' peaks since the last checkpoint (kept as code
-    /// extremes: the calibration is monotonic, so the peak code reads the
-    /// peak value exactly) to the float ones: at checkpoints and before the
-    /// cycle's peaks are read.
-    pub fn settle(&mut self, cal: &Calibration) {
+    /// Turns the exact integer sums since the last checkpoint into the
+    /// float sums (at checkpoints, and before a cycle's numbers are read):
+    /// Σ p = k·(Σc − n·z) per channel, the force and residual sums from
+    /// those, and the trapezoid integrals in closed form,
+    ///   v_end = v0 + h·(2F + f_before − f_last),
+    ///   Σv   = n·v0 + h·(n·f_before + Σ(2n−1−2j)·f_j),
+    ///   w   += dt/2·(2Σv − v_end + v0)
+    /// (h = dt/2m, F = Σ f_j, j from 0), where Σ(2n−1−2j)·c_j = 2q − s is
+    /// exact in integers. The cycle's first sample starts at rest: there
+    /// f_before = −f_0, so that v_0 = 0. Also adds the pressures' peaks
+    /// (kept as code extremes: the calibration is monotonic, so the peak code
+    /// reads the peak value exactly).
+    pub fn settle(&mut self, d: &Derived, cal: &Calibration) {
         let c = core::mem::take(&mut self.pend);
         if c.n == 0 {
             return;
@@ -548,6 +455,62 @@ impl CycleAcc {
         }
         self.peak_p1 = if peak[0] > self.peak_p1 { peak[0] } else { self.peak_p1 };
         self.peak_p2 = if peak[1] > self.peak_p2 { peak[1] } else { self.peak_p2 };
+
+        let n = c.n as f32;
+        let n0 = self.cur.n;
+        // Σ p, Σ (2n−1−2j)·p and Σ j·p of the interval, per channel.
+        let nn = c.n;
+        let sum = |ch: usize| (c.s[ch] as f32 - cal.zero[ch] * n) * cal.scale[ch];
+        let weighted = |ch: usize| {
+            let w = (2 * c.q[ch]).wrapping_sub(u64::from(c.s[ch]));
+            (pass::to_f32(w) - cal.zero[ch] * nn.wrapping_mul(nn) as f32) * cal.scale[ch]
+        };
+        let indexed = |ch: usize| {
+            let t = (u64::from(nn) * u64::from(c.s[ch])).wrapping_sub(c.q[ch]);
+            (pass::to_f32(t) - cal.zero[ch] * (nn.wrapping_mul(nn - 1) / 2) as f32) * cal.scale[ch]
+        };
+        let (p1, p2, a) = (sum(0), sum(1), sum(2));
+        let f = d.a1 * p1 - d.a2 * p2 + d.fg * n;
+        let fw = d.a1 * weighted(0) - d.a2 * weighted(1) + d.fg * nn.wrapping_mul(nn) as f32;
+        let f_before = if n0 <= 0.0 {
+            -self.first_force
+        } else {
+            self.force_before
+        };
+        let f_last = self.sq.force;
+        let v0 = self.cur.v;
+        let v_end = v0 + d.half_dt_over_m * (2.0 * f + f_before - f_last);
+        let sum_v = n * v0 + d.half_dt_over_m * (n * f_before + fw);
+        self.cur.w += d.half_dt * (2.0 * sum_v - v_end + v0);
+        self.cur.v = v_end;
+        self.force_before = f_last;
+        self.last_force = f_last;
+
+        self.jp1 += n0 * p1 + indexed(0);
+        self.jp2 += n0 * p2 + indexed(1);
+        let (ge, gee) = if c.n == d.k {
+            (d.e_k, d.ee_k)
+        } else {
+            pass::geometric(d.q, c.n)
+        };
+        let e0 = self.e_before;
+        self.e_before = self.sq.e;
+        let s = &mut self.cur;
+        s.n += n;
+        s.e += e0 * ge;
+        s.ee += e0 * e0 * gee;
+        s.r += d.m * a - f;
+        s.re = self.sq.re;
+        s.rr = self.sq.rr;
+        s.p1 += p1;
+        s.p2 += p2;
+        self.slope = SlopeSums {
+            n: s.n,
+            r: s.r,
+            f: self.slope.f + f,
+            ff: self.sq.ff,
+            rf: self.sq.rf,
+        };
     }
 
     /// Once a millisecond: the checkpoint's prefix sums, the accelerometer's

@@ -13,10 +13,12 @@
 //! - [`tare`]: zero offsets from the hammer at rest;
 //! - this file: [`Estimator`], impact detection (shock confirmation, spike
 //!   rejection, blanking), the cycle's phases, stalls and gaps;
-//! - [`cycle`]: the running sums of the cycle under way and the sensor
-//!   watches (rails, stuck channels, the accelerometer's force-balance slope);
+//! - [`cycle`]: the running sums of the cycle under way (exact integer sums
+//!   of the codes per checkpoint, the per-sample pass in `cycle::pass`) and the
+//!   sensor watches (rails, stuck channels, the accelerometer's force-balance slope);
 //! - [`estimate`]: what a closed cycle's sums give (friction per phase, zero
 //!   shift, impact velocity and energy, their uncertainties);
+//! - `run`: the impact scan and the delay line's copies, as plain loops;
 //! - `history`: the neighbour check on period and stroke;
 //! - [`wear`]: the wear index, the drift CUSUM and their saved state;
 //! - [`math`]: the one path for transcendental functions (host = target).
@@ -32,6 +34,7 @@ pub mod estimate;
 pub mod geometry;
 mod history;
 pub mod math;
+mod run;
 pub mod tare;
 pub mod wear;
 
@@ -44,6 +47,7 @@ pub use wear::{WearState, WearStateError};
 
 use cycle::{CycleAcc, Derived};
 use history::History;
+use run::{copy, first_at_or_below};
 
 /// Longest pre-impact blanking in samples (the delay line's size).
 pub const MAX_PRE_BLANK: usize = 64;
@@ -265,7 +269,13 @@ impl Estimator {
                 let to_stall = (self.cycle_start + self.max_period_samples + 1).saturating_sub(self.next_index);
                 let to_cp = self.acc.to_checkpoint(&self.d) as usize + self.pre_samples.saturating_sub(self.delay_len);
                 let limit = rest.len().min(to_stall.min(usize::MAX as u64) as usize).min(to_cp);
-                let n = rest[..limit].iter().position(|s| self.is_impact(s)).unwrap_or(limit);
+                let scan = &rest[..limit];
+                let n = match self.impact_code {
+                    // The common case: one integer compare per sample.
+                    Some(max) => first_at_or_below(scan, max),
+                    None => scan.iter().position(|s| self.is_impact(s)),
+                }
+                .unwrap_or(limit);
                 if n > 0 {
                     self.next_index = self.next_index.wrapping_add(n as u64);
                     self.counters.samples = self.counters.samples.wrapping_add(n as u64);
@@ -489,24 +499,26 @@ impl Estimator {
         let pre = self.pre_samples;
         let total = self.delay_len + run.len();
         if total <= pre {
-            self.delay[self.delay_len..total].copy_from_slice(run);
+            copy(&mut self.delay[self.delay_len..total], run);
             self.delay_len = total;
             return;
         }
         let n_proc = total - pre;
         let from_delay = self.delay_len.min(n_proc);
-        if from_delay > 0 {
-            self.acc
-                .push_run(&self.d, &self.cal, &self.delay[..from_delay], self.stuck_limit);
-        }
         let from_run = n_proc - from_delay;
-        self.acc
-            .push_run(&self.d, &self.cal, &run[..from_run], self.stuck_limit);
+        self.acc.push_run(
+            &self.d,
+            &self.cal,
+            [&self.delay[..from_delay], &run[..from_run]],
+            self.stuck_limit,
+        );
         // The new delay line: what is left of the old one, then the run's tail.
         let keep_old = self.delay_len - from_delay;
-        self.delay.copy_within(from_delay..from_delay + keep_old, 0);
+        for k in 0..keep_old {
+            self.delay[k] = self.delay[from_delay + k];
+        }
         let tail = &run[from_run..];
-        self.delay[keep_old..keep_old + tail.len()].copy_from_slice(tail);
+        copy(&mut self.delay[keep_old..keep_old + tail.len()], tail);
         self.delay_len = keep_old + tail.len();
     }
 
@@ -548,7 +560,7 @@ impl Estimator {
 
     /// A record with flags and no numbers: what happened instead of a cycle.
     fn record(&mut self, index: u64, mut flags: Flags) -> CycleReport {
-        self.acc.settle(&self.cal);
+        self.acc.settle(&self.d, &self.cal);
         let period_s = index.wrapping_sub(self.cycle_start) as f32 * self.d.dt;
         let n = self.acc.cur.n.max(1.0);
         if self.acc.rail.iter().any(|&r| r as f32 > 0.9 * n) {
@@ -574,7 +586,7 @@ impl Estimator {
     }
 
     fn close_cycle(&mut self, index: u64) -> CycleReport {
-        self.acc.settle(&self.cal);
+        self.acc.settle(&self.d, &self.cal);
         let start = self.cycle_start;
         let period_s = index.wrapping_sub(start) as f32 * self.d.dt;
         let tail = self.delay_len as u32;
