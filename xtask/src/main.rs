@@ -88,6 +88,13 @@ fn firmware_elves() -> [(&'static str, PathBuf); 2] {
 /// Both boards, one cargo run each: built together, cargo would unify the
 /// reference board's defmt features into the emulated board's dependencies.
 fn build_firmware() -> Result<(), String> {
+    // The reference board links with flip-link (firmware/.cargo/config.toml).
+    // (It has no --version of its own: it hands every argument to the linker.)
+    let on_path =
+        std::env::var_os("PATH").is_some_and(|p| std::env::split_paths(&p).any(|d| d.join("flip-link").is_file()));
+    if !on_path {
+        return Err("flip-link is not installed: `cargo install flip-link --locked` (.ci/run does this)".into());
+    }
     firmware(&["build", "--release", "-p", "hammer-firmware"])?;
     firmware(&["build", "--release", "-p", "hammer-firmware-emu"])?;
     size()
