@@ -56,6 +56,10 @@ pub enum Command {
     /// against a reference you apply and type in) and its accelerometer's
     /// zero at rest; the board stores the result.
     Calibrate(crate::calibrate::CalibrateArgs),
+    /// Flash the reference firmware through a debug probe (probe-rs),
+    /// verify and reset; the board's stored state is kept. --dry-run
+    /// prints the plan without a probe.
+    Flash(crate::flash::FlashArgs),
     /// A board's first-boot checks at rest (vented, supply off): each
     /// channel in its idle range, 10 s of sampling without loss at the
     /// configured rate. Exits non-zero when a check fails.
@@ -277,6 +281,7 @@ pub fn run(cli: Cli) -> Result<()> {
             outln!("{}", c.summary());
             Ok(())
         }
+        Command::Flash(args) => crate::flash::run(&args),
         Command::Selftest(args) => {
             let checks = crate::selftest::run(&args)?;
             outln!("{}", crate::selftest::summary(&checks));

@@ -11,7 +11,7 @@
 //! - [`estimate`], [`report`], [`plot`]: offline: per-cycle records, the
 //!   report page, the effect figures;
 //! - [`diagnose`]: the sim-to-real gap diagnosis and its benchmarks;
-//! - [`capture`], [`calibrate`], [`selftest`], [`demo`], [`soak`], [`monitor`]: live: raw captures, calibration, the
+//! - [`flash`], [`capture`], [`calibrate`], [`selftest`], [`demo`], [`soak`], [`monitor`]: live: raw captures, calibration, the
 //!   no-hardware demo, the full-rate soak, the dashboard, logs and replay;
 //! - [`cli`]: the subcommands, thin over the above.
 
@@ -28,6 +28,7 @@ pub mod demo;
 pub mod diagnose;
 pub mod emulator;
 pub mod estimate;
+pub mod flash;
 pub mod monitor;
 pub mod numfmt;
 pub mod plot;

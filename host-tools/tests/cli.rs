@@ -834,3 +834,39 @@ fn replay_of_a_damaged_recording_shows_the_good_frames_then_fails_naming_the_bad
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn flash_dry_run_plans_the_reference_image_and_refuses_other_images() {
+    let elf = hammer_host::flash::reference_elf();
+    assert!(
+        elf.exists(),
+        "cargo xtask firmware builds {} before the tests",
+        elf.display()
+    );
+    let (code, out, err) = hammer(&["flash", "--dry-run"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.contains("erase ") && out.contains("sectors"), "{out}");
+    assert!(
+        out.contains("0x0807e000..0x08080000") && out.contains("is untouched"),
+        "{out}"
+    );
+    assert!(out.contains("nothing written"), "{out}");
+    // --erase-state says so in the plan.
+    let (code, out, _) = hammer(&["flash", "--dry-run", "--erase-state"]);
+    assert_eq!(code, 0);
+    assert!(out.contains("WILL BE ERASED"), "{out}");
+    // The emulated board's image and a host binary: refused with the reason, no panic.
+    let emu = hammer_host::emulator::firmware_elf();
+    let (code, _, err) = hammer(&["flash", "--dry-run", emu.to_str().unwrap()]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("outside STM32G474RETx's flash"), "{err}");
+    let (code, _, err) = hammer(&["flash", "--dry-run", env!("CARGO_BIN_EXE_hammer")]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("not a 32-bit ELF") || err.contains("another architecture"),
+        "{err}"
+    );
+    let (code, _, err) = hammer(&["flash", "--dry-run", "--chip", "NoSuchChip"]);
+    assert_eq!(code, 2);
+    assert!(err.contains("unknown chip"), "{err}");
+}
