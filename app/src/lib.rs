@@ -12,7 +12,8 @@
 //! - [`persisted`]: the configuration record the boards store;
 //! - [`reset`]: the reset cause as a board keeps it through a reset;
 //! - [`supervisor`]: the duties' check-ins, for a watchdog fed only while
-//!   every duty is alive.
+//!   every duty is alive;
+//! - [`supply`]: the ADC's reference voltage from the internal reference.
 //!
 //! How to add a board: implement the four traits of [`board`] over its
 //! peripherals in a firmware binary (`firmware/src/main.rs` is the reference
@@ -34,6 +35,7 @@ pub mod packed;
 pub mod persisted;
 pub mod reset;
 pub mod supervisor;
+pub mod supply;
 pub mod tasks;
 
 pub use board::{Clock, LinkRx, LinkTx, Overrun, Record, SampleSource, Store};

@@ -424,9 +424,10 @@ impl Monitor {
             firmware_version: FIRMWARE_VERSION,
             config_hash: self.config_hash,
             reset_cause: self.reset_cause,
-            // The board's, filled in by the sampling task (`Shared::with_stack`).
+            // The board's, filled in by the sampling task (`Shared::with_board_figures`).
             stack_used_bytes: 0,
             stack_reserved_bytes: 0,
+            vdda_v: 0.0,
         }
     }
 

@@ -85,6 +85,9 @@ pub struct Shared<M: RawMutex> {
     /// measured them (painted stack); reported in every `Status`.
     pub stack_used_bytes: AtomicU32,
     pub stack_reserved_bytes: AtomicU32,
+    /// VDDA as the board last measured it ([`crate::supply::vdda_v`]),
+    /// an `f32`'s bits; 0 where not measured.
+    pub vdda_v_bits: AtomicU32,
 }
 
 impl<M: RawMutex> Shared<M> {
@@ -99,16 +102,23 @@ impl<M: RawMutex> Shared<M> {
             supervisor: Supervisor::new(),
             stack_used_bytes: AtomicU32::new(0),
             stack_reserved_bytes: AtomicU32::new(0),
+            vdda_v_bits: AtomicU32::new(0),
         }
     }
 
-    /// `status` with the board's stack figures.
-    pub fn with_stack(&self, status: hammer_wire::Status) -> hammer_wire::Status {
+    /// `status` with the figures the board measures itself (stack, VDDA).
+    pub fn with_board_figures(&self, status: hammer_wire::Status) -> hammer_wire::Status {
         hammer_wire::Status {
             stack_used_bytes: self.stack_used_bytes.load(Ordering::Relaxed),
             stack_reserved_bytes: self.stack_reserved_bytes.load(Ordering::Relaxed),
+            vdda_v: f32::from_bits(self.vdda_v_bits.load(Ordering::Relaxed)),
             ..status
         }
+    }
+
+    /// Publishes a VDDA measurement for `Status`.
+    pub fn set_vdda_v(&self, v: f32) {
+        self.vdda_v_bits.store(v.to_bits(), Ordering::Relaxed);
     }
 
     /// Queues a message; a full queue drops it and counts the drop.
@@ -156,7 +166,7 @@ pub async fn sampling<S: SampleSource, M: RawMutex, C: Clock>(
         }
         while let Some(cmd) = pending.take().or_else(|| shared.commands.try_receive().ok()) {
             if cmd == HostMsg::GetStatus {
-                emit(DeviceMsg::Status(shared.with_stack(monitor.status(
+                emit(DeviceMsg::Status(shared.with_board_figures(monitor.status(
                     t0,
                     load_permille,
                     busy_total_us,
@@ -191,7 +201,7 @@ pub async fn sampling<S: SampleSource, M: RawMutex, C: Clock>(
             window_start = t1;
             busy_us = 0;
             next_status = t1 + STATUS_PERIOD_US;
-            emit(DeviceMsg::Status(shared.with_stack(monitor.status(
+            emit(DeviceMsg::Status(shared.with_board_figures(monitor.status(
                 t1,
                 load_permille,
                 busy_total_us,

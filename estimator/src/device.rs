@@ -32,6 +32,18 @@ fn uncal(c: &ChannelCalibration) -> (ChannelCal, ChannelSpec) {
     )
 }
 
+impl Config {
+    /// The hash every report carries ([`hammer_types::calibration_hash`]),
+    /// over the same channel calibrations `GetConfig` answers with.
+    pub fn calibration_hash(&self) -> u32 {
+        hammer_types::calibration_hash(
+            &cal(&self.rear, &self.rear_spec),
+            &cal(&self.front, &self.front_spec),
+            &cal(&self.accel, &self.accel_spec),
+        )
+    }
+}
+
 impl From<&Config> for DeviceConfig {
     fn from(c: &Config) -> Self {
         DeviceConfig {

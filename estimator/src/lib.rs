@@ -169,6 +169,8 @@ pub struct Estimator {
     cycle_contact_samples: u32,
     friction_guess: f32,
     seq: u32,
+    /// Of the configuration's calibrations, for every report.
+    calibration_hash: u32,
     wear: WearState,
     counters: Counters,
 }
@@ -213,6 +215,7 @@ impl Estimator {
             cycle_contact_samples: 0,
             friction_guess: 0.0,
             seq: 0,
+            calibration_hash: cfg.calibration_hash(),
             wear: WearState::default(),
             counters: Counters::default(),
             cfg,
@@ -576,6 +579,7 @@ impl Estimator {
             peak_front_pa: finite(self.acc.peak_p2),
             wear_index_j: self.wear.friction_work_j as f32,
             drift_score: self.wear.cusum,
+            calibration_hash: self.calibration_hash,
             flags,
             ..Default::default()
         };
@@ -642,6 +646,7 @@ impl Estimator {
             wear_remaining_fraction: 0.0,
             remaining_life_cycles: 0.0,
             drift_score: self.wear.cusum,
+            calibration_hash: self.calibration_hash,
             flags: e.flags,
         };
         if r.impact_energy_j > 0.0 {

@@ -62,6 +62,7 @@ proptest! {
         seed in any::<u32>(),
     ) {
         let mut est = Estimator::new(cfg).unwrap();
+        let calibration = est.config().calibration_hash();
         let mut x = seed | 1;
         let mut lcg = move || { x ^= x << 13; x ^= x >> 17; x ^= x << 5; x };
         let mut last_seq = None;
@@ -74,6 +75,7 @@ proptest! {
                 let accel = if s.impact && i < 5 { 0 } else { jitter(s.base[2], lcg()) };
                 let sample = RawSample { rear: jitter(s.base[0], lcg()), front: jitter(s.base[1], lcg()), accel };
                 if let Some(r) = est.push(sample) {
+                    prop_assert_eq!(r.calibration_hash, calibration, "every report names its calibration");
                     if r.is_valid() {
                         for v in [r.friction_n, r.friction_uncertainty_n, r.impact_energy_j, r.impact_energy_uncertainty_j, r.frequency_hz, r.stroke_m] {
                             prop_assert!(v.is_finite(), "valid report with a non-finite field: {:?}", r);

@@ -23,6 +23,7 @@ mod persist;
 mod reset;
 mod sampler;
 mod stack;
+mod supply;
 
 use defmt::{error, info, unwrap, warn};
 use embassy_executor::{InterruptExecutor, Spawner};
@@ -119,6 +120,8 @@ fn clock_config() -> Config {
     // The ADC kernel clock is off after reset. SYSCLK / 4 (the prescaler the
     // driver picks to stay under 60 MHz) = 42.5 MHz.
     config.rcc.mux.adc12sel = mux::Adcsel::SYS;
+    // ADC4 measures VREFINT (supply.rs).
+    config.rcc.mux.adc345sel = mux::Adcsel::SYS;
     config
 }
 
@@ -204,6 +207,12 @@ unsafe fn HardFault(frame: &cortex_m_rt::ExceptionFrame) -> ! {
     let cfsr = unsafe { core::ptr::read_volatile(0xE000_ED28 as *const u32) };
     reset::record(hammer_wire::ResetCause::Fault { pc: frame.pc(), cfsr });
     cortex_m::peripheral::SCB::sys_reset()
+}
+
+/// VDDA for `Status`, once a second (supply.rs).
+#[embassy_executor::task]
+async fn measure_supply(supply: supply::Supply) {
+    supply.run(&SHARED).await
 }
 
 /// Visible proof of life, independent of the link.
@@ -358,6 +367,7 @@ async fn main(spawner: Spawner) {
     if let Some(store) = store {
         spawner.spawn(unwrap!(persist_state(store)));
     }
+    spawner.spawn(unwrap!(measure_supply(supply::Supply::new(p.ADC4))));
     // LD2, the Nucleo's green user LED, is on PA5 (driven high = on).
     spawner.spawn(unwrap!(heartbeat(Output::new(p.PA5, Level::Low, Speed::Low))));
 }

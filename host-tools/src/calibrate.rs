@@ -57,6 +57,8 @@ pub struct Calibration {
     pub span_codes: [f64; 2],
     pub span_std_codes: [f64; 2],
     pub config_hash: u32,
+    /// What every report computed with this calibration carries (`CycleReport::calibration_hash`).
+    pub calibration_hash: u32,
 }
 
 impl Calibration {
@@ -78,9 +80,10 @@ impl Calibration {
             )
         };
         let mut s = format!(
-            "calibration against {:.3} bar (config hash {:08x}):\n",
+            "calibration against {:.3} bar (config hash {:08x}, reports carry calibration {:08x}):\n",
             self.reference_pa / 1e5,
-            self.config_hash
+            self.config_hash,
+            self.calibration_hash
         );
         s += &ch("rear", &self.before.rear, &self.after.rear);
         s += &ch("front", &self.before.front, &self.after.front);
@@ -163,6 +166,7 @@ pub fn calibrate<S: Read + Write>(link: &mut Client<S>, op: &mut dyn Operator, s
         span_codes,
         span_std_codes: span_std,
         config_hash: config_hash(&set),
+        calibration_hash: set.calibration_hash(),
     })
 }
 

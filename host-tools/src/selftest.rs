@@ -3,6 +3,8 @@
 //! "Bring-up"):
 //! - each channel sits in its idle range (pressures near 0 gauge, the
 //!   accelerometer near the gravity component), off its rails, quiet;
+//! - the ADC's reference (VDDA, measured on the chip's internal reference)
+//!   is within 2 % of the 3.3 V every channel's scale assumes;
 //! - the board samples for 10 s of its own time without an overrun or a
 //!   dropped sample, at the configured rate (its sample clock against its
 //!   time base).
@@ -46,6 +48,40 @@ const T: Duration = Duration::from_secs(30);
 /// less than 0.5 % (5 kPa; noise is a few codes).
 const IDLE_SHARE: f64 = 0.02;
 const QUIET_SHARE: f64 = 0.005;
+/// VDDA's tolerance: a channel's gain moves with it one for one, and a
+/// 3.3 V regulator holds ±1-2 %; beyond 2 % the gains are off by more than
+/// the calibration's own uncertainty (a 1 % gain error biases friction by ~1 N).
+const VDDA_SHARE: f64 = 0.02;
+
+/// The ADC reference check on a measured VDDA (`Status::vdda_v`, 0 when the board does not measure it).
+pub fn reference_check(vdda_v: f32) -> Check {
+    let nominal = f64::from(hammer_app::supply::NOMINAL_VDDA_V);
+    let v = f64::from(vdda_v);
+    let off = v / nominal - 1.0;
+    let (pass, detail) = if !v.is_finite() || v <= 0.0 {
+        (
+            false,
+            "not measured: the board reports no VDDA (a firmware before protocol 3, or its reference channel failed)"
+                .to_string(),
+        )
+    } else if off.abs() > VDDA_SHARE {
+        (
+            false,
+            format!(
+                "VDDA {v:.3} V, {:+.1} % from {nominal:.1} V: every channel reads {:+.1} % off; check the 3.3 V regulator and the VDDA/VREF+ supply, then recalibrate",
+                off * 100.0,
+                (nominal / v - 1.0) * 100.0
+            ),
+        )
+    } else {
+        (true, format!("VDDA {v:.3} V ({:+.2} % of {nominal:.1} V)", off * 100.0))
+    };
+    Check {
+        name: "ADC reference".into(),
+        pass,
+        detail,
+    }
+}
 
 fn status<S: Read + Write>(link: &mut Client<S>) -> Result<Status> {
     link.send(&HostMsg::GetStatus)?;
@@ -117,6 +153,7 @@ pub fn selftest<S: Read + Write>(link: &mut Client<S>, seconds: f64) -> Result<V
 
     // Sampling for `seconds` of the board's own time.
     let before = status(link)?;
+    checks.push(reference_check(before.vdda_v));
     let deadline = Instant::now() + Duration::from_secs_f64(seconds * 3.0 + 30.0);
     let after = loop {
         let s = status(link)?;

@@ -82,8 +82,18 @@ impl Stimulus {
         h.capacity_sets.store(CAPACITY_SETS, Ordering::Relaxed);
         h.block_sets.store(BLOCK_SETS, Ordering::Relaxed);
         h.rate_hz.store(RATE_HZ, Ordering::Relaxed);
+        s.set_vdda_v(f64::from(hammer_app::supply::NOMINAL_VDDA_V));
         h.magic.store(MAGIC, Ordering::Release);
         Ok(s)
+    }
+
+    /// The board's analog supply from now on: what its ADC will read on the
+    /// internal reference channel (a sagging supply raises the code).
+    pub fn set_vdda_v(&self, vdda_v: f64) {
+        let code = f64::from(stimulus::VREFINT_CAL) * f64::from(hammer_app::supply::VREFINT_CAL_VDDA_V) / vdda_v;
+        self.header()
+            .vrefint_code
+            .store(code.round().clamp(0.0, 4095.0) as u32, Ordering::Relaxed);
     }
 
     /// QEMU's arguments that make this file the board's PSRAM.

@@ -210,7 +210,14 @@ fn estimate_prints_one_record_per_cycle_in_each_format() {
     );
     assert_eq!(out.lines().count(), truth_cycles + 1);
     let header: Vec<&str> = out.lines().next().unwrap().split(',').collect();
-    assert_eq!(&header[header.len() - 3..], ["drift_score", "valid", "flags"]);
+    assert_eq!(
+        &header[header.len() - 4..],
+        ["drift_score", "calibration_hash", "valid", "flags"]
+    );
+    // One trace, one calibration: every record names the same one.
+    let cal = &records[0]["calibration_hash"];
+    assert!(cal.as_u64().is_some_and(|h| h > 0), "{cal}");
+    assert!(records.iter().all(|r| &r["calibration_hash"] == cal));
     assert!(!header.contains(&"wear_index"), "renamed wear_index_j");
     let mut keys: Vec<&str> = records[0].as_object().unwrap().keys().map(|k| k.as_str()).collect();
     let mut columns = header.clone();

@@ -16,7 +16,7 @@ use hammer_estimator::{Config, RawSample};
 use hammer_host::calibrate::{calibrate, Operator};
 use hammer_host::client::Client;
 use hammer_host::emulator::{firmware_elf, Emulator, Icount};
-use hammer_host::selftest::selftest;
+use hammer_host::selftest::{selftest, Check};
 use hammer_host::stimulus::Stimulus;
 use hammer_wire::*;
 
@@ -40,10 +40,13 @@ fn truth() -> Truth {
     }
 }
 
-/// Feeds the board constant pressures, `pa` at a time, a little ahead of it.
+/// Feeds the board constant pressures, `pa` at a time, a little ahead of it;
+/// with `impacts` on, the accelerometer hits its bottom rail for 0.2 ms
+/// every 47 ms, so the board closes cycles and sends reports.
 struct Feeder {
     stimulus: Arc<Stimulus>,
     pa: Arc<AtomicU32>,
+    impacts: Arc<AtomicBool>,
     stop: Arc<AtomicBool>,
     thread: Option<std::thread::JoinHandle<()>>,
 }
@@ -51,11 +54,13 @@ struct Feeder {
 impl Feeder {
     fn start(stimulus: Arc<Stimulus>) -> Self {
         let pa = Arc::new(AtomicU32::new(0));
+        let impacts = Arc::new(AtomicBool::new(false));
         let stop = Arc::new(AtomicBool::new(false));
         let thread = std::thread::spawn({
-            let (stimulus, pa, stop) = (stimulus.clone(), pa.clone(), stop.clone());
+            let (stimulus, pa, impacts, stop) = (stimulus.clone(), pa.clone(), impacts.clone(), stop.clone());
             move || {
                 let t = truth();
+                let mut n = 0u64;
                 let mut x = 0x2545_F491u32;
                 let mut noise = move || {
                     // Triangular, ±2 codes: the sum of two uniforms.
@@ -76,14 +81,17 @@ impl Feeder {
                         continue;
                     }
                     let p = f64::from(pa.load(Ordering::Relaxed));
+                    let impacting = impacts.load(Ordering::Relaxed);
                     block.clear();
                     for _ in 0..512 {
                         let code = |k: usize, n: f64| (t.zero_code[k] + p / t.scale_pa_per_code[k] + n).round() as u16;
+                        let accel = (t.accel_zero_code + noise()).round() as u16;
                         block.push(RawSample {
                             rear: code(0, noise()),
                             front: code(1, noise()),
-                            accel: (t.accel_zero_code + noise()).round() as u16,
+                            accel: if impacting && n % 4_700 < 20 { 0 } else { accel },
                         });
+                        n += 1;
                     }
                     if !stimulus.push(&block, &stop) {
                         break;
@@ -94,6 +102,7 @@ impl Feeder {
         Self {
             stimulus,
             pa,
+            impacts,
             stop,
             thread: Some(thread),
         }
@@ -190,6 +199,21 @@ fn calibration_finds_the_applied_gains_and_survives_a_reset() {
     assert!((g[0] - 1.007).abs() < 1e-3 && (g[1] - 0.996).abs() < 1e-3, "{g:?}");
     // The board reads the reference as the reference now.
     assert_eq!(status(&mut link).config_hash, cal.config_hash);
+    // Every report from now on names the new calibration, and it is not the old one's.
+    assert_ne!(cal.calibration_hash, cal.before.calibration_hash());
+    feeder.impacts.store(true, Ordering::Relaxed);
+    let mut seen = vec![];
+    let (hashes, _) = link
+        .recv_until(T, |m| {
+            if let DeviceMsg::Report(r) = m {
+                seen.push(r.calibration_hash);
+            }
+            (seen.len() >= 3).then(|| seen.clone())
+        })
+        .unwrap();
+    let hashes = hashes.expect("reports once the hammer strikes");
+    assert!(hashes.iter().all(|&h| h == cal.calibration_hash), "{hashes:08x?}");
+    feeder.impacts.store(false, Ordering::Relaxed);
 
     // A watchdog reset (the sampling task hangs): the calibration is back
     // after it, from the board's non-volatile area.
@@ -222,7 +246,7 @@ fn the_self_test_passes_a_vented_board_and_names_a_pressurised_chamber() {
     feeder.apply(0);
     let checks = selftest(&mut link, 2.0).expect("self-test runs");
     println!("{}", hammer_host::selftest::summary(&checks));
-    assert_eq!(checks.len(), 5);
+    assert_eq!(checks.len(), 6);
     assert!(checks.iter().all(|c| c.pass), "{checks:?}");
     // 1 bar left in the chambers: both pressure checks fail and say why.
     feeder.apply(100_000);
@@ -234,5 +258,19 @@ fn the_self_test_passes_a_vented_board_and_names_a_pressurised_chamber() {
         "{checks:?}"
     );
     assert!(checks[0].detail.contains("not vented"), "{}", checks[0].detail);
+    // Vented again, with the analog supply sagged 4 % (3.17 V): the
+    // reference check alone fails, and says by how much every channel is off.
+    feeder.apply(0);
+    stimulus.set_vdda_v(3.168);
+    let checks = selftest(&mut link, 1.0).expect("self-test runs");
+    println!("{}", hammer_host::selftest::summary(&checks));
+    let failed: Vec<&Check> = checks.iter().filter(|c| !c.pass).collect();
+    assert_eq!(failed.len(), 1, "{checks:?}");
+    assert_eq!(failed[0].name, "ADC reference");
+    let d = &failed[0].detail;
+    assert!(
+        d.contains("VDDA 3.16") && d.contains("-4.0 % from") && d.contains("+4.2 % off"),
+        "{d}"
+    );
     drop(emu);
 }

@@ -38,3 +38,70 @@ pub struct DeviceConfig {
     pub cusum_k: f32,
     pub cusum_h: f32,
 }
+
+impl ChannelCalibration {
+    /// The calibration's bytes in a fixed little-endian layout (not the
+    /// wire's varints), so its hash does not depend on a serialiser.
+    fn bytes(&self) -> [u8; 18] {
+        let mut b = [0u8; 18];
+        b[0..4].copy_from_slice(&self.zero_code.to_le_bytes());
+        b[4..8].copy_from_slice(&self.scale.to_le_bytes());
+        b[8..10].copy_from_slice(&self.full_scale_code.to_le_bytes());
+        b[10..14].copy_from_slice(&self.gain_uncertainty.to_le_bytes());
+        b[14..18].copy_from_slice(&self.offset_uncertainty.to_le_bytes());
+        b
+    }
+}
+
+/// CRC-32 of the three channels' calibrations (rear, front, accelerometer):
+/// every cycle report carries it, so a logged number can be traced to the
+/// calibration that produced it, whatever else of the configuration changed.
+pub fn calibration_hash(rear: &ChannelCalibration, front: &ChannelCalibration, accel: &ChannelCalibration) -> u32 {
+    let mut b = [0u8; 54];
+    b[0..18].copy_from_slice(&rear.bytes());
+    b[18..36].copy_from_slice(&front.bytes());
+    b[36..54].copy_from_slice(&accel.bytes());
+    crate::crc32(&b)
+}
+
+impl DeviceConfig {
+    /// [`calibration_hash`] of this configuration's channels.
+    pub fn calibration_hash(&self) -> u32 {
+        calibration_hash(&self.rear, &self.front, &self.accel)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn channel(scale: f32) -> ChannelCalibration {
+        ChannelCalibration {
+            zero_code: 372.25,
+            scale,
+            full_scale_code: 4095,
+            gain_uncertainty: 0.008,
+            offset_uncertainty: 1000.0,
+        }
+    }
+
+    /// Any channel's zero, scale or uncertainty changes the hash; the order
+    /// of the channels matters (a swapped rear/front is another calibration).
+    #[test]
+    fn the_hash_follows_every_calibration_field_and_the_channel_order() {
+        let (a, b, c) = (channel(268.5), channel(270.0), channel(0.9765));
+        let h = calibration_hash(&a, &b, &c);
+        assert_ne!(h, calibration_hash(&b, &a, &c));
+        assert_ne!(h, calibration_hash(&a, &b, &channel(0.9766)));
+        let mut z = a;
+        z.zero_code += 0.25;
+        assert_ne!(h, calibration_hash(&z, &b, &c));
+        let mut u = c;
+        u.offset_uncertainty = 2.0;
+        assert_ne!(h, calibration_hash(&a, &b, &u));
+        let mut f = b;
+        f.full_scale_code = 4094;
+        assert_ne!(h, calibration_hash(&a, &f, &c));
+        assert_eq!(h, calibration_hash(&a, &b, &c));
+    }
+}

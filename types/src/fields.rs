@@ -121,6 +121,7 @@ fields! {
     wear_remaining_fraction: F32, "1", "wear budget left";
     remaining_life_cycles: F32, "cycles", "remaining life";
     drift_score: F32, "σ", "drift score";
+    calibration_hash: U32, "", "calibration hash";
 }
 
 /// The field named `name` (a column of [`FIELDS`]).

@@ -29,7 +29,7 @@ pub mod flags;
 pub mod report;
 pub mod sample;
 
-pub use config::{ChannelCalibration, DeviceConfig};
+pub use config::{calibration_hash, ChannelCalibration, DeviceConfig};
 pub use crc::crc32;
 pub use fields::{Field, Value, FIELDS};
 pub use flags::Flags;

@@ -50,6 +50,9 @@ pub struct CycleReport {
     pub remaining_life_cycles: f32,
     /// One-sided CUSUM of the friction against its baseline, in baseline σ.
     pub drift_score: f32,
+    /// CRC-32 of the channel calibrations the cycle was computed with
+    /// ([`crate::calibration_hash`]): a number traced to its calibration.
+    pub calibration_hash: u32,
     pub flags: Flags,
 }
 

@@ -151,6 +151,10 @@ pub struct Status {
     /// size, bytes (from the stack painted at boot; 0 where not measured).
     pub stack_used_bytes: u32,
     pub stack_reserved_bytes: u32,
+    /// The ADC's reference (VDDA) as the board measured it from the chip's
+    /// internal reference, V; 0 where not measured. Every channel's gain
+    /// follows it (`hammer_app::supply`).
+    pub vdda_v: f32,
 }
 
 /// A duty of the firmware that the watchdog supervises: each must check in

@@ -18,7 +18,8 @@
 //! modulo the capacity is its slot in the ring.
 //!
 //! Who writes what: the host writes the samples, then `written_sets`
-//! (release), `end_of_stream` and `stall_us`; the board writes every other counter.
+//! (release), `end_of_stream`, `stall_us` and `vrefint_code`; the board
+//! writes every other counter.
 //! `magic` is written last by the host, so a board that finds it finds a
 //! complete header; a board started without the backing file finds zeros and
 //! takes its samples from the UART instead.
@@ -40,7 +41,7 @@ pub const SET_BYTES: usize = 6;
 /// "HSTM", little-endian.
 pub const MAGIC: u32 = u32::from_le_bytes(*b"HSTM");
 /// Bumped on any change of the header's layout or meaning.
-pub const VERSION: u32 = 1;
+pub const VERSION: u32 = 2;
 /// The reference board's DMA half-buffer (firmware/src/sampler.rs), so the
 /// emulated board sees the same block size and has the same slack.
 pub const BLOCK_SETS: u32 = 256;
@@ -107,7 +108,16 @@ pub struct Header {
     /// asks for samples, stays busy this long (µs of guest time) and clears
     /// it: a firmware that is late, to show the overrun it causes.
     pub stall_us: AtomicU32,
+    /// Host: what the ADC reads on the internal reference channel, 12-bit
+    /// code: the host's model of the board's analog supply (VDDA =
+    /// 3.0 V · [`VREFINT_CAL`] / code). 0: no reference, not measured.
+    pub vrefint_code: AtomicU32,
 }
+
+/// The emulated chip's factory calibration of its internal reference, the
+/// code it read at VDDA = 3.0 V (a typical STM32G474's; the reference board
+/// reads its own from system memory).
+pub const VREFINT_CAL: u16 = 1655;
 
 /// The ring slot of sample-set position `pos`.
 pub const fn slot(pos: u32) -> usize {

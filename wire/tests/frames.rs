@@ -41,6 +41,7 @@ fn sample_report() -> CycleReport {
         wear_remaining_fraction: 1.0,
         remaining_life_cycles: 1.0e7,
         drift_score: 0.0,
+        calibration_hash: sample_config().calibration_hash(),
         flags: Flags(0x0800),
     }
 }
@@ -83,6 +84,8 @@ fn sample_config() -> DeviceConfig {
 const GOLDEN_CONFIG_FRAME: &str = "0002050450c347010b203fb81e053dcdcc4c3c010370c10420ba430a408643ff1f6f12033c01037a440420ba430a408643ff1f6f12033c01037a440ef0ff44e7fb793fff1f0ad7a33b0103803f010f7a4417b75139a69bc43a0ad7a33c0101023f0101023f010102400108c07f20bc3e4c320101023f0107204125d6285200";
 const GOLDEN_SET_CONFIG_FRAME: &str = "0002020450c347010b203fb81e053dcdcc4c3c010370c10420ba430a408643ff1f6f12033c01037a440420ba430a408643ff1f6f12033c01037a440ef0ff44e7fb793fff1f0ad7a33b0103803f010f7a4417b75139a69bc43a0ad7a33c0101023f0101023f010102400108c07f20bc3e4c320101023f01072041e052e21300";
 const GOLDEN_CONFIG_HASH: u32 = 2_188_404_417;
+/// Checked independently: Python's `zlib.crc32(struct.pack('<ffHff', ...) × 3)`.
+const GOLDEN_CALIBRATION_HASH: u32 = 2_717_027_379;
 
 /// The bytes of these frames are the protocol. If a test here fails, the
 /// wire format changed: bump PROTOCOL_VERSION (unless, like the leading
@@ -90,7 +93,7 @@ const GOLDEN_CONFIG_HASH: u32 = 2_188_404_417;
 /// update docs/wire-protocol.md, and only then update the snapshot.
 #[test]
 fn golden_frames() {
-    assert_eq!(PROTOCOL_VERSION, 2);
+    assert_eq!(PROTOCOL_VERSION, 3);
     assert_eq!(
         hex(&frame(&HostMsg::Hello { protocol_version: 1 })),
         "000106016922de3600"
@@ -106,7 +109,7 @@ fn golden_frames() {
     );
     assert_eq!(
         hex(&frame(&DeviceMsg::Report(sample_report()))),
-        "00030107010101010107e03f1283403d0103aa410103244101032041010328410103803f0103c03f0103c03f010320400103304001036040010388400101023e0101023e0103603f0101063e3333333d04ab9f4804966148010101010103c4400107803f8096184b0101010780101b7be5f800"
+        "00030107010101010107e03f1283403d0103aa410103244101032041010328410103803f0103c03f0103c03f010320400103304001036040010388400101023e0101023e0103603f0101063e3333333d04ab9f4804966148010101010103c4400107803f8096184b0101010cb398ca8f0a8010797d344800"
     );
     // A configuration, both ways (`Config` answers `GetConfig`, `SetConfig` carries one).
     assert_eq!(hex(&frame(&DeviceMsg::Config(sample_config()))), GOLDEN_CONFIG_FRAME);
@@ -115,12 +118,14 @@ fn golden_frames() {
         GOLDEN_SET_CONFIG_FRAME
     );
     assert_eq!(config_hash(&sample_config()), GOLDEN_CONFIG_HASH);
+    // Protocol 3 added the calibration's hash to every report.
+    assert_eq!(sample_config().calibration_hash(), GOLDEN_CALIBRATION_HASH);
     let rej = DeviceMsg::Rejected {
         command: CommandKind::Unknown,
         reason: RejectReason::CorruptFrame,
     };
     assert_eq!(hex(&frame(&rej)), "0008080a0439a4d00c00");
-    // A status after a watchdog reset (protocol 2 added the cause and the stack).
+    // A status after a watchdog reset (protocol 2 added the cause and the stack, 3 VDDA).
     let status = Status {
         uptime_us: 1_000_000,
         samples: 100_000,
@@ -132,11 +137,12 @@ fn golden_frames() {
         },
         stack_used_bytes: 18_292,
         stack_reserved_bytes: 32_768,
+        vdda_v: 3.3,
         ..Default::default()
     };
     assert_eq!(
         hex(&frame(&DeviceMsg::Status(status))),
-        "000802c0843da08d0601010101010101010101010101010202020107b59cf38602010bf48e01808002436233c800"
+        "000802c0843da08d0601010101010101010101010101010202020107b59cf38602010ff48e0180800233335340b25b9ba100"
     );
 }
 

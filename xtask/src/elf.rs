@@ -1,11 +1,13 @@
-//! Flash and static RAM of an ARM ELF, from its section headers (no external
-//! size tool needed on a fresh machine).
+//! Flash and static RAM of an ARM ELF, from its section headers, and a
+//! symbol's address from its symbol table (no external size tool needed on
+//! a fresh machine).
 
 use std::path::Path;
 
 const SHF_WRITE: u32 = 0x1;
 const SHF_ALLOC: u32 = 0x2;
 const SHT_NOBITS: u32 = 8;
+const SHT_SYMTAB: u32 = 2;
 
 #[derive(Debug, Default, Clone, Copy)]
 pub struct Sizes {
@@ -53,4 +55,48 @@ pub fn sizes(path: &Path) -> Result<Sizes, String> {
         }
     }
     Ok(s)
+}
+
+/// The value (address) of the global or local symbol `name`, if the ELF has it.
+pub fn symbol(path: &Path, name: &str) -> Result<Option<u32>, String> {
+    let b = std::fs::read(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    if b.len() < 52 || &b[..4] != b"\x7fELF" || b[4] != 1 {
+        return Err(format!("{}: not a 32-bit ELF", path.display()));
+    }
+    let truncated = || format!("{}: truncated ELF", path.display());
+    let shoff = u32le(&b, 32) as usize;
+    let shentsize = u16le(&b, 46) as usize;
+    let shnum = u16le(&b, 48) as usize;
+    let section = |i: usize| -> Result<(u32, usize, usize, u32, usize), String> {
+        let o = shoff + i * shentsize;
+        if o + 40 > b.len() {
+            return Err(truncated());
+        }
+        // (type, offset, size, link, entsize)
+        Ok((
+            u32le(&b, o + 4),
+            u32le(&b, o + 16) as usize,
+            u32le(&b, o + 20) as usize,
+            u32le(&b, o + 24),
+            u32le(&b, o + 36) as usize,
+        ))
+    };
+    for i in 0..shnum {
+        let (kind, off, size, link, entsize) = section(i)?;
+        if kind != SHT_SYMTAB || entsize < 16 {
+            continue;
+        }
+        let (_, str_off, str_size, _, _) = section(link as usize)?;
+        let strings = b.get(str_off..str_off + str_size).ok_or_else(truncated)?;
+        let table = b.get(off..off + size).ok_or_else(truncated)?;
+        for sym in table.chunks_exact(entsize) {
+            let at = u32le(sym, 0) as usize;
+            let Some(rest) = strings.get(at..) else { continue };
+            let end = rest.iter().position(|&c| c == 0).unwrap_or(rest.len());
+            if &rest[..end] == name.as_bytes() {
+                return Ok(Some(u32le(sym, 4)));
+            }
+        }
+    }
+    Ok(None)
 }

@@ -121,9 +121,74 @@ fn size() -> Result<(), String> {
             RAM_AIM / 1024
         );
     }
+    Ok(())
+}
+
+/// The stack region of a board's ELF, bytes: flip-link puts it below the
+/// statics, from `_stack_end` (its lowest word) up to `_stack_start`.
+fn stack_region(path: &Path) -> Result<u32, String> {
+    let top = elf::symbol(path, "_stack_start")?;
+    let bottom = elf::symbol(path, "_stack_end")?;
+    match (top, bottom) {
+        (Some(t), Some(b)) if t > b => Ok(t - b),
+        _ => Err(format!("{}: no _stack_start/_stack_end symbols", path.display())),
+    }
+}
+
+/// `cargo xtask size`: the sizes, then each board's stack region from its
+/// ELF and the high-water mark the emulated board measures on itself (its
+/// painted stack) over 20 s of hammer time at full rate through the soak.
+/// The reference board reports its own in every `Status` (the dashboard's
+/// Device panel); it runs the same app tasks, so its mark is the emulated
+/// one plus what its board layer adds (embassy-stm32's interrupt handlers,
+/// nested on the same stack), which only a board can measure.
+fn size_and_stack() -> Result<(), String> {
+    size()?;
+    let [(ref_name, ref_elf), (emu_name, emu_elf)] = firmware_elves();
+    let (ref_region, emu_region) = (stack_region(&ref_elf)?, stack_region(&emu_elf)?);
+    eprintln!("xtask: measuring the emulated board's stack (hammer soak, 20 s of hammer time)");
+    let out = Command::new("cargo")
+        .args([
+            "run",
+            "--release",
+            "-q",
+            "-p",
+            "hammer-host",
+            "--bin",
+            "hammer",
+            "--",
+            "soak",
+        ])
+        .args(["--minutes", "0.334"])
+        .current_dir(root())
+        .stderr(Stdio::inherit())
+        .output()
+        .map_err(|e| format!("cannot start cargo: {e}"))?;
+    if !out.status.success() {
+        return Err(format!(
+            "the soak failed ({}): is qemu-system-arm installed?",
+            out.status
+        ));
+    }
+    let text = String::from_utf8_lossy(&out.stdout);
+    // "  stack: <used> B at the deepest of <reserved> B reserved ..." (host-tools/src/soak.rs).
+    let used: u32 = text
+        .lines()
+        .find_map(|l| l.trim().strip_prefix("stack: "))
+        .and_then(|l| l.split(' ').next())
+        .and_then(|n| n.parse().ok())
+        .ok_or_else(|| format!("no stack line in the soak's output:\n{text}"))?;
+    let pct = |a: u32, b: u32| 100.0 * f64::from(a) / f64::from(b);
     println!(
-        "stack: the emulated board measures its high-water mark on itself (painted stack); \
-         `cargo xtask bench-firmware` and `hammer soak` print it"
+        "{emu_name}: stack {used} B at the deepest of a {emu_region} B region (measured), margin {} B ({:.0} % free)",
+        emu_region.saturating_sub(used),
+        pct(emu_region.saturating_sub(used), emu_region)
+    );
+    println!(
+        "{ref_name}: stack region {ref_region} B; the same app measured {used} B on the emulated board, \
+         margin {} B ({:.0} % free) before the board layer's interrupt frames; the board's own mark is in its Status",
+        ref_region.saturating_sub(used),
+        pct(ref_region.saturating_sub(used), ref_region)
     );
     Ok(())
 }
@@ -272,7 +337,7 @@ fn afl(target: &str, minutes: u64) -> Result<(), String> {
 const USAGE: &str = "usage: cargo xtask <command>
   ci              every test: formatting, firmware build, host and emulator tests
   firmware        build both firmware binaries and print their flash and RAM
-  size            flash and static RAM of the built firmware binaries
+  size            flash and static RAM of the built firmware binaries, each board's stack region and high-water mark (a 20 s soak)
   bench-firmware  estimator cost on the Cortex-M4 ISA under QEMU (-icount), with sizes
   soak [--minutes N] [hammer soak options]
                   the emulated board at the full 100 kS/s x 3 for N minutes of hammer time (default 10):
@@ -290,7 +355,7 @@ fn main() -> ExitCode {
         Some("ci") => ci(),
         Some("fuzz") => fuzz(&args[1..].iter().map(String::as_str).collect::<Vec<_>>()),
         Some("firmware") => build_firmware(),
-        Some("size") => size(),
+        Some("size") => size_and_stack(),
         Some("ninth-effect") => ninth_effect::run(&root(), &mut (0, 0)),
         Some("soak") => build_firmware().and_then(|_| {
             let mut cmd = vec!["run", "--release", "-p", "hammer-host", "--bin", "hammer", "--", "soak"];

@@ -258,6 +258,18 @@ impl SampleSource for StimulusAdc {
     }
 }
 
+/// The internal reference's reading, as the host's model of the analog
+/// supply sets it: VDDA for `Status`. The reference board reads its
+/// VREFINT channel once a second; this runs on every SysTick (100 ms).
+pub fn measure_vdda() {
+    let h = header();
+    if h.magic.load(Ordering::Acquire) != MAGIC {
+        return;
+    }
+    let code = h.vrefint_code.load(Ordering::Relaxed).min(u32::from(u16::MAX)) as u16;
+    crate::SHARED.set_vdda_v(hammer_app::supply::vdda_v(code, stimulus::VREFINT_CAL));
+}
+
 /// TIMER0 (IRQ 8): a DMA half is due. Completes it, wakes the sampling task
 /// and sets the timer to the next half's due time, so the timer cannot
 /// drift from the DMA's clock.

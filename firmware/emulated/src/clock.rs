@@ -126,6 +126,7 @@ fn SysTick() {
     // 1024 words a tick (≈ 25 µs of guest time): a pass over 70 KB of paint
     // in under 2 s.
     crate::stack::scan_step(1024);
+    crate::adc::measure_vdda();
     for w in &TICK_WAKERS {
         w.wake();
     }

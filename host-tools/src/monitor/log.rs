@@ -479,7 +479,8 @@ mod tests {
 
     #[test]
     fn csv_rows_have_a_value_per_column() {
-        // The layout cycles.csv had before the columns came from the table of report fields.
+        // The layout cycles.csv had before the columns came from the table of report fields,
+        // plus the calibration hash (protocol 3).
         assert_eq!(
             cycles_header(),
             "host_time,host_unix_s,seq,t_impact_s,period_s,frequency_hz,friction_n,\
@@ -487,7 +488,7 @@ friction_stroke_n,friction_backhaul_n,friction_uncertainty_n,friction_stroke_unc
 friction_backhaul_uncertainty_n,impact_velocity_mps,impact_velocity_frictionless_mps,impact_energy_j,\
 impact_energy_frictionless_j,impact_energy_uncertainty_j,impact_energy_frictionless_uncertainty_j,\
 friction_work_j,friction_work_ratio,stroke_m,peak_rear_pa,peak_front_pa,accel_zero_shift_mps2,wear_index_j,\
-wear_remaining_fraction,remaining_life_cycles,drift_score,valid,flags"
+wear_remaining_fraction,remaining_life_cycles,drift_score,calibration_hash,valid,flags"
         );
         let row = csv_row(1_700_000_000_123_456, &CycleReport::default());
         assert_eq!(row.split(',').count(), cycles_header().split(',').count());

@@ -451,6 +451,14 @@ fn device_panel(v: &View) -> Paragraph<'static> {
                 ),
             ));
         }
+        if st.vdda_v > 0.0 {
+            let nominal = hammer_app::supply::NOMINAL_VDDA_V;
+            lines.push(row(
+                "VDDA",
+                format!("{:.3} V", st.vdda_v),
+                &format!(" {:+.1} % of {nominal:.1} V", (st.vdda_v / nominal - 1.0) * 100.0),
+            ));
+        }
     }
     if v.captures > 0 {
         lines.push(row("Capture chunks", v.captures.to_string(), ""));
