@@ -87,6 +87,12 @@ impl Stimulus {
         Ok(s)
     }
 
+    /// Makes the board's sampling task fault (an undefined instruction) the
+    /// next time it asks for samples (see `Header::fault`).
+    pub fn fault(&self) {
+        self.header().fault.store(1, Ordering::Release);
+    }
+
     /// The board's analog supply from now on: what its ADC will read on the
     /// internal reference channel (a sagging supply raises the code).
     pub fn set_vdda_v(&self, vdda_v: f64) {

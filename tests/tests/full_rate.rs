@@ -219,3 +219,80 @@ fn a_stuck_sampling_task_is_reset_by_the_supervised_watchdog_which_says_why() {
         "sampling again after the reset"
     );
 }
+
+/// A real fault (an undefined instruction in the sampling task): the fault
+/// handler records where and why in RAM that survives the reset, resets, and
+/// the next boot reports it in every `Status`.
+#[test]
+fn a_fault_is_recorded_and_reported_after_the_reset() {
+    let samples = codes(5.0, 8.0, 13);
+    let stimulus = Stimulus::create().unwrap();
+    assert!(stimulus.push(&samples, &std::sync::atomic::AtomicBool::new(false)));
+    stimulus.finish();
+    let mut emu = Emulator::start_with(&firmware_elf(), Some(Icount::m4_at_125_mips(false)), Some(&stimulus))
+        .expect("QEMU and the emulated firmware");
+    let mut link = Client::new(emu.connect(T).unwrap());
+    link.handshake(T).unwrap();
+    let status = |link: &mut Client<std::net::TcpStream>| {
+        link.send(&HostMsg::GetStatus).unwrap();
+        link.recv_until(T, |m| if let DeviceMsg::Status(s) = m { Some(*s) } else { None })
+            .unwrap()
+            .0
+            .expect("status")
+    };
+    assert_eq!(status(&mut link).reset_cause, ResetCause::PowerOn);
+    stimulus.fault();
+    let deadline = Instant::now() + T;
+    let after = loop {
+        assert!(Instant::now() < deadline, "no status after the fault");
+        let s = status(&mut link);
+        if s.reset_cause != ResetCause::PowerOn {
+            break s;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    let ResetCause::Fault { pc, cfsr } = after.reset_cause else {
+        panic!("not a fault record: {:?}", after.reset_cause);
+    };
+    // UFSR.UNDEFINSTR (CFSR bit 16): the core says what it was.
+    assert_ne!(cfsr & (1 << 16), 0, "CFSR {cfsr:#010x}");
+    // The faulting instruction is in the image (the emulated board's code
+    // memory starts at 0) and is a UDF (0xDExx, Thumb).
+    let elf = std::fs::read(firmware_elf()).unwrap();
+    let udf = udf_addresses(&elf);
+    assert!(
+        udf.contains(&pc),
+        "pc {pc:#010x} is not one of the image's UDFs {udf:08x?}"
+    );
+    assert!(after.uptime_us < 3_000_000, "a fresh boot: {after:?}");
+    assert!(emu.is_running(), "a reset, not an exit");
+    let before = stimulus.counters().consumed_sets;
+    std::thread::sleep(Duration::from_millis(300));
+    assert!(
+        stimulus.counters().consumed_sets > before,
+        "sampling again after the reset"
+    );
+}
+
+/// Addresses of the Thumb `UDF #imm8` instructions (0xDExx) in the ELF's
+/// executable sections.
+fn udf_addresses(elf: &[u8]) -> Vec<u32> {
+    let u16le = |o: usize| u16::from_le_bytes([elf[o], elf[o + 1]]);
+    let u32le = |o: usize| u32::from_le_bytes([elf[o], elf[o + 1], elf[o + 2], elf[o + 3]]);
+    let (shoff, shentsize, shnum) = (u32le(32) as usize, u16le(46) as usize, u16le(48) as usize);
+    let mut found = vec![];
+    for i in 0..shnum {
+        let o = shoff + i * shentsize;
+        const SHF_EXECINSTR: u32 = 4;
+        if u32le(o + 8) & SHF_EXECINSTR == 0 {
+            continue;
+        }
+        let (addr, off, size) = (u32le(o + 12), u32le(o + 16) as usize, u32le(o + 20) as usize);
+        for k in (0..size).step_by(2) {
+            if elf[off + k + 1] == 0xDE {
+                found.push(addr + k as u32);
+            }
+        }
+    }
+    found
+}

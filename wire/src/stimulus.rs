@@ -18,7 +18,7 @@
 //! modulo the capacity is its slot in the ring.
 //!
 //! Who writes what: the host writes the samples, then `written_sets`
-//! (release), `end_of_stream`, `stall_us` and `vrefint_code`; the board
+//! (release), `end_of_stream`, `stall_us`, `vrefint_code` and `fault`; the board
 //! writes every other counter.
 //! `magic` is written last by the host, so a board that finds it finds a
 //! complete header; a board started without the backing file finds zeros and
@@ -112,6 +112,10 @@ pub struct Header {
     /// code: the host's model of the board's analog supply (VDDA =
     /// 3.0 V · [`VREFINT_CAL`] / code). 0: no reference, not measured.
     pub vrefint_code: AtomicU32,
+    /// Host: fault injection. Non-zero: the board's sampling task, the next
+    /// time it asks for samples, clears it and executes an undefined
+    /// instruction, to show the fault record a real fault leaves.
+    pub fault: AtomicU32,
 }
 
 /// The emulated chip's factory calibration of its internal reference, the

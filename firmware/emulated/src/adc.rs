@@ -206,6 +206,15 @@ impl StimulusAdc {
         h.busy_us.store(busy as u32, Ordering::Relaxed);
     }
 
+    /// Fault injection (see `Header::fault`): an undefined instruction,
+    /// which escalates to a HardFault (UsageFault is not enabled). Cleared
+    /// first, so the board that restarts runs on.
+    fn fault_if_asked(h: &Header) {
+        if h.fault.swap(0, Ordering::AcqRel) != 0 {
+            cortex_m::asm::udf();
+        }
+    }
+
     /// Fault injection (see `Header::stall_us`): a late firmware.
     fn stall_if_asked(h: &Header) {
         let us = h.stall_us.swap(0, Ordering::AcqRel);
@@ -223,6 +232,7 @@ impl SampleSource for StimulusAdc {
             self.processed(h, half);
         }
         Self::stall_if_asked(h);
+        Self::fault_if_asked(h);
         // Cancel-safe: nothing below the wait is interrupted by an await.
         let next = self.next;
         poll_fn(|cx| {
