@@ -118,6 +118,9 @@ pub enum Format {
     Csv,
     /// The main fields (friction and energy ± their uncertainty) and a summary line.
     Table,
+    /// The CSV's columns as one Parquet file (zstd; `device` is the trace's
+    /// file name, `host_time` null): to `--out`, or to a redirected stdout.
+    Parquet,
 }
 
 #[derive(Args, Debug)]
@@ -133,6 +136,9 @@ pub struct EstimateArgs {
     pub config: Option<PathBuf>,
     #[arg(long, value_enum, default_value_t = Format::Table)]
     pub format: Format,
+    /// Write to this file instead of standard output.
+    #[arg(long, value_name = "FILE")]
+    pub out: Option<PathBuf>,
 }
 
 /// `--effect`'s help: the catalogue's names, from the registry.
@@ -430,8 +436,15 @@ fn estimate_cmd(args: &EstimateArgs) -> Result<()> {
     if reports.is_empty() {
         return Err(no_cycle_error());
     }
-    let mut out = std::io::BufWriter::new(std::io::stdout().lock());
-    use std::io::Write as _;
+    use std::io::{IsTerminal as _, Write as _};
+    let sink: Box<dyn std::io::Write + Send> = match &args.out {
+        Some(path) => Box::new(std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?),
+        None if args.format == Format::Parquet && std::io::stdout().is_terminal() => {
+            anyhow::bail!("Parquet is binary: give --out FILE or redirect standard output")
+        }
+        None => Box::new(std::io::stdout()),
+    };
+    let mut out = std::io::BufWriter::new(sink);
     match args.format {
         Format::Jsonl => {
             for r in &reports {
@@ -445,9 +458,24 @@ fn estimate_cmd(args: &EstimateArgs) -> Result<()> {
             }
         }
         Format::Table => write!(out, "{}", table(&reports))?,
+        Format::Parquet => {
+            let device = args
+                .trace
+                .file_stem()
+                .map_or_else(String::new, |s| s.to_string_lossy().into_owned());
+            let rows: Vec<crate::parquet_log::Row> = reports
+                .iter()
+                .map(|r| crate::parquet_log::Row {
+                    device: device.clone(),
+                    host_time_us: None,
+                    report: *r,
+                })
+                .collect();
+            crate::parquet_log::write(&mut out, &rows)?;
+        }
     }
     // A full disk or a closed pipe must not pass for success.
-    out.flush().context("writing to standard output")?;
+    out.flush().context("writing the records")?;
     if no_cycle {
         return Err(no_cycle_error());
     }

@@ -254,6 +254,33 @@ fn estimate_prints_one_record_per_cycle_in_each_format() {
         }
     }
 
+    // Parquet: the same numbers, read back (NaN = a JSON null).
+    let pq = dir.join("cycles.parquet");
+    let (code, _, err) = hammer(&[
+        "estimate",
+        trace.to_str().unwrap(),
+        "--format",
+        "parquet",
+        "--out",
+        pq.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let rows = hammer_host::parquet_log::read(&pq).unwrap();
+    assert_eq!(rows.len(), records.len());
+    for (row, json) in rows.iter().zip(&records) {
+        assert_eq!(row.device, "run");
+        assert_eq!(row.host_time_us, None);
+        assert_eq!(row.valid, json["valid"].as_bool().unwrap());
+        for (f, v) in hammer_estimator::fields::FIELDS.iter().zip(&row.values) {
+            let (v, j) = (v.as_f64(), json[f.name].as_f64().unwrap_or(f64::NAN));
+            assert!(
+                v == j || v as f32 == j as f32 || (v.is_nan() && j.is_nan()),
+                "{}: {v} vs {j}",
+                f.name
+            );
+        }
+    }
+
     let (code, out, _) = hammer(&["estimate", trace.to_str().unwrap(), "--supply-bar", "6"]);
     assert_eq!(code, 0);
     assert!(out.lines().last().unwrap().starts_with("summary:"), "{out}");
