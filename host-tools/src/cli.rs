@@ -95,6 +95,8 @@ pub struct CaptureArgs {
     #[arg(long)]
     pub supply_bar: Option<f64>,
     /// Trace to write (CSV); its sidecar goes beside it with extension .json.
+    /// A name ending in `.parquet` writes one Parquet file instead: the
+    /// trace's columns, the raw ADC codes, the sidecar in its metadata.
     #[arg(long)]
     pub out: PathBuf,
 }
@@ -360,12 +362,25 @@ fn capture_cmd(args: &CaptureArgs) -> Result<()> {
         }
     };
     let (trace, sidecar) = crate::capture::to_trace(&codes, &cfg, args.supply_bar.or(supply));
+    let ms = codes.len() as f64 / cfg.sample_rate_hz as f64 * 1e3;
+    if args.out.extension().is_some_and(|e| e == "parquet") {
+        let file = std::fs::File::create(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+        let mut out = std::io::BufWriter::new(file);
+        crate::parquet_files::write_trace(&mut out, &trace, &codes, &serde_json::to_string(&sidecar)?)?;
+        use std::io::Write as _;
+        out.flush().with_context(|| format!("writing {}", args.out.display()))?;
+        outln!(
+            "captured {} sample-sets ({ms:.1} ms) into {}",
+            codes.len(),
+            args.out.display()
+        );
+        return Ok(());
+    }
     write_csv(&args.out, &trace)?;
     write_sidecar(&args.out, &sidecar)?;
     outln!(
-        "captured {} sample-sets ({:.1} ms) into {} and {}",
+        "captured {} sample-sets ({ms:.1} ms) into {} and {}",
         codes.len(),
-        codes.len() as f64 / cfg.sample_rate_hz as f64 * 1e3,
         args.out.display(),
         hammer_trace::trace::sidecar_path(&args.out).display()
     );
@@ -463,15 +478,15 @@ fn estimate_cmd(args: &EstimateArgs) -> Result<()> {
                 .trace
                 .file_stem()
                 .map_or_else(String::new, |s| s.to_string_lossy().into_owned());
-            let rows: Vec<crate::parquet_log::Row> = reports
+            let rows: Vec<crate::parquet_files::Row> = reports
                 .iter()
-                .map(|r| crate::parquet_log::Row {
+                .map(|r| crate::parquet_files::Row {
                     device: device.clone(),
                     host_time_us: None,
                     report: *r,
                 })
                 .collect();
-            crate::parquet_log::write(&mut out, &rows)?;
+            crate::parquet_files::write(&mut out, &rows)?;
         }
     }
     // A full disk or a closed pipe must not pass for success.

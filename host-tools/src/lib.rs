@@ -4,7 +4,7 @@
 //!
 //! Module map (each row uses only the rows above it and the crates below):
 //! - [`numfmt`], [`chart`]: numbers for people, the one chart model and renderer;
-//! - [`records`], [`parquet_log`]: every rendering of a cycle report, from
+//! - [`records`], [`parquet_files`]: every rendering of a cycle report, from
 //!   `hammer_types::fields::FIELDS`, and the same columns as Parquet;
 //! - [`client`]: the one protocol client (its sans-IO decoding core, the blocking client);
 //! - [`board`], [`stimulus`], [`emulator`]: the firmware's app natively, the
@@ -32,7 +32,7 @@ pub mod estimate;
 pub mod flash;
 pub mod monitor;
 pub mod numfmt;
-pub mod parquet_log;
+pub mod parquet_files;
 pub mod plot;
 pub mod records;
 pub mod report;

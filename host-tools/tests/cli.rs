@@ -265,7 +265,7 @@ fn estimate_prints_one_record_per_cycle_in_each_format() {
         pq.to_str().unwrap(),
     ]);
     assert_eq!(code, 0, "{err}");
-    let rows = hammer_host::parquet_log::read(&pq).unwrap();
+    let rows = hammer_host::parquet_files::read(&pq).unwrap();
     assert_eq!(rows.len(), records.len());
     for (row, json) in rows.iter().zip(&records) {
         assert_eq!(row.device, "run");
@@ -412,6 +412,28 @@ fn capture_from_a_demo_board_writes_a_trace_the_estimator_reads() {
         "{}",
         recs[0]
     );
+
+    // The same as one Parquet file: samples, the codes they came from, the sidecar.
+    let pq = dir.join("cap.parquet");
+    let (code, stdout, err) = hammer(&["capture", "--demo", "5", "--out", pq.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    assert!(stdout.contains("cap.parquet"), "{stdout}");
+    let (samples, codes, side) = hammer_host::parquet_files::read_trace(&pq).unwrap();
+    assert!(samples.len() > 4000, "one full cycle at 100 kS/s: {}", samples.len());
+    let side: serde_json::Value = serde_json::from_str(&side.expect("the sidecar in the metadata")).unwrap();
+    assert_eq!(side["supply_pressure_bar"], 5.0, "{side}");
+    assert!(samples.windows(2).all(|w| (w[1][0] - w[0][0] - 1e-5).abs() < 1e-12));
+    // Each pressure is its code through one affine calibration.
+    let (i, j) = (0, (1..codes.len()).find(|&k| codes[k][0] != codes[0][0]).unwrap());
+    let scale = (samples[j][1] - samples[i][1]) / (f64::from(codes[j][0]) - f64::from(codes[i][0]));
+    for (s, c) in samples.iter().zip(&codes) {
+        let p = samples[i][1] + scale * (f64::from(c[0]) - f64::from(codes[i][0]));
+        assert!(
+            (s[1] - p).abs() < 1e-6 * scale.abs().max(1.0) * 4096.0,
+            "{} vs {p}",
+            s[1]
+        );
+    }
 }
 
 #[test]

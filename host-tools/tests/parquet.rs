@@ -10,7 +10,7 @@ use std::time::Duration;
 
 use hammer_estimator::fields::FIELDS;
 use hammer_estimator::CycleReport;
-use hammer_host::parquet_log::{read, PartitionedWriter};
+use hammer_host::parquet_files::{read, PartitionedWriter};
 
 fn duckdb() -> bool {
     let ok = Command::new("python3")

@@ -1,5 +1,13 @@
-//! Cycle reports as Parquet, for analysts' engines (DuckDB, Polars, pandas,
-//! Spark) rather than a reader of our own. The columns are the report's one
+//! Cycle reports and raw captures as Parquet, for analysts' engines
+//! (DuckDB, Polars, pandas, Spark) rather than a reader of our own.
+//!
+//! A capture ([`write_trace`], `hammer capture --out X.parquet`) is the
+//! trace format's columns (`t_s`, `p_rear_pa`, `p_front_pa`, `accel_mps2`,
+//! DOUBLE) plus the ADC codes they came from (`rear_code`, `front_code`,
+//! `accel_code`, INT32), with the sidecar's JSON in the file's key-value
+//! metadata under `hammer.sidecar`.
+//!
+//! Cycle reports: The columns are the report's one
 //! field table (`hammer_types::FIELDS`, through [`crate::records`]), so a
 //! field added to `CycleReport` becomes a column here without touching this
 //! file: `device`, `host_time` (UTC, µs; null where there is no host clock,
@@ -130,6 +138,90 @@ pub fn write<W: Write + Send>(out: W, rows: &[Row]) -> Result<()> {
     group.close()?;
     writer.close()?;
     Ok(())
+}
+
+/// The key of a capture's sidecar JSON in the file's key-value metadata.
+pub const SIDECAR_KEY: &str = "hammer.sidecar";
+
+/// A capture: its samples in physical units and the ADC codes, with the
+/// sidecar's JSON, as one Parquet file (row groups of 2^20 samples).
+pub fn write_trace<W: Write + Send>(
+    out: W,
+    trace: &hammer_trace::trace::Trace,
+    codes: &[[u16; 3]],
+    sidecar_json: &str,
+) -> Result<()> {
+    let n = trace.t_s.len();
+    if codes.len() != n {
+        bail!("{} sample-sets of codes for {n} samples", codes.len());
+    }
+    let schema = Arc::new(parse_message_type(
+        "message capture {\n  REQUIRED DOUBLE t_s;\n  REQUIRED DOUBLE p_rear_pa;\n  REQUIRED DOUBLE p_front_pa;\n  \
+         REQUIRED DOUBLE accel_mps2;\n  REQUIRED INT32 rear_code;\n  REQUIRED INT32 front_code;\n  REQUIRED INT32 accel_code;\n}\n",
+    )?);
+    let props = WriterProperties::builder()
+        .set_compression(Compression::ZSTD(ZstdLevel::try_new(3).expect("3 is a zstd level")))
+        .set_created_by(format!("hammer-monitor {}", env!("CARGO_PKG_VERSION")))
+        .set_key_value_metadata(Some(vec![parquet::file::metadata::KeyValue::new(
+            SIDECAR_KEY.to_string(),
+            sidecar_json.to_string(),
+        )]))
+        .build();
+    let mut writer = SerializedFileWriter::new(out, schema, Arc::new(props))?;
+    const GROUP: usize = 1 << 20;
+    for start in (0..n.max(1)).step_by(GROUP) {
+        let range = start..(start + GROUP).min(n);
+        let mut group = writer.next_row_group()?;
+        let mut column = 0usize;
+        while let Some(mut col) = group.next_column()? {
+            let doubles = [&trace.t_s, &trace.p_rear_pa, &trace.p_front_pa, &trace.accel_mps2];
+            if column < 4 {
+                col.typed::<DoubleType>()
+                    .write_batch(&doubles[column][range.clone()], None, None)?;
+            } else {
+                let v: Vec<i32> = codes[range.clone()].iter().map(|c| i32::from(c[column - 4])).collect();
+                col.typed::<parquet::data_type::Int32Type>()
+                    .write_batch(&v, None, None)?;
+            }
+            col.close()?;
+            column += 1;
+        }
+        group.close()?;
+    }
+    writer.close()?;
+    Ok(())
+}
+
+/// A capture read back: (t_s, p_rear_pa, p_front_pa, accel_mps2, codes) and the sidecar's JSON.
+pub type Capture = (Vec<[f64; 4]>, Vec<[u16; 3]>, Option<String>);
+
+/// Reads a file [`write_trace`] wrote.
+pub fn read_trace(path: &Path) -> Result<Capture> {
+    let file = File::open(path).with_context(|| format!("opening {}", path.display()))?;
+    let reader = SerializedFileReader::new(file).with_context(|| format!("{} is not Parquet", path.display()))?;
+    let sidecar = reader
+        .metadata()
+        .file_metadata()
+        .key_value_metadata()
+        .and_then(|kv| kv.iter().find(|k| k.key == SIDECAR_KEY))
+        .and_then(|k| k.value.clone());
+    let (mut samples, mut codes) = (vec![], vec![]);
+    for row in reader.get_row_iter(None)? {
+        let row = row?;
+        let (mut s, mut c) = ([f64::NAN; 4], [0u16; 3]);
+        for (k, (name, field)) in row.get_column_iter().enumerate() {
+            match (k, field) {
+                (0..=3, PqField::Double(v)) => s[k] = *v,
+                (4..=6, PqField::Int(v)) => {
+                    c[k - 4] = u16::try_from(*v).with_context(|| format!("{name}: {v} is not an ADC code"))?
+                }
+                _ => bail!("{}: column {name} holds an unexpected {field:?}", path.display()),
+            }
+        }
+        samples.push(s);
+        codes.push(c);
+    }
+    Ok((samples, codes, sidecar))
 }
 
 /// One row read back: device, host time, and every column after them as
@@ -465,6 +557,43 @@ mod tests {
             assert_eq!(seqs, (0..100).collect::<Vec<_>>(), "{device}: every report once");
         }
         let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn a_capture_reads_back_with_its_codes_and_sidecar() {
+        let n = 1000;
+        let trace = hammer_trace::trace::Trace {
+            dt_s: 1e-5,
+            t_s: (0..n).map(|i| i as f64 * 1e-5).collect(),
+            p_rear_pa: (0..n).map(|i| 1e5 + i as f64).collect(),
+            p_front_pa: (0..n).map(|i| 2e5 - i as f64).collect(),
+            accel_mps2: (0..n).map(|i| (i as f64).sin()).collect(),
+            ..Default::default()
+        };
+        let codes: Vec<[u16; 3]> = (0..n).map(|i| [i as u16, 4095 - i as u16, 2048]).collect();
+        let mut bytes = vec![];
+        write_trace(&mut bytes, &trace, &codes, "{\"supply_bar\":4}").unwrap();
+        let path = std::env::temp_dir().join(format!("hammer-capture-{}.parquet", std::process::id()));
+        std::fs::write(&path, &bytes).unwrap();
+        let (samples, back_codes, sidecar) = read_trace(&path).unwrap();
+        assert_eq!(back_codes, codes);
+        assert_eq!(sidecar.as_deref(), Some("{\"supply_bar\":4}"));
+        for (i, s) in samples.iter().enumerate() {
+            assert_eq!(
+                *s,
+                [
+                    trace.t_s[i],
+                    trace.p_rear_pa[i],
+                    trace.p_front_pa[i],
+                    trace.accel_mps2[i]
+                ]
+            );
+        }
+        assert!(
+            write_trace(&mut vec![], &trace, &codes[1..], "{}").is_err(),
+            "codes and samples must agree"
+        );
+        let _ = std::fs::remove_file(&path);
     }
 
     #[test]
