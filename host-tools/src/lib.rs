@@ -4,8 +4,8 @@
 //!
 //! Module map (each row uses only the rows above it and the crates below):
 //! - [`numfmt`], [`chart`]: numbers for people, the one chart model and renderer;
-//! - [`records`], [`parquet_files`]: every rendering of a cycle report, from
-//!   `hammer_types::fields::FIELDS`, and the same columns as Parquet;
+//! - [`records`], [`parquet_files`], [`influx`]: every rendering of a cycle
+//!   report, from `hammer_types::fields::FIELDS`: text, Parquet, line protocol;
 //! - [`client`]: the one protocol client (its sans-IO decoding core, the blocking client);
 //! - [`board`], [`stimulus`], [`emulator`]: the firmware's app natively, the
 //!   emulated board's ADC ring, and the board on QEMU's mps2-an386;
@@ -30,6 +30,7 @@ pub mod diagnose;
 pub mod emulator;
 pub mod estimate;
 pub mod flash;
+pub mod influx;
 pub mod monitor;
 pub mod numfmt;
 pub mod parquet_files;

@@ -1,0 +1,540 @@
+//! Cycle reports as InfluxDB line protocol, for a time-series database and
+//! Grafana rather than a store of our own.
+//!
+//! One line per report, measurement `hammer_cycle`:
+//! `hammer_cycle,device=<d>[,site=<s>][,supply_bar=<p>] <field>=<value>,... <ns>`.
+//! Tags are what a query groups by: the device, the site if given, and the
+//! configured gauge supply pressure in bar when the device knows it. Fields
+//! are the report's one field table (`hammer_types::FIELDS`) under their
+//! unit-suffixed names (integers as `12i`, the rest as floats; a non-finite
+//! value is left out, which line protocol cannot carry), then `valid`
+//! (boolean) and `flags` (string, names joined by `|`, `-` when none).
+//!
+//! Time: the device's own (`t_impact_s`, the sample clock's), anchored to
+//! the host's clock at the first report of a connection, so the points keep
+//! the device's spacing instead of the link's jitter; re-anchored when the
+//! two drift more than [`REANCHOR_US`] apart (a device reset restarts its
+//! clock). Written in nanoseconds (µs resolution), the default precision of
+//! every InfluxDB write API, so no precision parameter is needed.
+//!
+//! Destinations ([`Destination::parse`]): a file (appended), `udp://HOST:PORT`
+//! (one datagram per batch, kept under 1 400 bytes), or `http(s)://…` (the
+//! URL of a write endpoint, e.g. `http://localhost:8086/api/v2/write?org=o&bucket=b`
+//! or `…/write?db=hammer`; the body gzip-compressed; `INFLUX_TOKEN` in the
+//! environment becomes an `Authorization: Token` header). HTTPS is not
+//! built in: point it at a local proxy or Telegraf.
+
+use std::fs::{File, OpenOptions};
+use std::io::{BufRead, BufReader, Read, Write};
+use std::net::{TcpStream, ToSocketAddrs, UdpSocket};
+use std::path::PathBuf;
+use std::time::Duration;
+
+use anyhow::{bail, Context, Result};
+use hammer_estimator::fields::{Value, FIELDS};
+use hammer_estimator::CycleReport;
+
+use crate::records::flag_list;
+
+pub const MEASUREMENT: &str = "hammer_cycle";
+/// Device time and host time further apart than this: anchor again.
+pub const REANCHOR_US: i64 = 1_000_000;
+/// A UDP datagram stays under a typical path MTU.
+const UDP_MAX: usize = 1_400;
+/// Lines per HTTP request at most.
+const HTTP_BATCH: usize = 5_000;
+
+/// Escapes a tag value (commas, spaces, equals signs).
+fn tag(s: &str) -> String {
+    let mut out = String::with_capacity(s.len());
+    for c in s.chars() {
+        if matches!(c, ',' | ' ' | '=' | '\\') {
+            out.push('\\');
+        }
+        if c != '\n' && c != '\r' {
+            out.push(c);
+        }
+    }
+    out
+}
+
+/// One report as a line, stamped `t_ns`.
+pub fn line(device: &str, site: Option<&str>, supply_bar: Option<f64>, r: &CycleReport, t_ns: i64) -> String {
+    let mut s = format!("{MEASUREMENT},device={}", tag(device));
+    if let Some(site) = site {
+        s += &format!(",site={}", tag(site));
+    }
+    if let Some(p) = supply_bar.filter(|p| p.is_finite()) {
+        s += &format!(",supply_bar={p}");
+    }
+    let mut sep = ' ';
+    for f in &FIELDS {
+        let v = match f.value(r) {
+            Value::U32(v) => format!("{v}i"),
+            Value::F32(v) if v.is_finite() => format!("{v}"),
+            Value::F64(v) if v.is_finite() => format!("{v}"),
+            _ => continue,
+        };
+        s.push(sep);
+        sep = ',';
+        s += &format!("{}={v}", f.name);
+    }
+    s += &format!(",valid={},flags=\"{}\" {t_ns}", r.is_valid(), flag_list(r.flags));
+    s
+}
+
+/// Device time → host time, anchored per connection.
+#[derive(Debug, Default, Clone, Copy)]
+pub struct Anchor {
+    /// Host µs minus device µs.
+    offset_us: Option<i64>,
+}
+
+impl Anchor {
+    /// A new connection: the next report anchors again.
+    pub fn reset(&mut self) {
+        self.offset_us = None;
+    }
+
+    /// The report's time in ns since the epoch, from its device time and the
+    /// host time `host_us` it arrived at.
+    pub fn stamp_ns(&mut self, r: &CycleReport, host_us: i64) -> i64 {
+        let device_us = (r.t_impact_s * 1e6).round() as i64;
+        let offset = *self.offset_us.get_or_insert(host_us - device_us);
+        let t = device_us + offset;
+        let t = if (t - host_us).abs() > REANCHOR_US {
+            self.offset_us = Some(host_us - device_us);
+            host_us
+        } else {
+            t
+        };
+        t.saturating_mul(1_000)
+    }
+}
+
+/// Where the lines go.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Destination {
+    File(PathBuf),
+    Udp(String),
+    /// host:port, path with query, the URL as given.
+    Http {
+        host: String,
+        path: String,
+        url: String,
+    },
+}
+
+impl Destination {
+    pub fn parse(s: &str) -> Result<Self> {
+        if let Some(rest) = s.strip_prefix("udp://") {
+            if rest.is_empty() || !rest.contains(':') {
+                bail!("--influx {s}: a UDP destination is udp://HOST:PORT");
+            }
+            return Ok(Self::Udp(rest.to_string()));
+        }
+        if s.starts_with("https://") {
+            bail!("--influx {s}: HTTPS is not built in; use http:// to a local InfluxDB, Telegraf or a TLS proxy");
+        }
+        if let Some(rest) = s.strip_prefix("http://") {
+            let (host, path) = match rest.find('/') {
+                Some(i) => (&rest[..i], &rest[i..]),
+                None => (rest, "/write"),
+            };
+            if host.is_empty() {
+                bail!("--influx {s}: no host");
+            }
+            let host = if host.contains(':') {
+                host.to_string()
+            } else {
+                format!("{host}:80")
+            };
+            return Ok(Self::Http {
+                host,
+                path: path.to_string(),
+                url: s.to_string(),
+            });
+        }
+        if s.contains("://") {
+            bail!("--influx {s}: a FILE, udp://HOST:PORT or http://HOST:PORT/PATH");
+        }
+        Ok(Self::File(PathBuf::from(s)))
+    }
+}
+
+/// Batches lines and sends them to a [`Destination`].
+pub struct Writer {
+    dest: Destination,
+    file: Option<File>,
+    udp: Option<UdpSocket>,
+    pending: Vec<String>,
+    /// Lines written and lines a failed write could not deliver.
+    pub lines: u64,
+    pub lines_failed: u64,
+}
+
+impl Writer {
+    pub fn open(dest: Destination) -> Result<Self> {
+        let mut w = Self {
+            dest,
+            file: None,
+            udp: None,
+            pending: vec![],
+            lines: 0,
+            lines_failed: 0,
+        };
+        match &w.dest {
+            Destination::File(p) => {
+                w.file = Some(
+                    OpenOptions::new()
+                        .create(true)
+                        .append(true)
+                        .open(p)
+                        .with_context(|| format!("opening {}", p.display()))?,
+                )
+            }
+            Destination::Udp(addr) => {
+                let sock = UdpSocket::bind("0.0.0.0:0").context("binding a UDP socket")?;
+                sock.connect(addr).with_context(|| format!("udp://{addr}"))?;
+                w.udp = Some(sock);
+            }
+            Destination::Http { .. } => {}
+        }
+        Ok(w)
+    }
+
+    pub fn push(&mut self, line: String) -> Result<()> {
+        self.pending.push(line);
+        if self.pending.len() >= HTTP_BATCH {
+            self.flush()?;
+        }
+        Ok(())
+    }
+
+    /// Sends what is pending. On failure the batch is counted in
+    /// `lines_failed` and dropped (the logs keep every report).
+    pub fn flush(&mut self) -> Result<()> {
+        if self.pending.is_empty() {
+            return Ok(());
+        }
+        let batch = std::mem::take(&mut self.pending);
+        let n = batch.len() as u64;
+        let result = self.send(&batch);
+        match &result {
+            Ok(()) => self.lines += n,
+            Err(_) => self.lines_failed += n,
+        }
+        result
+    }
+
+    fn send(&mut self, batch: &[String]) -> Result<()> {
+        match &self.dest {
+            Destination::File(p) => {
+                let mut body = batch.join("\n");
+                body.push('\n');
+                let f = self.file.as_mut().expect("opened");
+                f.write_all(body.as_bytes())
+                    .with_context(|| format!("writing {}", p.display()))
+            }
+            Destination::Udp(addr) => {
+                let sock = self.udp.as_ref().expect("opened");
+                let mut datagram = String::new();
+                for l in batch {
+                    if !datagram.is_empty() && datagram.len() + l.len() + 1 > UDP_MAX {
+                        sock.send(datagram.as_bytes())
+                            .with_context(|| format!("udp://{addr}"))?;
+                        datagram.clear();
+                    }
+                    datagram += l;
+                    datagram.push('\n');
+                }
+                sock.send(datagram.as_bytes())
+                    .with_context(|| format!("udp://{addr}"))?;
+                Ok(())
+            }
+            Destination::Http { host, path, url } => post(host, path, batch).with_context(|| format!("POST {url}")),
+        }
+    }
+}
+
+impl Drop for Writer {
+    fn drop(&mut self) {
+        if let Err(e) = self.flush() {
+            eprintln!("influx: {e:#}");
+        }
+    }
+}
+
+/// One HTTP/1.1 POST of the batch, gzip-compressed; any 2xx is success.
+fn post(host: &str, path: &str, batch: &[String]) -> Result<()> {
+    let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
+    for l in batch {
+        gz.write_all(l.as_bytes())?;
+        gz.write_all(b"\n")?;
+    }
+    let body = gz.finish()?;
+    let addr = host
+        .to_socket_addrs()
+        .with_context(|| format!("resolving {host}"))?
+        .next()
+        .with_context(|| format!("{host} has no address"))?;
+    let mut s = TcpStream::connect_timeout(&addr, Duration::from_secs(5))?;
+    s.set_read_timeout(Some(Duration::from_secs(10)))?;
+    s.set_write_timeout(Some(Duration::from_secs(10)))?;
+    let auth = std::env::var("INFLUX_TOKEN")
+        .map(|t| format!("Authorization: Token {t}\r\n"))
+        .unwrap_or_default();
+    write!(
+        s,
+        "POST {path} HTTP/1.1\r\nHost: {host}\r\nContent-Type: text/plain; charset=utf-8\r\nContent-Encoding: gzip\r\n{auth}Content-Length: {}\r\nConnection: close\r\n\r\n",
+        body.len()
+    )?;
+    s.write_all(&body)?;
+    let mut reader = BufReader::new(s);
+    let mut status = String::new();
+    reader.read_line(&mut status)?;
+    let code: u16 = status
+        .split_whitespace()
+        .nth(1)
+        .and_then(|c| c.parse().ok())
+        .with_context(|| format!("not an HTTP answer: {:?}", status.trim()))?;
+    if !(200..300).contains(&code) {
+        let mut rest = String::new();
+        let _ = reader.take(4096).read_to_string(&mut rest);
+        let body = rest.split("\r\n\r\n").nth(1).unwrap_or("").trim();
+        bail!("{} {body}", status.trim());
+    }
+    Ok(())
+}
+
+/// A parsed line (for tests and tools): measurement, tags, fields as text, timestamp.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Parsed {
+    pub measurement: String,
+    pub tags: Vec<(String, String)>,
+    pub fields: Vec<(String, String)>,
+    pub t_ns: i64,
+}
+
+/// Parses a line this module wrote (escaped tag values, quoted string fields).
+pub fn parse(l: &str) -> Result<Parsed> {
+    // Split at unescaped spaces outside quotes: series, fields, time
+    // (escapes kept for the splits below).
+    let mut parts = vec![String::new()];
+    let (mut esc, mut quoted) = (false, false);
+    for c in l.chars() {
+        let cur = parts.last_mut().expect("one part at least");
+        if esc {
+            cur.push(c);
+            esc = false;
+            continue;
+        }
+        match c {
+            '\\' => {
+                cur.push(c);
+                esc = true;
+            }
+            '"' => {
+                quoted = !quoted;
+                cur.push(c);
+            }
+            ' ' if !quoted => parts.push(String::new()),
+            _ => cur.push(c),
+        }
+    }
+    let [series, fields, time] =
+        <[String; 3]>::try_from(parts).map_err(|p| anyhow::anyhow!("{} parts in {l:?}", p.len()))?;
+    let split_unescaped = |s: &str, sep: char| -> Vec<String> {
+        let mut out = vec![String::new()];
+        let (mut esc, mut quoted) = (false, false);
+        for c in s.chars() {
+            if esc {
+                out.last_mut().unwrap().push(c);
+                esc = false;
+            } else if c == '\\' {
+                esc = true;
+            } else if c == '"' {
+                quoted = !quoted;
+                out.last_mut().unwrap().push(c);
+            } else if c == sep && !quoted {
+                out.push(String::new());
+            } else {
+                out.last_mut().unwrap().push(c);
+            }
+        }
+        out
+    };
+    let kv = |s: &str| -> Result<(String, String)> {
+        let (k, v) = s.split_once('=').with_context(|| format!("no '=' in {s:?}"))?;
+        Ok((k.to_string(), v.to_string()))
+    };
+    let mut series = split_unescaped(&series, ',').into_iter();
+    let measurement = series.next().unwrap_or_default();
+    let tags = series.map(|t| kv(&t)).collect::<Result<_>>()?;
+    let fields = split_unescaped(&fields, ',')
+        .iter()
+        .map(|f| kv(f))
+        .collect::<Result<_>>()?;
+    Ok(Parsed {
+        measurement,
+        tags,
+        fields,
+        t_ns: time.parse().with_context(|| format!("timestamp {time:?}"))?,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use hammer_estimator::Flags;
+
+    fn report(seq: u32) -> CycleReport {
+        CycleReport {
+            seq,
+            t_impact_s: 0.047 * f64::from(seq),
+            friction_n: 10.27,
+            impact_energy_j: 4.5,
+            drift_score: f32::NAN,
+            calibration_hash: 7,
+            flags: Flags::IMPLAUSIBLE,
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn a_line_parses_back_to_the_report_and_skips_what_it_cannot_carry() {
+        let r = report(3);
+        let l = line("rig 4,a", Some("lab"), Some(4.0), &r, 1_764_000_000_000_000_000);
+        let p = parse(&l).unwrap();
+        assert_eq!(p.measurement, MEASUREMENT);
+        assert_eq!(
+            p.tags,
+            [("device", "rig 4,a"), ("site", "lab"), ("supply_bar", "4")].map(|(a, b)| (a.to_string(), b.to_string()))
+        );
+        let field = |k: &str| p.fields.iter().find(|(n, _)| n == k).map(|(_, v)| v.clone());
+        assert_eq!(field("seq").as_deref(), Some("3i"));
+        assert_eq!(field("friction_n").unwrap().parse::<f32>().unwrap(), 10.27);
+        assert_eq!(field("t_impact_s").unwrap().parse::<f64>().unwrap(), r.t_impact_s);
+        assert_eq!(field("drift_score"), None, "NaN is left out");
+        assert_eq!(field("valid").as_deref(), Some("false"));
+        assert_eq!(field("flags").as_deref(), Some("\"implausible\""));
+        assert_eq!(p.t_ns, 1_764_000_000_000_000_000);
+        assert_eq!(p.fields.len(), FIELDS.len() - 1 + 2);
+    }
+
+    #[test]
+    fn device_time_keeps_its_spacing_and_a_reset_device_is_anchored_again() {
+        let mut a = Anchor::default();
+        let host0 = 1_764_000_000_000_000i64;
+        // Arrivals jitter by up to 20 ms; the stamps keep 47 ms steps.
+        let jitter = [0, 20_000, 3_000, 15_000];
+        let stamps: Vec<i64> = (0..4u32)
+            .map(|k| a.stamp_ns(&report(k), host0 + i64::from(k) * 47_000 + jitter[k as usize]))
+            .collect();
+        for w in stamps.windows(2) {
+            assert_eq!(w[1] - w[0], 47_000_000);
+        }
+        // The device restarted its clock (a reset, 2 s later): host time again.
+        let t = a.stamp_ns(&report(0), host0 + 2_000_000);
+        assert_eq!(t, (host0 + 2_000_000) * 1000);
+        let t = a.stamp_ns(&report(1), host0 + 2_060_000);
+        assert_eq!(t, (host0 + 2_047_000) * 1000, "then its own spacing");
+    }
+
+    #[test]
+    fn destinations_parse_or_say_what_is_wrong() {
+        assert_eq!(
+            Destination::parse("udp://127.0.0.1:8089").unwrap(),
+            Destination::Udp("127.0.0.1:8089".into())
+        );
+        assert_eq!(
+            Destination::parse("http://db:8086/api/v2/write?bucket=b").unwrap(),
+            Destination::Http {
+                host: "db:8086".into(),
+                path: "/api/v2/write?bucket=b".into(),
+                url: "http://db:8086/api/v2/write?bucket=b".into()
+            }
+        );
+        assert_eq!(
+            Destination::parse("cycles.lp").unwrap(),
+            Destination::File("cycles.lp".into())
+        );
+        assert!(Destination::parse("udp://nohost").is_err());
+        assert!(format!("{:#}", Destination::parse("https://x/write").unwrap_err()).contains("HTTPS"));
+        assert!(Destination::parse("mqtt://x").is_err());
+    }
+
+    #[test]
+    fn udp_batches_arrive_as_whole_lines() {
+        let server = UdpSocket::bind("127.0.0.1:0").unwrap();
+        server.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+        let addr = server.local_addr().unwrap();
+        let mut w = Writer::open(Destination::parse(&format!("udp://{addr}")).unwrap()).unwrap();
+        for k in 0..20 {
+            w.push(line("rig", None, None, &report(k), 1_000 + i64::from(k)))
+                .unwrap();
+        }
+        w.flush().unwrap();
+        let mut got = vec![];
+        let mut buf = [0u8; 2048];
+        while got.len() < 20 {
+            let n = server.recv(&mut buf).unwrap();
+            assert!(n <= UDP_MAX, "{n} bytes");
+            got.extend(
+                std::str::from_utf8(&buf[..n])
+                    .unwrap()
+                    .lines()
+                    .map(|l| parse(l).unwrap()),
+            );
+        }
+        let seqs: Vec<String> = got.iter().map(|p| p.fields[0].1.clone()).collect();
+        assert_eq!(seqs, (0..20).map(|k| format!("{k}i")).collect::<Vec<_>>());
+        assert_eq!(w.lines, 20);
+    }
+
+    #[test]
+    fn http_posts_gzip_and_reports_the_servers_refusal() {
+        use std::net::TcpListener;
+        let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+        let addr = listener.local_addr().unwrap();
+        let server = std::thread::spawn(move || {
+            let mut bodies = vec![];
+            for status in ["204 No Content", "400 Bad Request"] {
+                let (mut s, _) = listener.accept().unwrap();
+                let mut r = BufReader::new(s.try_clone().unwrap());
+                let mut len = 0;
+                let mut gzip = false;
+                loop {
+                    let mut h = String::new();
+                    r.read_line(&mut h).unwrap();
+                    if h == "\r\n" {
+                        break;
+                    }
+                    if let Some(v) = h.to_ascii_lowercase().strip_prefix("content-length:") {
+                        len = v.trim().parse().unwrap();
+                    }
+                    gzip |= h.to_ascii_lowercase().starts_with("content-encoding: gzip");
+                }
+                let mut body = vec![0; len];
+                r.read_exact(&mut body).unwrap();
+                let mut text = String::new();
+                flate2::read::GzDecoder::new(&body[..])
+                    .read_to_string(&mut text)
+                    .unwrap();
+                bodies.push((gzip, text));
+                write!(s, "HTTP/1.1 {status}\r\nContent-Length: 12\r\n\r\nbad request!").unwrap();
+            }
+            bodies
+        });
+        let mut w = Writer::open(Destination::parse(&format!("http://{addr}/api/v2/write?bucket=b")).unwrap()).unwrap();
+        w.push(line("rig", None, None, &report(1), 5)).unwrap();
+        w.flush().unwrap();
+        w.push(line("rig", None, None, &report(2), 6)).unwrap();
+        let e = w.flush().unwrap_err();
+        assert!(format!("{e:#}").contains("400 Bad Request"), "{e:#}");
+        assert_eq!((w.lines, w.lines_failed), (1, 1));
+        let bodies = server.join().unwrap();
+        assert!(bodies[0].0, "gzip");
+        assert_eq!(parse(bodies[0].1.trim()).unwrap().fields[0].1, "1i");
+    }
+}
