@@ -490,7 +490,10 @@ fn estimate_cmd(args: &EstimateArgs) -> Result<()> {
         }
     }
     // A full disk or a closed pipe must not pass for success.
-    out.flush().context("writing the records")?;
+    out.flush().with_context(|| match &args.out {
+        Some(p) => format!("writing {}", p.display()),
+        None => "writing to standard output".into(),
+    })?;
     if no_cycle {
         return Err(no_cycle_error());
     }

@@ -55,6 +55,13 @@ pub struct DemoArgs {
     /// allows; the board's timing is instruction-counted either way.
     #[arg(long)]
     pub real_time: bool,
+    /// Emulated boards to run at once (a fleet): the first at --supply-bar,
+    /// the others spread up to 7 bar, each wearing 1 %/min faster than the
+    /// one before; shown in the fleet monitor (headless: `[device]` lines).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u8).range(1..=8))]
+    pub devices: u8,
+    #[command(flatten)]
+    pub export: crate::monitor::export::ExportArgs,
 }
 
 /// Where the firmware runs.
@@ -89,7 +96,32 @@ impl DemoArgs {
             native: false,
             seed: 1,
             real_time: false,
+            devices: 1,
+            export: Default::default(),
         }
+    }
+
+    /// The `k`-th of `--devices` boards: its supply pressure and wear rate.
+    pub fn member(&self, k: u8) -> Self {
+        let n = f64::from(self.devices.max(1));
+        let top = self.supply_bar.max(7.0);
+        let supply_bar = if n > 1.0 {
+            self.supply_bar + (top - self.supply_bar) * f64::from(k) / (n - 1.0)
+        } else {
+            self.supply_bar
+        };
+        Self {
+            supply_bar,
+            wear_rate: self.wear_rate + 0.01 * f64::from(k),
+            seed: self.seed + u64::from(k),
+            devices: 1,
+            ..self.clone()
+        }
+    }
+
+    /// The `k`-th board's name in the fleet, its logs and exports.
+    pub fn member_name(&self, k: u8) -> String {
+        format!("demo{}-{:.1}bar", k + 1, self.member(k).supply_bar)
     }
 }
 
@@ -326,6 +358,9 @@ pub use crate::records::report_line;
 pub fn run(args: &DemoArgs) -> Result<()> {
     use std::io::IsTerminal;
     let headless = args.headless || !std::io::stdout().is_terminal();
+    if args.devices > 1 {
+        return run_fleet(args, headless);
+    }
     let seconds = args.seconds.unwrap_or(if headless {
         0.15 + 0.05 * args.cycles as f64
     } else {
@@ -376,9 +411,9 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         std::thread::spawn(move || feed(codes, writer, paced, 1e5))
     });
     let result = if headless {
-        headless_loop(port, args.cycles, full_rate.as_ref().map(|f| &*f.stimulus))
+        headless_loop(port, args, full_rate.as_ref().map(|f| &*f.stimulus))
     } else {
-        dashboard(port, &board)
+        dashboard(port, &board, &args.export, &args.member_name(0))
     };
     drop(board); // stops QEMU
     let produced = full_rate.as_mut().map_or(Ok(()), FullRate::stop);
@@ -388,10 +423,67 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     result.and(produced)
 }
 
-fn headless_loop(port: SharedPort, cycles: usize, stimulus: Option<&Stimulus>) -> Result<()> {
+/// `--devices N`: N emulated boards, each with its own full-rate stream,
+/// watched by the fleet monitor.
+fn run_fleet(args: &DemoArgs, headless: bool) -> Result<()> {
+    if !emulated_board_available(args.native) {
+        bail!("--devices needs the emulated board (qemu-system-arm and `cargo xtask firmware`)");
+    }
+    let mut streams = vec![];
+    let mut boards = vec![];
+    let mut devices: Vec<(String, Box<dyn crate::monitor::Connector>)> = vec![];
+    for k in 0..args.devices {
+        let member = args.member(k);
+        eprintln!(
+            "demo: board {} at {:.1} bar, wear {:.0} %/min",
+            args.member_name(k),
+            member.supply_bar,
+            member.wear_rate * 100.0
+        );
+        let fr = FullRate::start(&member, args.seconds)?;
+        let (board, read, write) = start_board(false, Some(&fr.stimulus), args.real_time || !headless)?;
+        let describe = match &board {
+            Board::Qemu(e) => format!("demo: emulated board (QEMU) on tcp:127.0.0.1:{}", e.port),
+            Board::Native => "demo: firmware app running natively".to_string(),
+        };
+        let port = SharedPort::new(read, Arc::new(Mutex::new(write)));
+        devices.push((
+            args.member_name(k),
+            Box::new(DemoConnector {
+                port: Some(port),
+                describe,
+            }),
+        ));
+        streams.push(fr);
+        boards.push(board);
+    }
+    let margs = crate::monitor::MonitorArgs {
+        headless,
+        exit_after_reports: headless.then_some(args.cycles as u64),
+        export: args.export.clone(),
+        ..Default::default()
+    };
+    let result = crate::monitor::run_fleet(devices, &margs);
+    drop(boards); // stops QEMU
+    let mut produced = Ok(());
+    for mut fr in streams {
+        produced = produced.and(fr.stop());
+    }
+    result.and(produced)
+}
+
+fn headless_loop(port: SharedPort, args: &DemoArgs, stimulus: Option<&Stimulus>) -> Result<()> {
+    let cycles = args.cycles;
+    let exports = crate::monitor::export::Exports::open(&args.export)?;
+    let mut export = exports
+        .clone()
+        .map(|x| crate::monitor::export::DeviceExport::new(&args.member_name(0), x));
     let mut link = Client::new(port);
     let deadline = Duration::from_secs(30);
     let (info, _) = link.handshake(deadline)?;
+    if export.is_some() {
+        link.send(&HostMsg::GetConfig)?;
+    }
     println!(
         "device: {} firmware {}.{}.{} protocol {} config {:08x}",
         String::from_utf8_lossy(&info.board),
@@ -404,7 +496,14 @@ fn headless_loop(port: SharedPort, cycles: usize, stimulus: Option<&Stimulus>) -
     let mut seen = 0;
     let mut last = Instant::now();
     while seen < cycles {
-        match link.recv(Duration::from_millis(200))? {
+        let m = link.recv(Duration::from_millis(200))?;
+        if let (Some(x), Some(m)) = (export.as_mut(), &m) {
+            let ev = crate::monitor::event::Stamped::now(crate::monitor::event::Event::Msg(m.clone()));
+            if let Some(note) = x.event(&ev) {
+                eprintln!("{note}");
+            }
+        }
+        match m {
             Some(DeviceMsg::Report(r)) => {
                 println!("{}", report_line(&r));
                 seen += 1;
@@ -443,6 +542,8 @@ fn headless_loop(port: SharedPort, cycles: usize, stimulus: Option<&Stimulus>) -
     if let Some(stimulus) = stimulus {
         println!("{}", adc_line(&stimulus.counters()));
     }
+    drop(export);
+    crate::monitor::close_exports(exports);
     Ok(())
 }
 
@@ -469,13 +570,12 @@ impl crate::monitor::Connector for DemoConnector {
     }
 }
 
-fn dashboard(port: SharedPort, board: &Board) -> Result<()> {
-    #[derive(clap::Parser)]
-    struct Defaults {
-        #[command(flatten)]
-        monitor: crate::monitor::MonitorArgs,
-    }
-    let args = <Defaults as clap::Parser>::parse_from(["hammer-demo"]).monitor;
+fn dashboard(port: SharedPort, board: &Board, export: &crate::monitor::export::ExportArgs, name: &str) -> Result<()> {
+    let args = crate::monitor::MonitorArgs {
+        device: Some(name.into()),
+        export: export.clone(),
+        ..Default::default()
+    };
     let describe = match board {
         Board::Qemu(e) => format!("demo: emulated board (QEMU) on tcp:127.0.0.1:{}", e.port),
         Board::Native => "demo: firmware app running natively".to_string(),

@@ -13,6 +13,8 @@
 pub mod app;
 pub mod connect;
 pub mod event;
+pub mod export;
+pub mod fleet;
 pub mod headless;
 pub mod log;
 pub mod reader;
@@ -43,15 +45,16 @@ impl<T: std::io::Read + std::io::Write + Send> Port for T {}
 /// Events buffered between the reader and the screen. The reader never waits
 /// for the screen (logging goes on); beyond this the screen skips events and
 /// says so, and catches up from the next counter snapshot.
-const EVENT_QUEUE: usize = 16_384;
+pub(crate) const EVENT_QUEUE: usize = 16_384;
 
 #[derive(clap::Args, Debug, Clone)]
 pub struct MonitorArgs {
     /// The device: a serial port (/dev/ttyACM0, /dev/serial/by-id/...), `auto`
     /// (the first of /dev/serial/by-id/*, /dev/ttyACM*, /dev/ttyUSB*), or
-    /// tcp:HOST:PORT (the emulated board's UART).
-    #[arg(long, default_value = "auto")]
-    pub port: String,
+    /// tcp:HOST:PORT (the emulated board's UART), optionally named
+    /// (`rig4=/dev/ttyACM0`). Repeat it to watch several devices at once.
+    #[arg(long = "port", value_name = "[NAME=]PORT", default_value = "auto")]
+    pub ports: Vec<String>,
     /// Directory for cycles.csv (decoded reports), link.log (connects,
     /// disconnects, gaps, errors) and frames.bin (every received byte, for
     /// `hammer replay`). Created if missing; existing files are appended to.
@@ -72,18 +75,48 @@ pub struct MonitorArgs {
     /// Stop after this many reports (for scripts and tests).
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
     pub exit_after_reports: Option<u64>,
+    /// The device's name in exports and logs (one device; several are
+    /// named with NAME=PORT; default: from the port, e.g. ttyACM0).
+    #[arg(long)]
+    pub device: Option<String>,
+    #[command(flatten)]
+    pub export: export::ExportArgs,
 }
 
 impl Default for MonitorArgs {
     fn default() -> Self {
         Self {
-            port: "auto".into(),
+            ports: vec!["auto".into()],
             log: None,
             log_max_mb: log::DEFAULT_MAX_MB,
             history_s: 300.0,
             headless: false,
             exit_after_reports: None,
+            device: None,
+            export: export::ExportArgs::default(),
         }
+    }
+}
+
+/// A device's name from its port: the last path component or the
+/// address, reduced to [A-Za-z0-9_.-] (`/dev/ttyACM0` → `ttyACM0`,
+/// `tcp:127.0.0.1:4000` → `tcp_127.0.0.1_4000`).
+pub fn device_name(port: &str) -> String {
+    let last = port.rsplit('/').next().unwrap_or(port);
+    let s: String = last
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || "-_.".contains(c) {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect();
+    if s.is_empty() {
+        "device".into()
+    } else {
+        s
     }
 }
 
@@ -112,14 +145,48 @@ pub struct UiOptions {
     pub live: bool,
 }
 
-/// Runs the monitor on the port named by `--port`.
-pub fn run(args: &MonitorArgs) -> Result<()> {
-    let connector = connector_for(&args.port)?;
-    run_with(connector, args)
+/// `NAME=PORT` or `PORT` → (name, port).
+pub fn named_port(s: &str) -> (String, String) {
+    match s.split_once('=') {
+        Some((name, port)) if !name.is_empty() && !name.contains(['/', ':']) => (device_name(name), port.to_string()),
+        _ => (device_name(s), s.to_string()),
+    }
 }
 
-/// Runs the monitor on any connector (the demo passes its own).
-pub fn run_with(connector: Box<dyn Connector>, args: &MonitorArgs) -> Result<()> {
+/// Runs the monitor on the port(s) named by `--port`.
+pub fn run(args: &MonitorArgs) -> Result<()> {
+    match args.ports.as_slice() {
+        [one] => {
+            let (name, port) = named_port(one);
+            let connector = connector_for(&port)?;
+            let args = MonitorArgs {
+                device: args.device.clone().or(Some(name)),
+                ..args.clone()
+            };
+            run_with(connector, &args)
+        }
+        many => {
+            if args.device.is_some() {
+                bail!("--device names one device; name several with --port NAME=PORT");
+            }
+            let mut devices = vec![];
+            for s in many {
+                let (name, port) = named_port(s);
+                devices.push((name, connector_for(&port)?));
+            }
+            run_fleet(devices, args)
+        }
+    }
+}
+
+/// Several devices at once ([`fleet`]).
+pub fn run_fleet(devices: Vec<(String, Box<dyn Connector>)>, args: &MonitorArgs) -> Result<()> {
+    check_args(args)?;
+    let headless = args.headless || !std::io::stdout().is_terminal();
+    fleet::run(devices, args, headless)
+}
+
+fn check_args(args: &MonitorArgs) -> Result<()> {
     if !(args.history_s.is_finite() && args.history_s > 0.0) {
         bail!(
             "--history-s must be a positive number of seconds, not {}",
@@ -129,6 +196,12 @@ pub fn run_with(connector: Box<dyn Connector>, args: &MonitorArgs) -> Result<()>
     if !(args.log_max_mb.is_finite() && args.log_max_mb > 0.0) {
         bail!("--log-max-mb must be a positive number of MB, not {}", args.log_max_mb);
     }
+    Ok(())
+}
+
+/// Runs the monitor on any connector (the demo passes its own).
+pub fn run_with(connector: Box<dyn Connector>, args: &MonitorArgs) -> Result<()> {
+    check_args(args)?;
     let max_bytes = (args.log_max_mb * 1e6) as u64;
     let logger = match &args.log {
         Some(dir) => {
@@ -138,9 +211,15 @@ pub fn run_with(connector: Box<dyn Connector>, args: &MonitorArgs) -> Result<()>
     };
     let headless = args.headless || !std::io::stdout().is_terminal();
     let title = connector.describe();
+    let exports = export::Exports::open(&args.export)?;
+    let device = args
+        .device
+        .clone()
+        .unwrap_or_else(|| device_name(&connector.describe()));
+    let device_export = exports.clone().map(|x| export::DeviceExport::new(&device, x));
     let (tx, rx) = mpsc::sync_channel(EVENT_QUEUE);
     let stop = Arc::new(AtomicBool::new(false));
-    let reader = reader::spawn(connector, logger, tx, stop.clone())?;
+    let reader = reader::spawn(connector, logger, device_export, tx, stop.clone())?;
     let mut app = app::App::new(title, true, args.history_s);
     let opts = UiOptions {
         headless,
@@ -154,7 +233,19 @@ pub fn run_with(connector: Box<dyn Connector>, args: &MonitorArgs) -> Result<()>
     if reader.join().is_err() {
         eprintln!("the reader thread panicked; the logs may be incomplete");
     }
+    close_exports(exports);
     result
+}
+
+/// Writes what the exports still hold and says what they did.
+pub(crate) fn close_exports(exports: Option<Arc<std::sync::Mutex<export::Exports>>>) {
+    if let Some(x) = exports {
+        let mut x = x.lock().unwrap_or_else(|e| e.into_inner());
+        if let Err(e) = x.flush() {
+            eprintln!("export: {e:#}");
+        }
+        eprintln!("{}", x.summary());
+    }
 }
 
 /// Replays a recorded `frames.bin` through the decoder and the dashboard.

@@ -14,6 +14,7 @@ use hammer_wire::{DecodeError, DeviceMsg, HostMsg};
 use crate::client::{hello, hello_reply, write_frame, Inbound, Incoming, SeqCheck};
 
 use super::event::{now_us, Event, LinkStats, Stamped};
+use super::export::DeviceExport;
 use super::log::{Logger, Marker};
 use super::{Connector, Port};
 
@@ -235,12 +236,13 @@ impl Ingest {
 pub fn spawn(
     connector: Box<dyn Connector>,
     logger: Option<Logger>,
+    export: Option<DeviceExport>,
     tx: SyncSender<Stamped>,
     stop: Arc<AtomicBool>,
 ) -> io::Result<JoinHandle<()>> {
     let mut r = Reader {
         connector,
-        logger,
+        out: Outputs { logger, export },
         tx,
         stop,
         ingest: Ingest::new(),
@@ -251,18 +253,31 @@ pub fn spawn(
         .spawn(move || r.run())
 }
 
+/// What a device's events are written to: the logs and the exports.
+struct Outputs {
+    logger: Option<Logger>,
+    export: Option<DeviceExport>,
+}
+
 struct Reader {
     connector: Box<dyn Connector>,
-    logger: Option<Logger>,
+    out: Outputs,
     tx: SyncSender<Stamped>,
     stop: Arc<AtomicBool>,
     ingest: Ingest,
     ui_dropped: u64,
 }
 
-/// The logs first (they must not miss anything), then the screen, which may
-/// lag: it is never waited for, and what it missed is counted.
-fn deliver(logger: &mut Option<Logger>, tx: &SyncSender<Stamped>, ui_dropped: &mut u64, mut ev: Stamped) {
+/// The logs and exports first (they must not miss anything), then the
+/// screen, which may lag: it is never waited for, and what it missed is counted.
+fn deliver(out: &mut Outputs, tx: &SyncSender<Stamped>, ui_dropped: &mut u64, mut ev: Stamped) {
+    if let Some(note) = out.export.as_mut().and_then(|x| x.event(&ev)) {
+        let _ = tx.try_send(Stamped {
+            t_us: ev.t_us,
+            event: Event::Note(note),
+        });
+    }
+    let logger = &mut out.logger;
     if let Some(l) = logger {
         if let Event::Stats(s) = &mut ev.event {
             s.unlogged = l.unlogged();
@@ -295,13 +310,13 @@ impl Reader {
     }
 
     fn emit(&mut self, ev: Stamped) {
-        deliver(&mut self.logger, &self.tx, &mut self.ui_dropped, ev);
+        deliver(&mut self.out, &self.tx, &mut self.ui_dropped, ev);
     }
 
     fn marker(&mut self, t_us: u64, m: Marker) {
-        if let Some(l) = &mut self.logger {
+        if let Some(l) = &mut self.out.logger {
             if let Err(e) = l.marker(t_us, m) {
-                give_up_logging(&mut self.logger, &self.tx, e);
+                give_up_logging(&mut self.out.logger, &self.tx, e);
             }
         }
     }
@@ -318,9 +333,9 @@ impl Reader {
     }
 
     fn flush_due(&mut self) {
-        if let Some(l) = &mut self.logger {
+        if let Some(l) = &mut self.out.logger {
             if let Err(e) = l.flush_if_due() {
-                give_up_logging(&mut self.logger, &self.tx, e);
+                give_up_logging(&mut self.out.logger, &self.tx, e);
             }
         }
     }
@@ -334,16 +349,16 @@ impl Reader {
                     let name = self.connector.describe();
                     let t = now_us();
                     self.marker(t, Marker::Opened);
-                    let (logger, tx, dropped) = (&mut self.logger, &self.tx, &mut self.ui_dropped);
+                    let (out, tx, dropped) = (&mut self.out, &self.tx, &mut self.ui_dropped);
                     self.ingest
-                        .opened(t, name.clone(), &mut |ev| deliver(logger, tx, dropped, ev));
+                        .opened(t, name.clone(), &mut |ev| deliver(out, tx, dropped, ev));
                     let reason = self.session(port);
                     let t = now_us();
                     self.marker(t, Marker::Lost);
-                    let (logger, tx, dropped) = (&mut self.logger, &self.tx, &mut self.ui_dropped);
+                    let (out, tx, dropped) = (&mut self.out, &self.tx, &mut self.ui_dropped);
                     self.ingest
-                        .lost(t, name, reason, &mut |ev| deliver(logger, tx, dropped, ev));
-                    if let Some(l) = &mut self.logger {
+                        .lost(t, name, reason, &mut |ev| deliver(out, tx, dropped, ev));
+                    if let Some(l) = &mut self.out.logger {
                         let _ = l.flush();
                     }
                 }
@@ -360,7 +375,7 @@ impl Reader {
             }
             self.sleep(RETRY);
         }
-        if let Some(l) = &mut self.logger {
+        if let Some(l) = &mut self.out.logger {
             let _ = l.flush();
         }
     }
@@ -409,14 +424,13 @@ impl Reader {
                 Ok(0) => return "end of stream (the device closed the link)".into(),
                 Ok(n) => {
                     let t = now_us();
-                    if let Some(l) = &mut self.logger {
+                    if let Some(l) = &mut self.out.logger {
                         if let Err(e) = l.raw(t, &buf[..n]) {
-                            give_up_logging(&mut self.logger, &self.tx, e);
+                            give_up_logging(&mut self.out.logger, &self.tx, e);
                         }
                     }
-                    let (logger, tx, dropped) = (&mut self.logger, &self.tx, &mut self.ui_dropped);
-                    self.ingest
-                        .feed(t, &buf[..n], &mut |ev| deliver(logger, tx, dropped, ev));
+                    let (out, tx, dropped) = (&mut self.out, &self.tx, &mut self.ui_dropped);
+                    self.ingest.feed(t, &buf[..n], &mut |ev| deliver(out, tx, dropped, ev));
                 }
                 Err(e) if matches!(e.kind(), io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut) => {}
                 Err(e) if e.kind() == io::ErrorKind::Interrupted => {}

@@ -99,9 +99,13 @@ pub fn run(app: &mut App, rx: &Receiver<Stamped>, opts: UiOptions) -> Result<()>
 
 /// Draws the whole dashboard.
 pub fn ui(f: &mut Frame, app: &App) {
+    ui_in(f, f.area(), app)
+}
+
+/// Draws the dashboard of one device into `area` (the fleet view's lower part).
+pub fn ui_in(f: &mut Frame, area: Rect, app: &App) {
     let v = app.shown();
     let banners = banners(app, v);
-    let area = f.area();
     let events_h = if area.height >= 40 { 8 } else { 5 };
     let [header, banner_area, main, events, footer] = Layout::vertical([
         Constraint::Length(1),
