@@ -35,6 +35,9 @@ pub enum Command {
     /// Feed a raw-frame log (`frames.bin` from `monitor --log`) back through the dashboard.
     /// A damaged recording is shown as far as it goes, then exits 2 naming the bad frames' byte offsets.
     Replay(crate::monitor::ReplayArgs),
+    /// Watch a fleet from an MQTT broker alone: one line per cycle report
+    /// and per device state change, from hammer/<site>/# (docs/fleet.md).
+    MqttTail(crate::mqtt::TailArgs),
     /// Ask a device for the raw samples of the next N cycles and write them in
     /// the project's trace format (CSV + sidecar).
     Capture(CaptureArgs),
@@ -309,6 +312,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Config(ConfigCommand::Check { file }) => config_check(&file),
         Command::Monitor(args) => crate::monitor::run(&args),
         Command::Replay(args) => crate::monitor::replay(&args),
+        Command::MqttTail(args) => crate::mqtt::tail(&args),
         Command::Capture(args) => capture_cmd(&args),
         Command::Report(args) => {
             for f in crate::report::run(&args)? {

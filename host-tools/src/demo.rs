@@ -481,7 +481,11 @@ fn headless_loop(port: SharedPort, args: &DemoArgs, stimulus: Option<&Stimulus>)
     let mut link = Client::new(port);
     let deadline = Duration::from_secs(30);
     let (info, _) = link.handshake(deadline)?;
-    if export.is_some() {
+    if let Some(x) = export.as_mut() {
+        let ev = crate::monitor::event::Stamped::now(crate::monitor::event::Event::Device(info.clone()));
+        if let Some(note) = x.event(&ev) {
+            eprintln!("{note}");
+        }
         link.send(&HostMsg::GetConfig)?;
     }
     println!(

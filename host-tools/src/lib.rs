@@ -32,6 +32,7 @@ pub mod estimate;
 pub mod flash;
 pub mod influx;
 pub mod monitor;
+pub mod mqtt;
 pub mod numfmt;
 pub mod parquet_files;
 pub mod plot;

@@ -15,15 +15,18 @@ use std::time::{Duration, Instant};
 use anyhow::Result;
 use hammer_wire::DeviceMsg;
 
-use super::event::{Event, Stamped};
+use serde_json::json;
+
+use super::event::{describe, firmware_version, rfc3339, Event, Stamped};
 use crate::influx::{self, Anchor, Destination};
+use crate::mqtt;
 use crate::parquet_files::PartitionedWriter;
 
 /// A failing export says so at most this often.
 pub const NOTE_EVERY: Duration = Duration::from_secs(10);
 
 /// Where reports go besides the screen and the logs.
-#[derive(clap::Args, Debug, Clone, Default)]
+#[derive(clap::Args, Debug, Clone)]
 pub struct ExportArgs {
     /// Write cycle reports as Parquet into DIR, partitioned
     /// device=<name>/date=<YYYY-MM-DD>/ (docs/fleet.md).
@@ -34,14 +37,40 @@ pub struct ExportArgs {
     /// token from INFLUX_TOKEN).
     #[arg(long, value_name = "DEST")]
     pub influx: Option<String>,
-    /// Site name: a tag on every exported report.
+    /// Publish every report, status, alarm and link event to an MQTT
+    /// broker, mqtt://HOST[:PORT], under hammer/<site>/<device>/ (docs/fleet.md).
+    #[arg(long, value_name = "URL")]
+    pub mqtt: Option<String>,
+    /// The MQTT outage buffer's directory (default: hammer-mqtt-buffer in
+    /// the temporary directory); a buffer left by an earlier run is replayed.
+    #[arg(long, value_name = "DIR")]
+    pub mqtt_buffer: Option<PathBuf>,
+    /// The outage buffer's cap per device, MB; beyond it the oldest
+    /// messages are dropped and counted.
+    #[arg(long, value_name = "MB", default_value_t = crate::mqtt::DEFAULT_BUFFER_MB)]
+    pub mqtt_buffer_mb: f64,
+    /// Site name: the MQTT topics' second level (default `lab`) and a tag
+    /// on every line-protocol point.
     #[arg(long)]
     pub site: Option<String>,
 }
 
+impl Default for ExportArgs {
+    fn default() -> Self {
+        Self {
+            parquet: None,
+            influx: None,
+            mqtt: None,
+            mqtt_buffer: None,
+            mqtt_buffer_mb: crate::mqtt::DEFAULT_BUFFER_MB,
+            site: None,
+        }
+    }
+}
+
 impl ExportArgs {
     pub fn any(&self) -> bool {
-        self.parquet.is_some() || self.influx.is_some()
+        self.parquet.is_some() || self.influx.is_some() || self.mqtt.is_some()
     }
 }
 
@@ -50,6 +79,11 @@ pub struct Exports {
     parquet: Option<PartitionedWriter>,
     influx: Option<influx::Writer>,
     site: Option<String>,
+    /// The MQTT options but the device's name (each device has its own
+    /// connection: the broker's last will is per connection).
+    mqtt: Option<mqtt::Options>,
+    /// The devices' MQTT summaries, as their publishers stop.
+    mqtt_summaries: Vec<String>,
 }
 
 impl Exports {
@@ -65,10 +99,31 @@ impl Exports {
             .as_deref()
             .map(|d| Destination::parse(d).and_then(influx::Writer::open))
             .transpose()?;
+        let mqtt = match &args.mqtt {
+            Some(url) => {
+                mqtt::parse_url(url)?;
+                if !(args.mqtt_buffer_mb.is_finite() && args.mqtt_buffer_mb > 0.0) {
+                    anyhow::bail!("--mqtt-buffer-mb must be a positive number of MB");
+                }
+                Some(mqtt::Options {
+                    url: url.clone(),
+                    site: args.site.clone().unwrap_or_else(|| "lab".into()),
+                    device: String::new(),
+                    buffer_dir: args
+                        .mqtt_buffer
+                        .clone()
+                        .unwrap_or_else(|| std::env::temp_dir().join("hammer-mqtt-buffer")),
+                    buffer_bytes: (args.mqtt_buffer_mb * 1e6) as usize,
+                })
+            }
+            None => None,
+        };
         Ok(Some(Arc::new(Mutex::new(Self {
             parquet,
             influx,
             site: args.site.clone(),
+            mqtt,
+            mqtt_summaries: vec![],
         }))))
     }
 
@@ -88,6 +143,7 @@ impl Exports {
                 w.lines, w.lines_failed
             ));
         }
+        parts.extend(self.mqtt_summaries.iter().cloned());
         parts.join("; ")
     }
 
@@ -103,6 +159,7 @@ impl Exports {
 pub struct DeviceExport {
     device: String,
     exports: Arc<Mutex<Exports>>,
+    mqtt: Option<mqtt::Publisher>,
     anchor: Anchor,
     supply_bar: Option<f64>,
     last_note: Option<Instant>,
@@ -111,9 +168,23 @@ pub struct DeviceExport {
 
 impl DeviceExport {
     pub fn new(device: &str, exports: Arc<Mutex<Exports>>) -> Self {
+        let options = exports.lock().unwrap_or_else(|e| e.into_inner()).mqtt.clone();
+        let mqtt = options.and_then(|o| {
+            match mqtt::Publisher::start(mqtt::Options {
+                device: device.to_string(),
+                ..o
+            }) {
+                Ok(p) => Some(p),
+                Err(e) => {
+                    eprintln!("mqtt {device}: {e:#}; not publishing");
+                    None
+                }
+            }
+        });
         Self {
             device: device.to_string(),
             exports,
+            mqtt,
             anchor: Anchor::default(),
             supply_bar: None,
             last_note: None,
@@ -121,8 +192,39 @@ impl DeviceExport {
         }
     }
 
+    /// The event on the device's MQTT topics.
+    fn publish(&mut self, ev: &Stamped) {
+        let Some(p) = self.mqtt.as_mut() else { return };
+        let host_time = rfc3339(ev.t_us);
+        let (kind, body) = match &ev.event {
+            Event::Device(info) => (
+                mqtt::Kind::State,
+                json!({
+                    "online": true,
+                    "board": String::from_utf8_lossy(&info.board),
+                    "firmware": firmware_version(info.firmware_version),
+                    "protocol": info.protocol_version,
+                    "config_hash": format!("{:08x}", info.config_hash),
+                }),
+            ),
+            Event::Msg(DeviceMsg::Report(r)) => (mqtt::Kind::Cycle, crate::records::json_record(r)),
+            Event::Msg(DeviceMsg::Status(s)) => (mqtt::Kind::Status, serde_json::to_value(s).unwrap_or_default()),
+            Event::Msg(DeviceMsg::Alarm(a)) => (mqtt::Kind::Alarm, serde_json::to_value(a).unwrap_or_default()),
+            Event::Stats(_) | Event::Msg(_) => return,
+            e => match describe(e) {
+                Some((severity, text)) => (
+                    mqtt::Kind::Link,
+                    json!({"event": text, "severity": format!("{severity:?}").to_lowercase()}),
+                ),
+                None => return,
+            },
+        };
+        p.send(kind, body, &host_time);
+    }
+
     /// Takes in one event; returns a note to show when an export failed.
     pub fn event(&mut self, ev: &Stamped) -> Option<String> {
+        self.publish(ev);
         let result = match &ev.event {
             Event::Connected { .. } => {
                 self.anchor.reset();
@@ -170,4 +272,26 @@ impl DeviceExport {
             Err(_) => None,
         }
     }
+}
+
+impl Drop for DeviceExport {
+    /// Stops the device's publisher (it sends what it can, keeps the rest
+    /// on disk) and leaves its summary for the closing line.
+    fn drop(&mut self) {
+        if let Some(p) = self.mqtt.take() {
+            let publisher_summary = { drop_publisher(p) };
+            self.exports
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .mqtt_summaries
+                .push(publisher_summary);
+        }
+    }
+}
+
+fn drop_publisher(p: mqtt::Publisher) -> String {
+    let counters = p.counters.clone();
+    let device = p.device_name().to_string();
+    drop(p);
+    mqtt::Publisher::describe(&device, &counters)
 }
