@@ -42,7 +42,7 @@ use serde::{Deserialize, Serialize};
 use serde_json::{json, Value};
 
 /// The outage buffer's default cap.
-pub const DEFAULT_BUFFER_MB: f64 = 64.0;
+pub const DEFAULT_BUFFER_MB: f64 = 256.0;
 /// Messages sent and not yet acknowledged, at most.
 const MAX_INFLIGHT: usize = 64;
 /// Pause before connecting again after a failure.

@@ -197,3 +197,26 @@ fn ports_are_named_from_their_paths_or_by_the_user() {
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("two devices are named \"x\""));
 }
+
+/// The Grafana dashboard in docs/ asks only for what the line protocol
+/// writes: its measurement, its tags, fields of the report's table.
+#[test]
+fn the_grafana_dashboard_queries_the_line_protocol_schema() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/grafana/hammer-fleet.json");
+    let d: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
+    let panels = d["panels"].as_array().unwrap();
+    let mut plotted = vec![];
+    for p in panels {
+        for t in p["targets"].as_array().unwrap() {
+            let q = t["query"].as_str().unwrap();
+            assert!(q.contains(&format!("FROM \"{}\"", influx::MEASUREMENT)), "{q}");
+            assert!(q.contains("GROUP BY time($__interval), \"device\""), "{q}");
+            let field = q.split('"').nth(1).unwrap();
+            assert!(FIELDS.iter().any(|f| f.name == field), "{field} is not a report field");
+            plotted.push(field.to_string());
+        }
+    }
+    for needed in ["friction_n", "impact_energy_j", "frequency_hz", "wear_index_j"] {
+        assert!(plotted.iter().any(|f| f == needed), "the dashboard lacks {needed}");
+    }
+}
