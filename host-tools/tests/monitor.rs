@@ -1210,3 +1210,38 @@ fn a_serial_port_survives_replugging() {
     assert_eq!(csv_reports(&dir.join("log")).len(), 6);
     println!("serial test: {:.1} s", t0.elapsed().as_secs_f64());
 }
+
+/// `hammer demo --devices 2`: a summary row per board above the current
+/// board's dashboard; Tab shows the other. The 7-bar board's friction is the
+/// larger, as the paper's (10.27 N at 4 bar, 16.7 N at 7).
+#[test]
+fn the_fleet_dashboard_shows_each_board_and_switches_between_them() {
+    assert!(
+        hammer_host::emulator::qemu_available() && hammer_host::emulator::firmware_elf().exists(),
+        "QEMU and the emulated firmware are needed (cargo xtask firmware)"
+    );
+    let tmux = Tmux::start("fleet", &["demo", "--devices", "2"]);
+    let friction = |s: &str, device: &str| -> Option<f64> {
+        let row = s.lines().find(|l| l.contains(device) && l.contains(" up "))?;
+        let w: Vec<&str> = row.split_whitespace().collect();
+        w.iter()
+            .position(|x| *x == "friction")
+            .and_then(|i| w[i + 1].parse().ok())
+    };
+    let s = tmux.wait_for("both boards up with a cycle", |s| {
+        s.contains("fleet: 2 devices") && friction(s, "demo1-4.0bar").is_some() && friction(s, "demo2-7.0bar").is_some()
+    });
+    assert!(s.contains("> demo1-4.0bar"), "the first board is shown first:\n{s}");
+    assert!(s.contains("Link health"), "its dashboard is below:\n{s}");
+    let (f4, f7) = (
+        friction(&s, "demo1-4.0bar").unwrap(),
+        friction(&s, "demo2-7.0bar").unwrap(),
+    );
+    assert!(
+        (f4 - 10.27).abs() < 2.0 && (f7 - 16.7).abs() < 2.5,
+        "{f4} N, {f7} N:\n{s}"
+    );
+    tmux.keys("\t");
+    tmux.wait_text("> demo2-7.0bar");
+    tmux.quit();
+}

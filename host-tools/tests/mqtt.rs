@@ -239,8 +239,9 @@ fn mqtt_tail_lines_name_the_device_and_the_flag() {
     assert_eq!(hammer_host::mqtt::tail_line("hammer/lab/rig4/cycle", b"not json"), None);
 }
 
-/// `hammer demo --headless --devices 2 --mqtt …`: both boards' births and
-/// cycle reports on the broker, with the numbers the demo prints.
+/// `hammer demo --headless --devices 2 --mqtt …`, watched with
+/// `mosquitto_sub -v -t 'hammer/#'`: both boards' births and cycle reports
+/// on the broker, with the numbers the demo prints.
 #[test]
 fn two_boards_publish_their_births_and_reports() {
     if !mosquitto_present() {
@@ -251,9 +252,21 @@ fn two_boards_publish_their_births_and_reports() {
     std::fs::create_dir_all(&dir).unwrap();
     let port = free_port();
     let b = broker(&dir, port);
-    let got = Arc::new(Mutex::new(vec![]));
-    let done = Arc::new(AtomicBool::new(false));
-    let sub = subscribe(port, got.clone(), done.clone());
+    let sub = Command::new("mosquitto_sub")
+        .args([
+            "-h",
+            "127.0.0.1",
+            "-p",
+            &port.to_string(),
+            "-v",
+            "-q",
+            "1",
+            "-t",
+            "hammer/#",
+        ])
+        .stdout(Stdio::piped())
+        .spawn()
+        .expect("mosquitto_sub (Debian: mosquitto-clients)");
     std::thread::sleep(Duration::from_secs(1));
     let out = Command::new(env!("CARGO_BIN_EXE_hammer"))
         .args(["demo", "--headless", "--devices", "2", "--cycles", "15"])
@@ -269,10 +282,15 @@ fn two_boards_publish_their_births_and_reports() {
         String::from_utf8_lossy(&out.stderr)
     );
     std::thread::sleep(Duration::from_secs(1));
-    done.store(true, Ordering::Relaxed);
-    sub.join().unwrap();
+    let _ = Command::new("kill").arg(sub.id().to_string()).status();
+    let seen_text = String::from_utf8_lossy(&sub.wait_with_output().unwrap().stdout).into_owned();
     stop(b);
-    let got = got.lock().unwrap();
+    // "topic payload" lines.
+    let got: Vec<(String, Value)> = seen_text
+        .lines()
+        .filter_map(|l| l.split_once(' '))
+        .map(|(t, p)| (t.to_string(), serde_json::from_str(p).unwrap()))
+        .collect();
     for device in ["demo1-4.0bar", "demo2-7.0bar"] {
         let prefix = format!("[{device}] cycle ");
         let printed: BTreeMap<u64, f64> = stdout
@@ -285,17 +303,28 @@ fn two_boards_publish_their_births_and_reports() {
             .collect();
         assert!(printed.len() >= 15, "{device}: {stdout}");
         let topic = format!("hammer/lab/{device}/cycle");
-        let mut seen = BTreeMap::new();
+        let seqs: Vec<u64> = got
+            .iter()
+            .filter(|(t, _)| *t == topic)
+            .map(|(_, v)| v["seq"].as_u64().unwrap())
+            .collect();
+        assert_eq!(
+            seqs,
+            printed.keys().copied().collect::<Vec<_>>(),
+            "{device}: once each, in order"
+        );
         for (_, v) in got.iter().filter(|(t, _)| *t == topic) {
-            seen.insert(v["seq"].as_u64().unwrap(), v["friction_n"].as_f64().unwrap());
-        }
-        for (seq, f) in &printed {
-            assert!((seen[seq] - f).abs() < 0.006, "{device} #{seq}");
+            let seq = v["seq"].as_u64().unwrap();
+            assert!(
+                (v["friction_n"].as_f64().unwrap() - printed[&seq]).abs() < 0.006,
+                "{device} #{seq}"
+            );
+            assert_eq!(v["historical"], false);
         }
         let birth = format!("hammer/lab/{device}/state");
         assert!(
             got.iter().any(|(t, v)| *t == birth && v["online"] == true),
-            "no birth from {device}"
+            "no birth from {device}:\n{seen_text}"
         );
     }
     let _ = std::fs::remove_dir_all(&dir);
