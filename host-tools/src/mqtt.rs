@@ -45,6 +45,8 @@ use serde_json::{json, Value};
 pub const DEFAULT_BUFFER_MB: f64 = 256.0;
 /// Messages sent and not yet acknowledged, at most.
 const MAX_INFLIGHT: usize = 64;
+/// New messages held in memory while online, at most (then the disk buffer).
+const MAX_LIVE: usize = 1024;
 /// Pause before connecting again after a failure.
 const RETRY: Duration = Duration::from_secs(1);
 
@@ -383,7 +385,10 @@ impl Session {
                     if m.kind == Kind::State {
                         self.birth = Some(m.clone());
                     }
-                    if self.online() && self.buffer.queue.is_empty() {
+                    // A broker that is up but slower than the fleet: beyond
+                    // MAX_LIVE the queue spills to the bounded disk buffer
+                    // rather than growing in memory.
+                    if self.online() && self.buffer.queue.is_empty() && self.live.len() < MAX_LIVE {
                         self.live.push_back(m);
                     } else {
                         self.to_buffer(m);
@@ -593,12 +598,22 @@ mod tests {
             .map(|(m, _)| m.body["publish_seq"].as_u64().unwrap())
             .collect();
         assert_eq!(seqs, (0..10).collect::<Vec<_>>());
-        // A cap of about 5 messages: the oldest go, counted.
+        // A cap of about 5 messages: the oldest go, counted, the newest stay.
         let one = b.queue[0].1;
-        b.cap = 5 * one;
+        b.cap = 5 * one + 2;
         let dropped = b.push_back(msg(10)).unwrap();
-        assert_eq!(dropped, 6);
-        assert_eq!(b.queue.front().unwrap().0.body["publish_seq"], 6);
+        assert!(b.bytes <= b.cap, "{} bytes over a cap of {}", b.bytes, b.cap);
+        assert_eq!(b.queue.len() as u64, 11 - dropped);
+        assert!((6..=7).contains(&dropped), "{dropped}");
+        assert_eq!(b.queue.front().unwrap().0.body["publish_seq"], dropped);
+        assert_eq!(b.queue.back().unwrap().0.body["publish_seq"], 10);
+        drop(b);
+        let b = Buffer::open(&path, usize::MAX).unwrap();
+        assert_eq!(
+            b.queue.len() as u64,
+            11 - dropped,
+            "the file holds what the queue holds"
+        );
         let _ = std::fs::remove_dir_all(&dir);
     }
 
