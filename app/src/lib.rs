@@ -11,6 +11,7 @@
 //! - [`packed`]: sample-sets at 12 bits a code, for the capture buffer;
 //! - [`persisted`]: the configuration record the boards store;
 //! - [`reset`]: the reset cause as a board keeps it through a reset;
+//! - [`sample_clock`]: sample-sets produced in an elapsed time;
 //! - [`supervisor`]: the duties' check-ins, for a watchdog fed only while
 //!   every duty is alive;
 //! - [`supply`]: the ADC's reference voltage from the internal reference.
@@ -34,6 +35,7 @@ pub mod monitor;
 pub mod packed;
 pub mod persisted;
 pub mod reset;
+pub mod sample_clock;
 pub mod supervisor;
 pub mod supply;
 pub mod tasks;

@@ -140,20 +140,14 @@ impl Monitor {
             && self.measure.is_none()
             && matches!(self.capture, CaptureState::Idle | CaptureState::Streaming { .. })
         {
-            // After an impact the estimator blanks `blank_after` samples, so a
-            // piece one longer than that holds at most one report: none is lost.
-            let c = self.est.config();
-            let piece = hammer_estimator::math::round(c.blank_after_s * c.sample_rate_hz) as usize + 1;
-            for chunk in block.chunks(piece) {
-                let mut reports = heapless::Vec::<hammer_estimator::CycleReport, 2>::new();
-                self.est.push_block(chunk, |r| {
-                    let _ = reports.push(r);
-                });
-                for r in &reports {
-                    out(DeviceMsg::Report(*r));
-                    self.alarms(r, out);
-                }
-            }
+            // The common case: neither a tare nor a capture needs each
+            // sample, so the whole block goes through the estimator's hot
+            // loop in one call, reports leaving as they close.
+            let Self { est, alarm_on, .. } = self;
+            est.push_block(block, |r| {
+                out(DeviceMsg::Report(r));
+                alarms(alarm_on, &r, out);
+            });
             return;
         }
         for &s in block {
@@ -181,7 +175,7 @@ impl Monitor {
             let report = self.est.push(s);
             if let Some(r) = &report {
                 out(DeviceMsg::Report(*r));
-                self.alarms(r, out);
+                alarms(&mut self.alarm_on, r, out);
             }
             if self.est.counters().impacts != impacts && self.capture_on_impact() {
                 continue;
@@ -232,28 +226,6 @@ impl Monitor {
             other => other,
         };
         started
-    }
-
-    fn alarms(&mut self, r: &hammer_estimator::CycleReport, out: &mut impl FnMut(DeviceMsg)) {
-        let drift = r.flags.contains(Flags::DRIFT_ALARM);
-        if r.is_valid() && drift != self.alarm_on {
-            self.alarm_on = drift;
-            let kind = if drift { AlarmKind::DriftOn } else { AlarmKind::DriftOff };
-            out(DeviceMsg::Alarm(Alarm {
-                kind,
-                cycle_seq: r.seq,
-                flags: r.flags,
-                drift_score: r.drift_score,
-            }));
-        }
-        if r.flags.intersects(Flags::SENSOR_FAULTS) {
-            out(DeviceMsg::Alarm(Alarm {
-                kind: AlarmKind::SensorFault,
-                cycle_seq: r.seq,
-                flags: r.flags,
-                drift_score: r.drift_score,
-            }));
-        }
     }
 
     /// The next chunk of a finished capture, if any: call until `None`.
@@ -448,4 +420,28 @@ pub struct LinkCounters {
     pub rx_cobs_errors: u32,
     pub rx_decode_errors: u32,
     pub rx_oversize: u32,
+}
+
+/// Alarms for a report: the drift alarm's changes (`alarm_on` is its state)
+/// and every sensor fault.
+fn alarms(alarm_on: &mut bool, r: &hammer_estimator::CycleReport, out: &mut impl FnMut(DeviceMsg)) {
+    let drift = r.flags.contains(Flags::DRIFT_ALARM);
+    if r.is_valid() && drift != *alarm_on {
+        *alarm_on = drift;
+        let kind = if drift { AlarmKind::DriftOn } else { AlarmKind::DriftOff };
+        out(DeviceMsg::Alarm(Alarm {
+            kind,
+            cycle_seq: r.seq,
+            flags: r.flags,
+            drift_score: r.drift_score,
+        }));
+    }
+    if r.flags.intersects(Flags::SENSOR_FAULTS) {
+        out(DeviceMsg::Alarm(Alarm {
+            kind: AlarmKind::SensorFault,
+            cycle_seq: r.seq,
+            flags: r.flags,
+            drift_score: r.drift_score,
+        }));
+    }
 }

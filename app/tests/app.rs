@@ -64,7 +64,7 @@ fn reports_are_the_estimators_and_a_capture_reassembles_one_cycle() {
     // The capture starts at the first impact seen after it was armed (here
     // the stream's first, which opens the first reported cycle) and holds
     // that cycle plus the tail with its closing impact (reports[0]'s).
-    let closing = (reports[0].t_impact_s * 1e5).round() as i64;
+    let closing = (reports[0].t_impact_s() * 1e5).round() as i64;
     let period = (reports[0].period_s * 1e5).round() as i64;
     let start = samples
         .windows(got.len())

@@ -1,7 +1,7 @@
 //! Estimator configuration: the hammer, the sensor chain and the thresholds.
 //! Defaults describe the paper's hammer on the project's reference bench.
 
-use crate::geometry::{Geometry, STANDARD_GRAVITY_MPS2};
+use crate::geometry::{circle_area_f32, Geometry, STANDARD_GRAVITY_MPS2};
 use crate::math;
 
 /// Resolutions of the converters the estimator reads. Codes are `u16` (the
@@ -307,12 +307,14 @@ impl Config {
         self.geometry.piston_mass_kg as f32
     }
 
+    /// A1 in `f32` arithmetic (no software doubles on the target).
     pub fn rear_area_m2(&self) -> f32 {
-        self.geometry.rear_area_m2() as f32
+        circle_area_f32(self.geometry.bore_diameter_m as f32)
     }
 
+    /// A2 = A1 − the rod's area, in `f32` arithmetic.
     pub fn front_area_m2(&self) -> f32 {
-        self.geometry.front_area_m2() as f32
+        self.rear_area_m2() - circle_area_f32(self.geometry.rod_diameter_m as f32)
     }
 
     /// Gravity's force along the axis (forward positive).

@@ -275,6 +275,7 @@ impl CycleAcc {
     /// Samples still to be pushed before the next checkpoint (where the
     /// accelerometer is judged): runs end there, so that the block path and
     /// the sample path see a fault at the same sample.
+    #[inline(always)]
     pub fn to_checkpoint(&self, d: &Derived) -> u32 {
         d.k - self.since_cp
     }
@@ -344,7 +345,7 @@ impl CycleAcc {
     ///
     /// The run is given as two slices that follow each other (the delay
     /// line's samples, then the new ones): one call, one set-up.
-    #[inline]
+    #[inline(always)]
     pub fn push_run(&mut self, d: &Derived, cal: &Calibration, run: [&[crate::RawSample]; 2], stuck_limit: u32) {
         let Some(first) = run[0].first().or(run[1].first()) else {
             return;

@@ -27,6 +27,7 @@
 #![no_std]
 #![forbid(unsafe_code)]
 
+mod clock;
 pub mod config;
 pub mod cycle;
 pub mod device;
@@ -171,6 +172,8 @@ pub struct Estimator {
     seq: u32,
     /// Of the configuration's calibrations, for every report.
     calibration_hash: u32,
+    /// The sample rate in whole Hz, for the reports' times.
+    sample_hz: u64,
     wear: WearState,
     counters: Counters,
 }
@@ -216,6 +219,7 @@ impl Estimator {
             friction_guess: 0.0,
             seq: 0,
             calibration_hash: cfg.calibration_hash(),
+            sample_hz: (math::round(cfg.sample_rate_hz) as u64).max(1),
             wear: WearState::default(),
             counters: Counters::default(),
             cfg,
@@ -348,6 +352,7 @@ impl Estimator {
 
     /// Reports samples that never arrived (ADC overrun, link gap): the cycle
     /// under way cannot be estimated and is flagged; timing stays right.
+    #[inline(never)]
     pub fn push_gap(&mut self, missing: u32) {
         self.next_index = self.next_index.wrapping_add(missing as u64);
         self.counters.dropped_samples = self.counters.dropped_samples.wrapping_add(missing as u64);
@@ -378,6 +383,7 @@ impl Estimator {
     /// One more sample after a trigger: a shock is confirmed once
     /// `min_shock` samples of it have been seen, a spike once the
     /// accelerometer fell back before that.
+    #[inline(never)]
     fn confirm(&mut self, trigger: u64, s: RawSample, beyond: bool) {
         self.held[self.held_len] = s;
         self.held_len += 1;
@@ -403,6 +409,7 @@ impl Estimator {
     /// A confirmed impact at `trigger`: the cycle under way closes (its
     /// report waits for the shock to end), the next one opens, and the
     /// samples held since the trigger are the first of its blanking.
+    #[inline(never)]
     fn impact(&mut self, trigger: u64) {
         let earlier = self.pending.take().map(|r| self.finalize(r));
         self.emit(earlier);
@@ -427,6 +434,7 @@ impl Estimator {
         }
     }
 
+    #[inline(never)]
     fn blank(&mut self, left: u32, in_shock: bool, beyond: bool) {
         let still = in_shock && beyond;
         if still {
@@ -455,6 +463,7 @@ impl Estimator {
         self.emit(r);
     }
 
+    #[inline(never)]
     fn begin_cycle(&mut self, index: u64) {
         self.counters.impacts = self.counters.impacts.wrapping_add(1);
         self.cycle_start = index;
@@ -482,6 +491,7 @@ impl Estimator {
 
     /// A cycle that did not open at an impact (start-up, after a stall or a
     /// fault): accumulated for the fault checks, never an estimate.
+    #[inline(never)]
     fn open_without_impact(&mut self, index: u64) {
         self.cycle_start = index;
         self.kept_start = index;
@@ -528,6 +538,7 @@ impl Estimator {
     /// An accelerometer fault seen in the cycle under way is reported at
     /// once (the cycle cannot close on an impact the sensor will not show),
     /// then the estimator listens on without an impact; once per cycle.
+    #[inline(always)]
     fn accel_fault_record(&mut self) {
         if self.fault_reported {
             return;
@@ -546,6 +557,7 @@ impl Estimator {
     /// No impact within `max_period_s`. A hammer that stands still (its
     /// pressures flat) is only counted; one whose pressures keep cycling has
     /// a silent accelerometer, and that is reported.
+    #[inline(never)]
     fn stall(&mut self, index: u64, s: RawSample) {
         if self.opened_by_impact {
             self.counters.stalls = self.counters.stalls.wrapping_add(1);
@@ -562,6 +574,7 @@ impl Estimator {
     }
 
     /// A record with flags and no numbers: what happened instead of a cycle.
+    #[inline(never)]
     fn record(&mut self, index: u64, mut flags: Flags) -> CycleReport {
         self.acc.settle(&self.d, &self.cal);
         let period_s = index.wrapping_sub(self.cycle_start) as f32 * self.d.dt;
@@ -572,12 +585,12 @@ impl Estimator {
         let finite = |x: f32| if math::is_finite(x) { x } else { 0.0 };
         let r = CycleReport {
             seq: self.seq,
-            t_impact_s: (index as f64 - 0.5) / self.cfg.sample_rate_hz as f64,
+            t_impact_us: clock::edge_us(index, self.sample_hz),
             period_s,
             frequency_hz: 0.0,
             peak_rear_pa: finite(self.acc.peak_p1),
             peak_front_pa: finite(self.acc.peak_p2),
-            wear_index_j: self.wear.friction_work_j as f32,
+            wear_index_j: self.wear.wear_index_j(),
             drift_score: self.wear.cusum,
             calibration_hash: self.calibration_hash,
             flags,
@@ -589,6 +602,7 @@ impl Estimator {
         r
     }
 
+    #[inline(never)]
     fn close_cycle(&mut self, index: u64) -> CycleReport {
         self.acc.settle(&self.d, &self.cal);
         let start = self.cycle_start;
@@ -619,7 +633,7 @@ impl Estimator {
         let m = self.d.m;
         let mut r = CycleReport {
             seq: self.seq,
-            t_impact_s: (index as f64 - 0.5) / self.cfg.sample_rate_hz as f64,
+            t_impact_us: clock::edge_us(index, self.sample_hz),
             period_s,
             frequency_hz: 1.0 / period_s,
             friction_n: e.friction_n,
@@ -642,7 +656,7 @@ impl Estimator {
             peak_rear_pa: self.acc.peak_p1,
             peak_front_pa: self.acc.peak_p2,
             accel_zero_shift_mps2: e.zero_shift_mps2,
-            wear_index_j: self.wear.friction_work_j as f32,
+            wear_index_j: self.wear.wear_index_j(),
             wear_remaining_fraction: 0.0,
             remaining_life_cycles: 0.0,
             drift_score: self.wear.cusum,
@@ -659,6 +673,7 @@ impl Estimator {
 
     /// The bookkeeping that depends on a closed cycle's validity, done when
     /// its report leaves (after its closing shock was seen to end).
+    #[inline(never)]
     fn finalize(&mut self, mut r: CycleReport) -> CycleReport {
         if r.is_valid() {
             self.history.push(r.period_s, r.stroke_m);

@@ -10,7 +10,12 @@ pub const MIN_TARE_SAMPLES: u32 = 1000;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct Tare {
     n: u32,
-    sum: [u64; 3],
+    /// The first sample's codes: the sums are of deviations from them. At
+    /// rest those are a few codes, so `f32` turns the sums into a mean and
+    /// a variance without loss, where the sums of raw codes squared (10¹²
+    /// after 10⁵ samples) would need `f64`, which the target's FPU lacks.
+    origin: [u16; 3],
+    sum: [i64; 3],
     sum_sq: [u64; 3],
     rail: [u32; 3],
 }
@@ -58,11 +63,14 @@ impl Tare {
             return;
         }
         let codes = [s.rear, s.front, s.accel];
+        if self.n == 0 {
+            self.origin = codes;
+        }
         self.n += 1;
         for ch in 0..3 {
-            let c = codes[ch] as u64;
-            self.sum[ch] += c;
-            self.sum_sq[ch] += c * c;
+            let d = i64::from(codes[ch]) - i64::from(self.origin[ch]);
+            self.sum[ch] += d;
+            self.sum_sq[ch] += d.unsigned_abs() * d.unsigned_abs();
             if codes[ch] == 0 {
                 self.rail[ch] += 1;
             }
@@ -75,14 +83,21 @@ impl Tare {
         let mut mean = [0.0f32; 3];
         let mut std = [0.0f32; 3];
         if self.n > 0 {
-            let n = self.n as f64;
             for ch in 0..3 {
-                let m = self.sum[ch] as f64 / n;
-                mean[ch] = m as f32;
-                std[ch] = math::sqrt((self.sum_sq[ch] as f64 / n - m * m).max(0.0) as f32);
+                let (m, var) = self.moments(ch);
+                mean[ch] = m;
+                std[ch] = math::sqrt(var);
             }
         }
         (self.n, mean, std)
+    }
+
+    /// A channel's mean and variance in codes (`n` > 0).
+    fn moments(&self, ch: usize) -> (f32, f32) {
+        let n = self.n as f32;
+        let d = self.sum[ch] as f32 / n;
+        let var = (self.sum_sq[ch] as f32 / n - d * d).max(0.0);
+        (f32::from(self.origin[ch]) + d, var)
     }
 
     /// New zero codes for `cfg`: pressures read 0 gauge, the accelerometer reads
@@ -102,10 +117,8 @@ impl Tare {
         let g_axis =
             (STANDARD_GRAVITY_MPS2 as f32) * math::sin_small(cfg.inclination_deg * (core::f32::consts::PI / 180.0));
         for ch in 0..3 {
-            let n = self.n as f64;
-            let mean = self.sum[ch] as f64 / n;
-            let var = (self.sum_sq[ch] as f64 / n - mean * mean).max(0.0);
-            let std = math::sqrt(var as f32) * math::abs(cals[ch].scale);
+            let (mean, var) = self.moments(ch);
+            let std = math::sqrt(var) * math::abs(cals[ch].scale);
             if std > limits[ch] {
                 return Err(TareError::NotAtRest {
                     channel: NAMES[ch],
@@ -113,11 +126,12 @@ impl Tare {
                     limit: limits[ch],
                 });
             }
-            if self.rail[ch] as f64 > 0.05 * n {
+            // More than 5 % of the samples on the bottom rail.
+            if u64::from(self.rail[ch]) * 20 > u64::from(self.n) {
                 continue;
             }
             let expected = if ch == 2 { g_axis } else { 0.0 };
-            let zero = mean as f32 - expected / cals[ch].scale;
+            let zero = mean - expected / cals[ch].scale;
             match ch {
                 0 => out.rear.zero_code = zero,
                 1 => out.front.zero_code = zero,

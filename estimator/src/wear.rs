@@ -9,7 +9,8 @@ use crate::math;
 /// The state's size and its CRC, defined with the wire's `WearBlob` in `hammer-types`.
 pub use hammer_types::{crc32, MAX_BASELINES, WEAR_STATE_BYTES};
 const MAGIC: [u8; 4] = *b"HMWS";
-const VERSION: u32 = 1;
+/// 2: the friction work in integer µJ (1: `f64` J, still read).
+const VERSION: u32 = 2;
 
 /// Friction statistics at one operating point (Welford).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -32,8 +33,9 @@ impl Baseline {
 
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct WearState {
-    /// Cumulative friction work, J. f64: 10⁹ cycles of a few joules must not round away.
-    pub friction_work_j: f64,
+    /// Cumulative friction work, µJ. An integer: 10⁹ cycles of a few joules
+    /// must not round away, and the target's FPU has no double precision.
+    pub friction_work_uj: u64,
     pub cycles: u32,
     pub cusum: f32,
     pub alarm: bool,
@@ -81,7 +83,9 @@ impl WearState {
     ) -> WearUpdate {
         self.cycles = self.cycles.wrapping_add(1);
         if friction_work_j.is_finite() && friction_work_j > 0.0 {
-            self.friction_work_j += friction_work_j as f64;
+            // Saturating: f32 → u64 clamps, and 10¹³ J is beyond any hammer's life.
+            let uj = (friction_work_j * 1e6 + 0.5) as u64;
+            self.friction_work_uj = self.friction_work_uj.saturating_add(uj);
         }
         let bin = if operating_point_pa.is_finite() {
             math::round(operating_point_pa / cfg.bin_width_pa) as i32
@@ -109,18 +113,24 @@ impl WearState {
             self.cusum = (self.cusum + z - cfg.cusum_k).max(0.0);
             self.alarm = self.cusum > cfg.cusum_h;
         }
-        let remaining_j = (cfg.budget_j as f64 - self.friction_work_j).max(0.0);
+        let work_j = self.wear_index_j();
+        let remaining_j = (cfg.budget_j - work_j).max(0.0);
         WearUpdate {
-            wear_index_j: self.friction_work_j as f32,
-            remaining_fraction: (remaining_j / cfg.budget_j as f64) as f32,
+            wear_index_j: work_j,
+            remaining_fraction: remaining_j / cfg.budget_j,
             remaining_cycles: if friction_work_j > 0.0 {
-                (remaining_j / friction_work_j as f64) as f32
+                remaining_j / friction_work_j
             } else {
                 f32::INFINITY
             },
             drift_score: self.cusum,
             alarm: self.alarm,
         }
+    }
+
+    /// The wear index, J: the cumulative friction work.
+    pub fn wear_index_j(&self) -> f32 {
+        self.friction_work_uj as f32 * 1e-6
     }
 
     /// The baseline of a bin; a new bin takes a free slot, or none when full.
@@ -155,7 +165,7 @@ impl WearState {
         w.put(&VERSION.to_le_bytes());
         w.put(&(MAX_BASELINES as u32).to_le_bytes());
         w.put(&self.n_baselines.to_le_bytes());
-        w.put(&self.friction_work_j.to_le_bytes());
+        w.put(&self.friction_work_uj.to_le_bytes());
         w.put(&self.cycles.to_le_bytes());
         w.put(&self.cusum.to_le_bytes());
         w.put(&(self.alarm as u32).to_le_bytes());
@@ -180,7 +190,7 @@ impl WearState {
         }
         let mut r = Reader { buf: b, pos: 4 };
         let version = r.u32();
-        if version != VERSION {
+        if version != VERSION && version != 1 {
             return Err(WearStateError::UnsupportedVersion(version));
         }
         let end = WEAR_STATE_BYTES - 4;
@@ -191,7 +201,10 @@ impl WearState {
         let cap = r.u32();
         let n_baselines = r.u32().min(cap).min(MAX_BASELINES as u32);
         let mut s = WearState {
-            friction_work_j: r.f64(),
+            friction_work_uj: match version {
+                1 => f64_joules_to_uj(r.u64()),
+                _ => r.u64(),
+            },
             cycles: r.u32(),
             cusum: r.f32(),
             alarm: r.u32() != 0,
@@ -208,6 +221,14 @@ impl WearState {
         }
         Ok(s)
     }
+}
+
+/// A version-1 state's friction work (the bits of an `f64` in joules) in
+/// µJ. Through `f32` (24 bits: 6·10⁻⁸ relative, once, at the first boot
+/// after the update): exact `f64` arithmetic would cost the board ~1 KB of
+/// software routines for this one conversion. Negative or NaN reads as 0.
+fn f64_joules_to_uj(bits: u64) -> u64 {
+    (f64::from_bits(bits) as f32 * 1e6) as u64
 }
 
 struct Writer<'a> {
@@ -240,8 +261,8 @@ impl Reader<'_> {
     fn f32(&mut self) -> f32 {
         f32::from_le_bytes(self.take())
     }
-    fn f64(&mut self) -> f64 {
-        f64::from_le_bytes(self.take())
+    fn u64(&mut self) -> u64 {
+        u64::from_le_bytes(self.take())
     }
 }
 
@@ -273,6 +294,30 @@ mod tests {
     }
 
     #[test]
+    fn a_version_1_state_keeps_its_friction_work() {
+        for j in [0.0f64, 1e-6, 0.875, 120.0, 3.25e6, 1.234_567_891e9] {
+            let uj = f64_joules_to_uj(j.to_bits()) as f64;
+            assert!((uj - j * 1e6).abs() <= 1e-7 * j * 1e6, "{j} J: {uj} µJ");
+        }
+        assert_eq!(f64_joules_to_uj((-5.0f64).to_bits()), 0);
+        assert_eq!(f64_joules_to_uj(f64::NAN.to_bits()), 0);
+        assert_eq!(f64_joules_to_uj(f64::INFINITY.to_bits()), u64::MAX);
+        // A version-1 blob (f64 J at offset 16) reads back as µJ.
+        let mut s = WearState::default();
+        s.friction_work_uj = 0;
+        s.cycles = 7;
+        let mut b = s.to_bytes();
+        b[4..8].copy_from_slice(&1u32.to_le_bytes());
+        b[16..24].copy_from_slice(&42.5f64.to_bits().to_le_bytes());
+        let end = WEAR_STATE_BYTES - 4;
+        let crc = crc32(&b[..end]);
+        b[end..].copy_from_slice(&crc.to_le_bytes());
+        let back = WearState::from_bytes(&b).unwrap();
+        assert_eq!(back.friction_work_uj, 42_500_000);
+        assert_eq!(back.cycles, 7);
+    }
+
+    #[test]
     fn baselines_are_kept_per_operating_point() {
         let cfg = WearConfig::default();
         let mut s = WearState::default();
@@ -282,6 +327,6 @@ mod tests {
         }
         assert_eq!(s.n_baselines, 2);
         assert!(!s.alarm, "two operating points with different friction are not drift");
-        assert!((s.friction_work_j - 120.0).abs() < 1e-9);
+        assert_eq!(s.friction_work_uj, 120_000_000);
     }
 }

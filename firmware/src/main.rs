@@ -19,6 +19,7 @@
 
 mod clock;
 mod link;
+mod panic;
 mod persist;
 mod reset;
 mod sampler;
@@ -26,6 +27,7 @@ mod stack;
 mod supply;
 
 use defmt::{error, info, unwrap, warn};
+use defmt_rtt as _;
 use embassy_executor::{InterruptExecutor, Spawner};
 use embassy_stm32::gpio::{Level, Output, Speed};
 use embassy_stm32::interrupt;
@@ -40,7 +42,6 @@ use hammer_estimator::wear::WEAR_STATE_BYTES;
 use hammer_estimator::ConfigError;
 use hammer_wire::{DeviceMsg, HostMsg, WearBlob};
 use static_cell::StaticCell;
-use {defmt_rtt as _, panic_probe as _};
 
 use crate::clock::BoardClock;
 use crate::sampler::Sampler;

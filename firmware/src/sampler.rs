@@ -159,8 +159,8 @@ impl Sampler {
     /// exact but for the few sets in flight.
     fn produced(&self, now: Instant) -> u64 {
         let Some(start) = self.started else { return 0 };
-        let us = now.saturating_duration_since(start).as_micros() as u128;
-        (us * self.timer_hz as u128 / (1_000_000u128 * self.period_clocks as u128)) as u64
+        let us = now.saturating_duration_since(start).as_micros();
+        hammer_app::sample_clock::sets_in(us, self.timer_hz, self.period_clocks)
     }
 
     /// Writes off everything produced but not taken, after the ring was reset.

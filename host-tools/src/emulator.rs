@@ -116,6 +116,11 @@ impl Emulator {
         if let Some(i) = icount {
             cmd.args(["-icount", &i.arg()]);
         }
+        // Extra QEMU arguments for a developer (`-d nochain,exec -D exec.log`
+        // to profile the firmware by translation block).
+        if let Ok(extra) = std::env::var("HAMMER_QEMU_ARGS") {
+            cmd.args(extra.split_whitespace());
+        }
         cmd.arg("-kernel")
             .arg(elf)
             .stdin(Stdio::null())

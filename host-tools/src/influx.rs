@@ -99,7 +99,7 @@ impl Anchor {
     /// The report's time in ns since the epoch, from its device time and the
     /// host time `host_us` it arrived at.
     pub fn stamp_ns(&mut self, r: &CycleReport, host_us: i64) -> i64 {
-        let device_us = (r.t_impact_s * 1e6).round() as i64;
+        let device_us = i64::try_from(r.t_impact_us).unwrap_or(i64::MAX);
         let offset = *self.offset_us.get_or_insert(host_us - device_us);
         let t = device_us + offset;
         let t = if (t - host_us).abs() > REANCHOR_US {
@@ -391,7 +391,7 @@ mod tests {
     fn report(seq: u32) -> CycleReport {
         CycleReport {
             seq,
-            t_impact_s: 0.047 * f64::from(seq),
+            t_impact_us: 47_000 * u64::from(seq),
             friction_n: 10.27,
             impact_energy_j: 4.5,
             drift_score: f32::NAN,
@@ -414,7 +414,7 @@ mod tests {
         let field = |k: &str| p.fields.iter().find(|(n, _)| n == k).map(|(_, v)| v.clone());
         assert_eq!(field("seq").as_deref(), Some("3i"));
         assert_eq!(field("friction_n").unwrap().parse::<f32>().unwrap(), 10.27);
-        assert_eq!(field("t_impact_s").unwrap().parse::<f64>().unwrap(), r.t_impact_s);
+        assert_eq!(field("t_impact_s").unwrap().parse::<f64>().unwrap(), r.t_impact_s());
         assert_eq!(field("drift_score"), None, "NaN is left out");
         assert_eq!(field("valid").as_deref(), Some("false"));
         assert_eq!(field("flags").as_deref(), Some("\"implausible\""));

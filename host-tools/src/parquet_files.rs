@@ -458,7 +458,7 @@ mod tests {
     fn report(seq: u32, friction_n: f32) -> CycleReport {
         CycleReport {
             seq,
-            t_impact_s: 0.047 * f64::from(seq) + 1e-9,
+            t_impact_us: 47_000 * u64::from(seq) + 1,
             friction_n,
             impact_energy_j: 3.5,
             drift_score: f32::NAN,

@@ -134,7 +134,7 @@ mod tests {
     fn sample() -> CycleReport {
         CycleReport {
             seq: 12,
-            t_impact_s: 1.234_567_1,
+            t_impact_us: 1_234_567,
             period_s: 0.047,
             frequency_hz: 21.79,
             friction_n: 12.34,
@@ -160,6 +160,11 @@ mod tests {
         let serde = serde_json::to_value(r).unwrap();
         let json = json_record(&r);
         for (k, v) in serde.as_object().unwrap() {
+            if k == "t_impact_us" {
+                // The wire's integer µs is the column t_impact_s, in seconds.
+                assert_eq!(json["t_impact_s"].as_f64(), Some(v.as_f64().unwrap() / 1e6));
+                continue;
+            }
             assert!(header.split(',').any(|c| c == k), "{k} is no column");
             if k != "flags" {
                 assert_eq!(&json[k], v, "{k}");
@@ -167,7 +172,7 @@ mod tests {
         }
         assert_eq!(json["flags"], serde_json::json!(["accel_zero_shift"]));
         assert_eq!(json["valid"], serde_json::json!(true));
-        assert!(record.starts_with("12,1.2345671,0.047,21.79,12.34,"), "{record}");
+        assert!(record.starts_with("12,1.234567,0.047,21.79,12.34,"), "{record}");
         assert!(record.ends_with(",true,accel_zero_shift"), "{record}");
         assert!(header.contains(",wear_index_j,"), "{header}");
     }

@@ -21,8 +21,8 @@ fn gaps(effect: Option<&str>, bar: f64) -> Vec<GapCell> {
     let impacts: Vec<f64> = run(meas.codes(), est)
         .unwrap()
         .iter()
-        .filter(|r| r.t_impact_s > 0.2)
-        .map(|r| r.t_impact_s)
+        .filter(|r| r.t_impact_s() > 0.2)
+        .map(|r| r.t_impact_s())
         .collect();
     let mut model = SimConfig::nominal(bar);
     model.solver.duration_s = 0.6;

@@ -31,7 +31,7 @@ fn matched(sim: &Simulation, reports: &[CycleReport]) -> Vec<Matched> {
                 .run
                 .cycles
                 .iter()
-                .find(|c| (c.t_impact_s - r.t_impact_s).abs() < 2e-5)?;
+                .find(|c| (c.t_impact_s - r.t_impact_s()).abs() < 2e-5)?;
             (t.t_impact_s > 0.15).then(|| Matched {
                 report: *r,
                 truth: t.clone(),

@@ -52,17 +52,17 @@ fn accel_code(cfg: &hammer_estimator::Config, a_mps2: f32) -> u16 {
 /// Valid reports must agree with the truth cycle that closes at the same impact.
 fn assert_valid_within_3u(name: &str, reports: &[CycleReport], truth: &[CycleTruth]) {
     for r in reports.iter().filter(|r| r.is_valid()) {
-        let Some(t) = truth.iter().find(|c| (c.t_impact_s - r.t_impact_s).abs() < 2e-4) else {
+        let Some(t) = truth.iter().find(|c| (c.t_impact_s - r.t_impact_s()).abs() < 2e-4) else {
             panic!(
                 "{name}: cycle at {:.4} s reported valid, but no impact happened then",
-                r.t_impact_s
+                r.t_impact_s()
             );
         };
         let e_err = (r.impact_energy_j as f64 - t.impact_energy_j).abs();
         assert!(
             e_err <= 3.0 * r.impact_energy_uncertainty_j as f64,
             "{name}: cycle at {:.4} s: energy {} ± {} J, true {} J",
-            r.t_impact_s,
+            r.t_impact_s(),
             r.impact_energy_j,
             r.impact_energy_uncertainty_j,
             t.impact_energy_j
@@ -71,7 +71,7 @@ fn assert_valid_within_3u(name: &str, reports: &[CycleReport], truth: &[CycleTru
         assert!(
             f_err <= 3.0 * r.friction_uncertainty_n as f64,
             "{name}: cycle at {:.4} s: friction {} ± {} N, true {} N",
-            r.t_impact_s,
+            r.t_impact_s(),
             r.friction_n,
             r.friction_uncertainty_n,
             t.friction_cycle_n
@@ -83,7 +83,7 @@ fn assert_valid_within_3u(name: &str, reports: &[CycleReport], truth: &[CycleTru
 fn first_sensor_fault(reports: &[CycleReport]) -> Option<&CycleReport> {
     reports
         .iter()
-        .find(|r| r.t_impact_s > T_FAULT && r.flags.intersects(Flags::SENSOR_FAULTS))
+        .find(|r| r.t_impact_s() > T_FAULT && r.flags.intersects(Flags::SENSOR_FAULTS))
 }
 
 fn inject(run: &Run, mut f: impl FnMut(usize, &mut RawSample)) -> Vec<RawSample> {
@@ -173,16 +173,16 @@ fn every_persistent_accelerometer_fault_is_a_sensor_fault_within_one_period() {
         assert_valid_within_3u(name, &reports, &run.truth);
         let flagged = first_sensor_fault(&reports).unwrap_or_else(|| panic!("{name}: never flagged as a sensor fault"));
         assert!(
-            flagged.t_impact_s - T_FAULT <= period,
+            flagged.t_impact_s() - T_FAULT <= period,
             "{name}: first sensor-fault flag {:.1} ms after the fault began (period {:.1} ms): {:?}",
-            1e3 * (flagged.t_impact_s - T_FAULT),
+            1e3 * (flagged.t_impact_s() - T_FAULT),
             1e3 * period,
             flagged.flags.names().collect::<Vec<_>>()
         );
         // Not a flood: at most a few records per expected period.
         let during = reports
             .iter()
-            .filter(|r| r.t_impact_s > T_FAULT && r.t_impact_s < T_FAULT + FAULT_S)
+            .filter(|r| r.t_impact_s() > T_FAULT && r.t_impact_s() < T_FAULT + FAULT_S)
             .count();
         assert!(
             during as f64 <= 3.0 * FAULT_S / period,
@@ -191,7 +191,7 @@ fn every_persistent_accelerometer_fault_is_a_sensor_fault_within_one_period() {
         // And the estimator recovers once the fault is gone.
         let after: Vec<_> = reports
             .iter()
-            .filter(|r| r.t_impact_s > T_FAULT + FAULT_S + 3.0 * period)
+            .filter(|r| r.t_impact_s() > T_FAULT + FAULT_S + 3.0 * period)
             .collect();
         assert!(
             after.len() >= 5 && after.iter().all(|r| r.is_valid()),

@@ -213,7 +213,9 @@ fn every_report_arrives_once_in_order_through_a_broker_outage() {
     // Birth on connect, and the clean end says offline.
     let states = of("state");
     assert!(
-        states.iter().any(|v| v["online"] == true && v["protocol"] == 3),
+        states
+            .iter()
+            .any(|v| v["online"] == true && v["protocol"] == hammer_wire::PROTOCOL_VERSION),
         "{states:?}"
     );
     assert_eq!(states.last().unwrap()["online"], false);

@@ -45,7 +45,7 @@ fn duckdb_reads_a_two_device_dataset_row_for_row() {
     let reports: Vec<CycleReport> = (0..300u32)
         .map(|k| CycleReport {
             seq: k,
-            t_impact_s: f64::from(k) * 0.047,
+            t_impact_us: u64::from(k) * 47_000,
             friction_n: 10.0 + k as f32 * 0.01,
             impact_energy_j: 4.5,
             calibration_hash: 0x7b78_6e0f,

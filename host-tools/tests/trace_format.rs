@@ -215,7 +215,7 @@ fn streamed_estimation_matches_the_in_memory_path_and_flags_gaps() {
 
     // 50 rows cut out in the middle of the third cycle.
     let mut trace = sim.trace();
-    let t_mid = 0.5 * (in_memory[2].t_impact_s + in_memory[3].t_impact_s);
+    let t_mid = 0.5 * (in_memory[2].t_impact_s() + in_memory[3].t_impact_s());
     let at = (t_mid / trace.dt_s) as usize;
     for col in [
         &mut trace.t_s,
@@ -239,10 +239,10 @@ fn streamed_estimation_matches_the_in_memory_path_and_flags_gaps() {
     for (g, r) in gapped.iter().zip(&in_memory) {
         // Timing stays right across the gap.
         assert!(
-            (g.t_impact_s - r.t_impact_s).abs() < 1e-9,
+            (g.t_impact_s() - r.t_impact_s()).abs() < 1e-9,
             "{} vs {}",
-            g.t_impact_s,
-            r.t_impact_s
+            g.t_impact_s(),
+            r.t_impact_s()
         );
         assert_eq!(g.flags.contains(dropped), g.seq == 3, "cycle {}: {:?}", g.seq, g.flags);
         if !g.flags.contains(dropped) {

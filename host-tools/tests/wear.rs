@@ -24,7 +24,7 @@ fn a_five_percent_friction_step_fires_the_alarm_within_50_cycles() {
     let mut est = Estimator::new(est_cfg).unwrap();
     let mut reports = Vec::new();
     est.push_block(sim.codes(), |r| reports.push(r));
-    let before: Vec<&CycleReport> = reports.iter().filter(|r| r.t_impact_s < step_at).collect();
+    let before: Vec<&CycleReport> = reports.iter().filter(|r| r.t_impact_s() < step_at).collect();
     assert!(
         before.iter().filter(|r| r.is_valid()).count() > 60,
         "baseline needs 50 cycles before the step"
@@ -33,7 +33,7 @@ fn a_five_percent_friction_step_fires_the_alarm_within_50_cycles() {
         before.iter().all(|r| !r.flags.contains(Flags::DRIFT_ALARM)),
         "alarm before the step"
     );
-    let after: Vec<&CycleReport> = reports.iter().filter(|r| r.t_impact_s >= step_at).collect();
+    let after: Vec<&CycleReport> = reports.iter().filter(|r| r.t_impact_s() >= step_at).collect();
     let first = after
         .iter()
         .position(|r| r.flags.contains(Flags::DRIFT_ALARM))

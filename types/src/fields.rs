@@ -6,6 +6,8 @@
 //! the struct field's, which ends in its unit (`wear_index_j`,
 //! `friction_n`); dimensionless fields have unit `"1"` (or name what they
 //! count). A test asserts the table has every field of the struct, in order.
+//! One exception: the wire's integer `t_impact_us` is the column
+//! `t_impact_s`, so logs read the same as before it was an integer.
 
 use core::fmt;
 
@@ -76,7 +78,7 @@ impl Field {
 }
 
 macro_rules! fields {
-    ($($name:ident: $kind:ident, $unit:literal, $label:literal $(, pm $u:ident)?;)*) => {
+    ($($name:ident: $kind:ident $(via $get:ident())?, $unit:literal, $label:literal $(, pm $u:ident)?;)*) => {
         /// Every per-cycle field of [`CycleReport`] but `flags`, in struct (= wire) order.
         /// `flags` is rendered by name ([`crate::Flags::names`]), next to the
         /// derived `valid` ([`CycleReport::is_valid`]).
@@ -86,17 +88,20 @@ macro_rules! fields {
                 unit: $unit,
                 label: $label,
                 uncertainty: fields!(@u $($u)?),
-                get: |r: &CycleReport| Value::$kind(r.$name),
+                get: |r: &CycleReport| Value::$kind(fields!(@get r, $name $(, $get)?)),
             },
         )*];
     };
+    (@get $r:ident, $name:ident) => { $r.$name };
+    (@get $r:ident, $name:ident, $get:ident) => { $r.$get() };
     (@u) => { None };
     (@u $u:ident) => { Some(stringify!($u)) };
 }
 
 fields! {
     seq: U32, "", "cycle";
-    t_impact_s: F64, "s", "impact time";
+    // The wire's integer `t_impact_us`, shown in seconds.
+    t_impact_s: F64 via t_impact_s(), "s", "impact time";
     period_s: F32, "s", "period";
     frequency_hz: F32, "Hz", "frequency";
     friction_n: F32, "N", "friction", pm friction_uncertainty_n;
@@ -153,7 +158,13 @@ mod tests {
             ..Default::default()
         };
         let json = serde_json::to_value(r).unwrap();
-        let mut keys: Vec<&str> = json.as_object().unwrap().keys().map(|k| k.as_str()).collect();
+        // The table shows the wire's `t_impact_us` in seconds.
+        let mut keys: Vec<&str> = json
+            .as_object()
+            .unwrap()
+            .keys()
+            .map(|k| if k == "t_impact_us" { "t_impact_s" } else { k.as_str() })
+            .collect();
         keys.sort_unstable();
         let mut names: Vec<&str> = FIELDS.iter().map(|f| f.name).collect();
         names.push("flags");
@@ -162,7 +173,7 @@ mod tests {
         assert_eq!(keys, sorted);
         // Struct order: serialise to a sequence-preserving form.
         let order: Vec<&str> = {
-            let text = serde_json::to_string(&r).unwrap();
+            let text = serde_json::to_string(&r).unwrap().replace("t_impact_us", "t_impact_s");
             let mut at: Vec<(usize, &str)> = names.iter().map(|n| (text.find(&format_key(n)).unwrap(), *n)).collect();
             at.sort_unstable();
             at.into_iter().map(|(_, n)| n).collect()

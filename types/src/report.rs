@@ -16,8 +16,11 @@ use crate::Flags;
 pub struct CycleReport {
     /// Counts every closed cycle, valid or not, from 0: a gap in the sequence is a lost report.
     pub seq: u32,
-    /// Time of the impact that closes the cycle, from the first sample.
-    pub t_impact_s: f64,
+    /// Time of the impact that closes the cycle, µs from the first sample
+    /// by the sample clock. An integer: exact for years, and computed on the
+    /// board without double precision, which its FPU lacks (`t_impact_s()`
+    /// gives seconds; renderings show that, as column `t_impact_s`).
+    pub t_impact_us: u64,
     pub period_s: f32,
     pub frequency_hz: f32,
     /// Mean friction magnitude over the cycle (stroke and backhaul samples).
@@ -57,6 +60,13 @@ pub struct CycleReport {
 }
 
 impl CycleReport {
+    /// The impact's time in seconds: the nearest `f64` to the µs count's
+    /// decimal value (a division by 10⁶ rounds once; a product by 1e-6 can
+    /// print as 1.2345670000000001).
+    pub fn t_impact_s(&self) -> f64 {
+        self.t_impact_us as f64 / 1e6
+    }
+
     /// True when the numbers are estimates (no invalidating flag).
     pub fn is_valid(&self) -> bool {
         !self.flags.intersects(Flags::INVALIDATING)

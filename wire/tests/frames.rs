@@ -16,7 +16,7 @@ fn hex(b: &[u8]) -> String {
 fn sample_report() -> CycleReport {
     CycleReport {
         seq: 7,
-        t_impact_s: 0.5,
+        t_impact_us: 500_000,
         period_s: 0.047,
         frequency_hz: 21.25,
         friction_n: 10.25,
@@ -93,7 +93,7 @@ const GOLDEN_CALIBRATION_HASH: u32 = 2_717_027_379;
 /// update docs/wire-protocol.md, and only then update the snapshot.
 #[test]
 fn golden_frames() {
-    assert_eq!(PROTOCOL_VERSION, 3);
+    assert_eq!(PROTOCOL_VERSION, 4);
     assert_eq!(
         hex(&frame(&HostMsg::Hello { protocol_version: 1 })),
         "000106016922de3600"
@@ -109,7 +109,7 @@ fn golden_frames() {
     );
     assert_eq!(
         hex(&frame(&DeviceMsg::Report(sample_report()))),
-        "00030107010101010107e03f1283403d0103aa410103244101032041010328410103803f0103c03f0103c03f010320400103304001036040010388400101023e0101023e0103603f0101063e3333333d04ab9f4804966148010101010103c4400107803f8096184b0101010cb398ca8f0a8010797d344800"
+        "000a0107a0c21e1283403d0103aa410103244101032041010328410103803f0103c03f0103c03f010320400103304001036040010388400101023e0101023e0103603f0101063e3333333d04ab9f4804966148010101010103c4400107803f8096184b0101010cb398ca8f0a80100c19e07200"
     );
     // A configuration, both ways (`Config` answers `GetConfig`, `SetConfig` carries one).
     assert_eq!(hex(&frame(&DeviceMsg::Config(sample_config()))), GOLDEN_CONFIG_FRAME);
@@ -118,7 +118,8 @@ fn golden_frames() {
         GOLDEN_SET_CONFIG_FRAME
     );
     assert_eq!(config_hash(&sample_config()), GOLDEN_CONFIG_HASH);
-    // Protocol 3 added the calibration's hash to every report.
+    // Protocol 3 added the calibration's hash to every report; protocol 4
+    // made the impact time integer µs (0.5 s: varint a0 c2 1e after the seq).
     assert_eq!(sample_config().calibration_hash(), GOLDEN_CALIBRATION_HASH);
     let rej = DeviceMsg::Rejected {
         command: CommandKind::Unknown,

@@ -90,6 +90,7 @@ pub(super) struct Balance {
 }
 
 impl Balance {
+    #[inline(always)]
     pub fn new(d: &Derived, cal: &Calibration) -> Self {
         let k1 = d.a1 * cal.scale[0];
         let k2 = -d.a2 * cal.scale[1];
@@ -123,9 +124,12 @@ struct Acc {
 }
 
 impl Acc {
+    /// The loop is written out channel by channel, with every running sum
+    /// a local: the board builds the estimator for size (`opt-level = "z"`),
+    /// which neither unrolls the per-channel loops nor keeps arrays in
+    /// registers, and this form is as fast there as at `-O3`.
     #[inline(always)]
     fn feed(&mut self, q: f32, b: &Balance, piece: &[RawSample]) {
-        let Acc { sq, s, run, top } = self;
         let Squares {
             mut e,
             mut re,
@@ -133,28 +137,31 @@ impl Acc {
             mut ff,
             mut rf,
             mut force,
-        } = *sq;
-        let mut one = |smp: &RawSample| {
-            let c = [smp.rear, smp.front, smp.accel];
-            for ch in 0..3 {
-                s[ch] = s[ch].wrapping_add(u32::from(c[ch]));
-                top[ch] = top[ch].max(u32::from(c[ch]).wrapping_sub(1));
-            }
-            run[0] = run[0].wrapping_add(s[0]);
-            run[1] = run[1].wrapping_add(s[1]);
-            force = b.force(c[0], c[1]);
-            let r = b.residual(c[2], force);
+        } = self.sq;
+        let [mut s0, mut s1, mut s2] = self.s;
+        let [mut run0, mut run1] = self.run;
+        let [mut top0, mut top1, mut top2] = self.top;
+        // Not unrolled: two samples a turn run out of registers (measured worse).
+        for smp in piece {
+            let (c0, c1, c2) = (smp.rear, smp.front, smp.accel);
+            s0 = s0.wrapping_add(u32::from(c0));
+            s1 = s1.wrapping_add(u32::from(c1));
+            s2 = s2.wrapping_add(u32::from(c2));
+            // Code 0 wraps to the top: one maximum finds both rails.
+            top0 = top0.max(u32::from(c0).wrapping_sub(1));
+            top1 = top1.max(u32::from(c1).wrapping_sub(1));
+            top2 = top2.max(u32::from(c2).wrapping_sub(1));
+            run0 = run0.wrapping_add(s0);
+            run1 = run1.wrapping_add(s1);
+            force = b.force(c0, c1);
+            let r = b.residual(c2, force);
             e *= q;
             re += r * e;
             rr += r * r;
             ff += force * force;
             rf += r * force;
-        };
-        // Not unrolled: two samples a turn run out of registers (measured worse).
-        for smp in piece {
-            one(smp);
         }
-        *sq = Squares {
+        self.sq = Squares {
             e,
             re,
             rr,
@@ -162,6 +169,9 @@ impl Acc {
             rf,
             force,
         };
+        self.s = [s0, s1, s2];
+        self.run = [run0, run1];
+        self.top = [top0, top1, top2];
     }
 }
 

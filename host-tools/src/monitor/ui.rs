@@ -244,7 +244,7 @@ fn cycle_panel(app: &App, v: &View) -> Paragraph<'static> {
     let value_style = if valid { Style::new().bold() } else { Style::new().dim() };
     let mut lines = vec![Line::from(vec![
         Span::styled(format!("Cycle {}", r.seq), Style::new().bold().fg(Color::Cyan)),
-        Span::raw(format!("  t {} s  ", num(r.t_impact_s, 4))),
+        Span::raw(format!("  t {} s  ", num(r.t_impact_s(), 4))),
         Span::styled(ago(app.now_us, t), Style::new().dim()),
     ])];
     if !valid {

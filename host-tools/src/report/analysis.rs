@@ -207,7 +207,7 @@ pub fn match_truth<'a>(reports: &'a [CycleReport], truth: &'a [CycleTruth], t0_s
     reports
         .iter()
         .filter_map(|r| {
-            let t = r.t_impact_s + t0_s;
+            let t = r.t_impact_s() + t0_s;
             let truth = truth.iter().find(|c| (c.t_impact_s - t).abs() <= MATCH_TOLERANCE_S)?;
             Some(Matched { report: r, truth })
         })

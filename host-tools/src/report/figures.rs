@@ -60,12 +60,12 @@ struct CycleView {
 fn cycle_view(a: &Analysis, r: &CycleReport) -> CycleView {
     let dt = a.trace.dt_s;
     let n = a.trace.len();
-    let t_prev = r.t_impact_s - r.period_s as f64;
+    let t_prev = r.t_impact_s() - r.period_s as f64;
     let index = |t: f64| ((t / dt).floor().max(0.0) as usize).min(n - 1);
-    let window = index(t_prev - CYCLE_MARGIN_S)..index(r.t_impact_s + CYCLE_MARGIN_S) + 1;
+    let window = index(t_prev - CYCLE_MARGIN_S)..index(r.t_impact_s() + CYCLE_MARGIN_S) + 1;
     let t_ms: Vec<f64> = window.clone().map(|i| (i as f64 * dt - t_prev) * 1e3).collect();
     let first = index(t_prev + a.cfg.blank_after_s as f64).max(window.start);
-    let last = index(r.t_impact_s);
+    let last = index(r.t_impact_s());
     let mut v_mps = vec![f64::NAN; window.len()];
     let mut turn_ms = None;
     if first < last {
@@ -221,7 +221,7 @@ fn cycle_title(a: &Analysis, r: &CycleReport) -> String {
         "{}: cycle {} (impact at {:.4} s){state}: friction {:.2} ± {:.2} N, impact {:.3} m/s, {:.3} J{}",
         a.name,
         r.seq,
-        r.t_impact_s + a.t0_s(),
+        r.t_impact_s() + a.t0_s(),
         r.friction_n,
         r.friction_uncertainty_n,
         r.impact_velocity_mps,
@@ -290,7 +290,11 @@ fn run_chart<'a>(reports: &[CycleReport], k: f32, x: &'a [f64], y_label: &str, l
 }
 
 pub(super) fn run_figure(a: &Analysis, path: &Path) -> Result<()> {
-    let x: &[f64] = &a.reports.iter().map(|r| r.t_impact_s + a.t0_s()).collect::<Vec<f64>>();
+    let x: &[f64] = &a
+        .reports
+        .iter()
+        .map(|r| r.t_impact_s() + a.t0_s())
+        .collect::<Vec<f64>>();
     let (reports, k) = (a.reports.as_slice(), a.cfg.coverage_factor);
     let friction = run_chart(
         reports,
