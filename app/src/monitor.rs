@@ -278,8 +278,11 @@ impl Monitor {
 
     /// A new configuration restarts the estimator but keeps the wear state.
     fn replace_config(&mut self, cfg: Config) -> Result<(), hammer_estimator::ConfigError> {
-        let mut est = Estimator::new(cfg)?;
-        est.restore_wear(*self.est.wear_state());
+        // Checked, then built straight into its place (`renew`): the
+        // estimator is ~7 KB, and copies of it on the stack made this the
+        // deepest frame of the sampling task.
+        cfg.validate()?;
+        let wear = *self.est.wear_state();
         let old = self.est.counters();
         let c = &mut self.carried;
         c.samples = c.samples.wrapping_add(old.samples);
@@ -288,7 +291,8 @@ impl Monitor {
         c.cycles = c.cycles.wrapping_add(old.cycles);
         c.invalid_cycles = c.invalid_cycles.wrapping_add(old.invalid_cycles);
         c.stalls = c.stalls.wrapping_add(old.stalls);
-        self.est = est;
+        self.est.renew(cfg)?;
+        self.est.restore_wear(wear);
         self.config_hash = config_hash(&DeviceConfig::from(&cfg));
         Ok(())
     }

@@ -321,9 +321,40 @@ impl CycleAcc {
         }
     }
 
+    /// [`Self::new`] in place: a fresh accumulator is ~5.5 KB (its
+    /// checkpoints), and `*self = Self::new()` put one on the stack at every
+    /// impact, the deepest frame of the sampling task on a size build. A
+    /// test holds it to `new`.
+    fn clear(&mut self) {
+        self.cp.clear();
+        self.cur = Sums::default();
+        self.since_cp = 0;
+        self.jp1 = 0.0;
+        self.jp2 = 0.0;
+        self.sq = Squares::default();
+        self.e_before = 0.0;
+        self.force_before = 0.0;
+        self.last_force = 0.0;
+        self.first_force = 0.0;
+        self.peak_p1 = f32::NEG_INFINITY;
+        self.peak_p2 = f32::NEG_INFINITY;
+        self.flags = Flags::default();
+        self.rail = [0; 3];
+        self.run = [0; 3];
+        self.last_code = [u16::MAX; 3];
+        self.slope = SlopeSums::default();
+        self.slope_cp = [SlopeSums::default(); SLOPE_WINDOW_CP];
+        self.slope_cp_len = 0;
+        self.spans = [EMPTY_SPAN; SPANS];
+        self.span_count = 0;
+        self.span_now = EMPTY_SPAN;
+        self.accel_fault_at = None;
+        self.pend = CodeSums::default();
+    }
+
     /// Restarts for a cycle whose blanking ended `samples_since_impact` samples after the impact.
     pub fn start(&mut self, d: &Derived, samples_since_impact: u32) {
-        *self = Self::new();
+        self.clear();
         // e(t) = exp(−(t − t_impact)/τ); the first push multiplies by q once.
         self.e_before = if d.q > 0.0 {
             match samples_since_impact {
@@ -551,5 +582,37 @@ impl CycleAcc {
 impl Default for CycleAcc {
     fn default() -> Self {
         Self::new()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    extern crate std;
+    use std::format;
+
+    use super::*;
+    use crate::{Config, RawSample};
+
+    #[test]
+    fn a_restart_in_place_is_a_fresh_accumulator() {
+        let cfg = Config::default();
+        let (d, cal) = (Derived::new(&cfg), Calibration::new(&cfg));
+        let mut used = CycleAcc::new();
+        used.start(&d, 3);
+        // Every kind of state: sums, checkpoints, rails, runs, spans, a fault.
+        let run: heapless::Vec<RawSample, 2048> = (0..2048u32)
+            .map(|i| RawSample {
+                rear: if i % 700 == 5 { 0 } else { (1000 + i % 97) as u16 },
+                front: (900 + i % 53) as u16,
+                accel: if i > 1500 { 2048 } else { (2000 + i % 61) as u16 },
+            })
+            .collect();
+        used.push_run(&d, &cal, [&run[..1000], &run[1000..]], 200);
+        used.settle(&d, &cal);
+        assert!(!used.cp.is_empty() && used.rail[0] > 0);
+        used.start(&d, 7);
+        let mut fresh = CycleAcc::new();
+        fresh.start(&d, 7);
+        assert_eq!(format!("{used:?}"), format!("{fresh:?}"));
     }
 }

@@ -48,43 +48,10 @@ pub use wear::{WearState, WearStateError};
 
 use cycle::{CycleAcc, Derived};
 use history::History;
-use run::{copy, first_at_or_below};
+use run::{copy, first_at_or_below, impact_code};
 
 /// Longest pre-impact blanking in samples (the delay line's size).
 pub const MAX_PRE_BLANK: usize = 64;
-
-/// The highest accelerometer code that reads below −threshold, when the
-/// calibration has a positive scale (the usual case); then detecting an
-/// impact is one integer compare per sample.
-fn impact_code(cfg: &Config) -> Option<u16> {
-    let a = &cfg.accel;
-    if a.scale <= 0.0 {
-        return None;
-    }
-    let mut code: Option<u16> = None;
-    // value(c) < −thr ⇔ c < zero − thr/scale; scan down from the estimate to be exact in f32.
-    let est = a.zero_code - cfg.impact_threshold_mps2 / a.scale;
-    let start = if est < 0.0 {
-        0
-    } else if est > a.full_scale_code as f32 {
-        a.full_scale_code
-    } else {
-        est as u16
-    };
-    let mut c = start.saturating_add(2).min(a.full_scale_code);
-    loop {
-        if a.value(c) < -cfg.impact_threshold_mps2 {
-            code = Some(c);
-            break;
-        }
-        if c == 0 {
-            break;
-        }
-        c -= 1;
-    }
-    // Code 0 (the bottom rail) is always an impact.
-    Some(code.unwrap_or(0))
-}
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Phase {
@@ -181,6 +148,19 @@ pub struct Estimator {
 impl Estimator {
     pub fn new(cfg: Config) -> Result<Self, ConfigError> {
         cfg.validate()?;
+        Ok(Self::build(cfg))
+    }
+
+    /// A new estimator for `cfg` in place of this one (its wear state and
+    /// counters go with it). Built straight into `self`: the estimator is
+    /// ~7 KB, and `*est = Estimator::new(cfg)?` held two copies on the stack.
+    pub fn renew(&mut self, cfg: Config) -> Result<(), ConfigError> {
+        cfg.validate()?;
+        *self = Self::build(cfg);
+        Ok(())
+    }
+
+    fn build(cfg: Config) -> Self {
         let fs = cfg.sample_rate_hz;
         let pre = (math::round(cfg.blank_before_s * fs) as usize).min(MAX_PRE_BLANK - 1);
         let shock = MIN_SHOCK_S * fs;
@@ -188,7 +168,7 @@ impl Estimator {
         let d = Derived::new(&cfg);
         let mut acc = CycleAcc::new();
         acc.start(&d, u32::MAX / 2);
-        Ok(Self {
+        Self {
             d,
             phase: Phase::Collecting,
             delay: [RawSample::default(); MAX_PRE_BLANK],
@@ -223,7 +203,7 @@ impl Estimator {
             wear: WearState::default(),
             counters: Counters::default(),
             cfg,
-        })
+        }
     }
 
     pub fn config(&self) -> &Config {
@@ -695,23 +675,5 @@ impl Estimator {
             self.counters.invalid_cycles = self.counters.invalid_cycles.wrapping_add(1);
         }
         r
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn impact_code_matches_the_float_threshold() {
-        for thr in [100.0f32, 1500.0, 1999.0, 5000.0] {
-            let mut cfg = Config::default();
-            cfg.impact_threshold_mps2 = thr;
-            let max = impact_code(&cfg).unwrap();
-            for c in 0..=4095u16 {
-                let float = c == 0 || cfg.accel.value(c) < -thr;
-                assert_eq!(c <= max, float, "thr {thr}, code {c}, max {max}");
-            }
-        }
     }
 }
