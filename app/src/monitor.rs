@@ -278,12 +278,14 @@ impl Monitor {
 
     /// A new configuration restarts the estimator but keeps the wear state.
     fn replace_config(&mut self, cfg: Config) -> Result<(), hammer_estimator::ConfigError> {
-        // Checked, then built straight into its place (`renew`): the
-        // estimator is ~7 KB, and copies of it on the stack made this the
-        // deepest frame of the sampling task.
-        cfg.validate()?;
+        // Built straight into its place (`renew`, which checks `cfg` first
+        // and leaves the estimator as it was on a rejection): the estimator
+        // is ~7 KB, and copies of it on the stack made this the deepest
+        // frame of the sampling task.
         let wear = *self.est.wear_state();
         let old = self.est.counters();
+        self.est.renew(cfg)?;
+        self.est.restore_wear(wear);
         let c = &mut self.carried;
         c.samples = c.samples.wrapping_add(old.samples);
         c.dropped_samples = c.dropped_samples.wrapping_add(old.dropped_samples);
@@ -291,8 +293,6 @@ impl Monitor {
         c.cycles = c.cycles.wrapping_add(old.cycles);
         c.invalid_cycles = c.invalid_cycles.wrapping_add(old.invalid_cycles);
         c.stalls = c.stalls.wrapping_add(old.stalls);
-        self.est.renew(cfg)?;
-        self.est.restore_wear(wear);
         self.config_hash = config_hash(&DeviceConfig::from(&cfg));
         Ok(())
     }
