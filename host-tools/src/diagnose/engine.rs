@@ -17,7 +17,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 use serde::{Deserialize, Serialize};
 
-use super::features::Extractor;
+use super::features::{pressure_floor, Extractor};
 use super::gap::CycleSignals;
 use super::model::ModelRunner;
 use super::pipeline::{group, held_out, nominal, rank, where_};
@@ -27,8 +27,8 @@ use hammer_sim::SimConfig;
 use hammer_trace::trace::Trace;
 
 pub use super::report::{
-    EffectResult, FittedParam, InputInfo, ModelForm, PointShrink, Recalibration, Remainder, Report, Shrink, Verdict,
-    WhereCell,
+    EffectResult, FittedParam, InputInfo, ModelForm, ModelFreeStat, PointShrink, Recalibration, Remainder, Report,
+    Shrink, Verdict, WhereCell,
 };
 
 /// One measured trace and its role.
@@ -77,10 +77,28 @@ pub struct Options {
     /// unsure of ([`super::model::NUISANCE`]); 0 trusts them exactly.
     pub nominal_uncertainty: f64,
     pub max_iterations: usize,
-    /// An effect must score above this (BIC units) to be named.
+    /// An effect the force balance cannot see must score above this (BIC
+    /// units) to be named; one it sees needs a positive score and
+    /// [`Options::min_model_free_z`].
     pub min_score: f64,
-    /// ... and explain at least this fraction of the nominal χ².
+    /// An effect the force balance sees (friction, a gain error, a zero
+    /// shift) is named only if its signature there stands this many standard
+    /// errors off the nominal model: the force balance needs no valve or port
+    /// model, so the model's form error cannot fake it, and however much of
+    /// the gap has other causes, it does not hide it.
+    #[serde(default = "default_min_model_free_z")]
+    pub min_model_free_z: f64,
+    /// An effect the force balance cannot see (leakage, valve delay, heat
+    /// transfer, a supply restriction) has only the model-based features as
+    /// evidence, and they carry the model's form error: it must explain at
+    /// least this fraction of the nominal χ², because a smooth form error
+    /// lends any effect a little of its shape.
     pub min_explained: f64,
+    /// A pair's second effect, unseen by the force balance, must explain
+    /// this fraction of what the first leaves: after the first effect the
+    /// rest is mostly noise and form error, whose shape any effect fits a little.
+    #[serde(default = "default_min_explained_pair")]
+    pub min_explained_pair: f64,
     /// Pairs are tried when the best single effect leaves a reduced χ² above this.
     pub pair_residual: f64,
     /// How many runners-up are tried as the second effect of a pair.
@@ -101,7 +119,9 @@ impl Default for Options {
             nominal_uncertainty: 0.2,
             max_iterations: 12,
             min_score: 20.0,
-            min_explained: 0.5,
+            min_model_free_z: default_min_model_free_z(),
+            min_explained: 0.4,
+            min_explained_pair: default_min_explained_pair(),
             pair_residual: 2.0,
             pair_candidates: 5,
             threads: std::thread::available_parallelism().map_or(2, |n| n.get()),
@@ -109,6 +129,14 @@ impl Default for Options {
             model_form: true,
         }
     }
+}
+
+fn default_min_model_free_z() -> f64 {
+    3.0
+}
+
+fn default_min_explained_pair() -> f64 {
+    0.5
 }
 
 /// Waveforms of one operating point for the figures: mean measured cycle,
@@ -171,7 +199,11 @@ pub fn diagnose(
     if inputs.is_empty() {
         return Err(DiagnoseError::NoInput);
     }
-    let runner = ModelRunner::new(base.clone(), extractor_for(base));
+    let mut extractor = extractor_for(base);
+    let rear: Vec<&[f64]> = inputs.iter().map(|i| i.trace.p_rear_pa.as_slice()).collect();
+    let front: Vec<&[f64]> = inputs.iter().map(|i| i.trace.p_front_pa.as_slice()).collect();
+    extractor.pressure_floor_pa = [pressure_floor(&rear), pressure_floor(&front)];
+    let runner = ModelRunner::new(base.clone(), extractor);
     let grouped = group::group(inputs, &runner.extractor)?;
     let points = &grouped.points;
 
@@ -205,6 +237,7 @@ pub fn diagnose(
             recalibration,
             remainder: located.remainder,
             model_form,
+            model_free: fs.model_free_stats(),
             shrink,
             chi2_nominal: ranking.chi2_nominal,
             features_compared: ranking.features_compared,

@@ -101,6 +101,31 @@ pub struct Extractor {
     pub blank_before_s: f64,
     /// Below this pressure-integrated speed the direction of motion is unsure.
     pub min_speed_mps: f64,
+    /// The rear and front transducers' floors, Pa gauge: a reading there
+    /// says only "at or below" (a 0–10 bar gauge transducer on a chamber
+    /// vented below atmosphere), so the force balance skips it and the
+    /// model is read through the same floor. −∞ when the readings show none
+    /// ([`pressure_floor`]).
+    pub pressure_floor_pa: [f64; 2],
+}
+
+/// A channel's clipping floor, if its readings show one: the lowest reading
+/// held by at least 0.1 % of the samples. A smooth signal touches its
+/// minimum for a few samples; a transducer at the end of its range sits there.
+pub fn pressure_floor(channels: &[&[f64]]) -> f64 {
+    let min = channels
+        .iter()
+        .flat_map(|c| c.iter())
+        .copied()
+        .filter(|x| x.is_finite())
+        .fold(f64::INFINITY, f64::min);
+    let n: usize = channels.iter().map(|c| c.len()).sum();
+    let at = channels.iter().flat_map(|c| c.iter()).filter(|&&x| x <= min).count();
+    if min.is_finite() && n > 0 && at * 1000 >= n && at >= 10 {
+        min
+    } else {
+        f64::NEG_INFINITY
+    }
 }
 
 impl Extractor {
@@ -116,6 +141,7 @@ impl Extractor {
             blank_after_s: super::gap::IMPACT_WINDOW_S,
             blank_before_s: 50e-6,
             min_speed_mps: 0.05,
+            pressure_floor_pa: [f64::NEG_INFINITY; 2],
         }
     }
 
@@ -171,13 +197,17 @@ impl Extractor {
             .collect();
         let v_p = velocity_from_accel(&pressure_accel, dt);
         let flight = |k: usize| since(k) >= self.blank_after_s && until(k) > self.blank_before_s;
+        // The force balance needs both chamber forces: a reading at a
+        // transducer's floor is not one.
+        let [floor1, floor2] = self.pressure_floor_pa;
+        let balanced = |k: usize| flight(k) && p1[k] > floor1 && p2[k] > floor2;
         let decay = |k: usize| (-since(k) / self.zero_shift_tau_s).exp();
 
         // The force balance, first with the direction of motion from the
         // pressures, then twice more with the velocity integrated from the
         // acceleration corrected for the zero shift just fitted (sharper
         // turning points: a friction of 10 N moves them by ~0.1 m/s).
-        let mut fit = self.force_balance(p1, p2, acc, &v_p, &flight, &decay)?;
+        let mut fit = self.force_balance(p1, p2, acc, &v_p, &balanced, &decay)?;
         let mut accel_c: Vec<f64> = Vec::new();
         let mut vel: Vec<f64> = Vec::new();
         for pass in 0..3 {
@@ -185,7 +215,7 @@ impl Extractor {
             accel_c = (0..n).map(|k| acc[k] - z * decay(k)).collect();
             vel = velocity_from_accel(&accel_c, dt);
             if pass < 2 {
-                fit = self.force_balance(p1, p2, acc, &vel, &flight, &decay)?;
+                fit = self.force_balance(p1, p2, acc, &vel, &balanced, &decay)?;
             }
         }
         let (beta, z_var) = (fit.beta, fit.z_var);
@@ -420,5 +450,53 @@ mod tests {
         assert_eq!(feature_name(wave_index(2, 3)), "accel_mps2[3]");
         assert_eq!(wave_of(wave_index(3, BINS - 1)), Some((3, BINS - 1)));
         assert_eq!(wave_of(ZERO_SHIFT_SQ), None);
+    }
+
+    /// A floor is a reading held for many samples; a smooth signal's minimum is not.
+    #[test]
+    fn a_floor_is_found_only_where_the_readings_sit() {
+        let sine: Vec<f64> = (0..10_000).map(|i| 1e5 * (i as f64 * 0.01).sin()).collect();
+        assert_eq!(pressure_floor(&[&sine]), f64::NEG_INFINITY);
+        let clipped: Vec<f64> = sine.iter().map(|p| p.max(0.0)).collect();
+        assert_eq!(pressure_floor(&[&clipped]), 0.0);
+        assert_eq!(pressure_floor(&[]), f64::NEG_INFINITY);
+        assert_eq!(pressure_floor(&[&[f64::NAN; 100]]), f64::NEG_INFINITY);
+    }
+
+    /// A frictionless hammer read through transducers whose range ends at
+    /// 0.3 bar gauge: the clipped readings fake several newtons and a gain
+    /// error in the force balance; with the floor known, it is back to the
+    /// truth (no friction, unit gains) within its floors.
+    #[test]
+    fn clipped_readings_are_left_out_of_the_force_balance() {
+        use hammer_sim::effects::Effects;
+        let base = hammer_sim::SimConfig::default();
+        let runner =
+            crate::diagnose::model::ModelRunner::new(base.clone(), crate::diagnose::engine::extractor_for(&base));
+        let truth = hammer_sim::simulate_truth(&runner.config(5.0, &Effects::default()))
+            .unwrap()
+            .truth;
+        let floor = 0.3e5;
+        let p1: Vec<f64> = truth.p_rear_pa.iter().map(|p| p.max(floor)).collect();
+        let p2: Vec<f64> = truth.p_front_pa.iter().map(|p| p.max(floor)).collect();
+        assert!(pressure_floor(&[&p1]) == floor && pressure_floor(&[&p2]) == floor);
+        let s = Signals {
+            dt_s: truth.dt_s,
+            p_rear_pa: &p1,
+            p_front_pa: &p2,
+            accel_mps2: &truth.accel_mps2,
+        };
+        let mean = |ex: &Extractor| summarize(&ex.cycles(&s)[2..]).mean;
+        let blind = mean(&runner.extractor);
+        let mut ex = runner.extractor;
+        ex.pressure_floor_pa = [floor, floor];
+        let aware = mean(&ex);
+        let worst = |f: &[f64]| f[F_STROKE].abs().max(f[F_BACKHAUL].abs());
+        assert!(worst(&blind) > 2.0, "{} N {} N", blind[F_STROKE], blind[F_BACKHAUL]);
+        assert!(worst(&aware) < 0.3, "{} N {} N", aware[F_STROKE], aware[F_BACKHAUL]);
+        assert!(
+            aware[GAIN_REAR].abs() < 0.002 && aware[GAIN_FRONT].abs() < 0.002,
+            "{aware:?}"
+        );
     }
 }

@@ -10,11 +10,12 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 use super::engine::Floors;
 use super::features::{
-    wave_index, wave_of, Summary, BINS, ENERGY, F_BACKHAUL, F_STROKE, GAIN_FRONT, GAIN_REAR, N_FEATURES, PERIOD,
-    VISCOUS, WAVE_SIGNALS, ZERO_SHIFT_SQ,
+    feature_name, wave_index, wave_of, Summary, BINS, ENERGY, F_BACKHAUL, F_STROKE, GAIN_FRONT, GAIN_REAR, N_FEATURES,
+    PERIOD, VISCOUS, WAVE_SIGNALS, ZERO_SHIFT_SQ,
 };
 use super::model::{Candidate, ModelRunner, NUISANCE};
 use super::parallel::parallel;
+use super::report::ModelFreeStat;
 use hammer_sim::run::TruthTrace;
 
 /// The fit set's data and its weights, shared by every effect's fit.
@@ -22,6 +23,8 @@ pub(crate) struct FitSet<'a> {
     pub(crate) runner: &'a ModelRunner,
     pub(crate) points: Vec<(f64, Summary, Vec<f64>)>, // bar, summary, sigma
     pub(crate) nominal_truth: Vec<TruthTrace>,
+    /// The nominal model's features at each fit point.
+    pub(crate) nominal_features: Vec<Vec<f64>>,
     /// Lowest and highest supply pressure of the fit set, bar.
     pub(crate) pressures: (f64, f64),
     pub(crate) distinct: usize,
@@ -66,6 +69,39 @@ impl FitSet<'_> {
         let m = self.points.iter().map(|p| p.1.mean[j]).sum::<f64>() / n;
         let se = (self.points.iter().map(|p| p.2[j] * p.2[j]).sum::<f64>()).sqrt() / n;
         (m, se)
+    }
+
+    /// The measurement's feature `j` against the nominal model's, over the
+    /// fit points: the mean difference and its standard error.
+    pub(crate) fn off_nominal(&self, j: usize) -> (f64, f64) {
+        let n = self.points.len().max(1) as f64;
+        let d = self
+            .points
+            .iter()
+            .zip(&self.nominal_features)
+            .map(|(p, nom)| p.1.mean[j] - nom[j])
+            .filter(|x| x.is_finite())
+            .sum::<f64>()
+            / n;
+        (d, self.mean_se(j).1)
+    }
+
+    /// The force balance's quantities against the nominal model's.
+    pub(crate) fn model_free_stats(&self) -> Vec<ModelFreeStat> {
+        MODEL_FREE
+            .iter()
+            .map(|&j| {
+                let (d, se) = self.off_nominal(j);
+                let nominal = self.nominal_features.iter().map(|f| f[j]).sum::<f64>() / self.points.len().max(1) as f64;
+                ModelFreeStat {
+                    feature: feature_name(j),
+                    measured: nominal + d,
+                    nominal,
+                    se,
+                    z: if se > 0.0 { d / se } else { 0.0 },
+                }
+            })
+            .collect()
     }
 
     pub(crate) fn residuals(&self, cand: &Candidate) -> Option<Vec<f64>> {
@@ -265,6 +301,9 @@ pub(crate) fn model_form_group(feature: usize) -> Option<usize> {
 pub(crate) fn model_form_group_name(g: usize) -> &'static str {
     WAVE_SIGNALS[g]
 }
+
+/// The force balance's features: model-free (see [`super::features`]).
+pub(crate) const MODEL_FREE: [usize; 6] = [F_STROKE, F_BACKHAUL, VISCOUS, GAIN_REAR, GAIN_FRONT, ZERO_SHIFT_SQ];
 
 /// Missing on the model side where the measurement has it: a clear miss.
 pub(crate) fn residual(model: f64, meas: f64, sigma: f64) -> f64 {

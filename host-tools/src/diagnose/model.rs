@@ -119,11 +119,17 @@ impl ModelRunner {
     /// Features of a simulated solution seen through the candidate's sensor effects.
     pub fn features_of_truth(&self, truth: &TruthTrace, effects: &Effects) -> Option<Vec<f64>> {
         let (f1, f2) = pressure_reading_factors(effects);
+        let [floor1, floor2] = self.extractor.pressure_floor_pa;
         let scaled;
-        let (p1, p2): (&[f64], &[f64]) = if f1 != 1.0 || f2 != 1.0 {
+        // Read as the measurement's transducers read: gain, then their floor.
+        let (p1, p2): (&[f64], &[f64]) = if f1 != 1.0 || f2 != 1.0 || floor1.is_finite() || floor2.is_finite() {
             scaled = (
-                truth.p_rear_pa.iter().map(|p| p * f1).collect::<Vec<_>>(),
-                truth.p_front_pa.iter().map(|p| p * f2).collect::<Vec<_>>(),
+                truth.p_rear_pa.iter().map(|p| (p * f1).max(floor1)).collect::<Vec<_>>(),
+                truth
+                    .p_front_pa
+                    .iter()
+                    .map(|p| (p * f2).max(floor2))
+                    .collect::<Vec<_>>(),
             );
             (&scaled.0, &scaled.1)
         } else {

@@ -53,6 +53,11 @@ pub struct EffectResult {
     pub score: f64,
     pub explained_fraction: f64,
     pub evidence: Vec<String>,
+    /// How many standard errors the force balance's signature of the effect
+    /// stands off the nominal model (see [`ModelFreeStat`]); `None` for an
+    /// effect the force balance cannot see.
+    #[serde(default)]
+    pub model_free_z: Option<f64>,
     pub simulations: usize,
     #[serde(skip)]
     pub candidate: Candidate,
@@ -114,6 +119,22 @@ pub struct ModelForm {
     pub factor: f64,
 }
 
+/// One quantity of the measurement's force balance over the fit points
+/// against the nominal model's: it needs no valve, port or chamber model,
+/// so a structural difference of the model cannot fake it, and an effect
+/// that shows here is pinned by it.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct ModelFreeStat {
+    pub feature: String,
+    /// Mean over the fit points: the measurement's and the nominal model's.
+    pub measured: f64,
+    pub nominal: f64,
+    /// Standard error of the difference (noise and floor).
+    pub se: f64,
+    /// (measured − nominal) / se.
+    pub z: f64,
+}
+
 /// A nominal parameter the fit moved: its value and standard deviation
 /// after the fit, and how many prior standard deviations it moved.
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -156,6 +177,9 @@ pub struct Report {
     /// The unexplained remainder, largest first.
     pub remainder: Vec<Remainder>,
     pub model_form: Vec<ModelForm>,
+    /// The force balance's model-free quantities, measured against nominal.
+    #[serde(default)]
+    pub model_free: Vec<ModelFreeStat>,
     pub shrink: Shrink,
     pub chi2_nominal: f64,
     pub features_compared: usize,

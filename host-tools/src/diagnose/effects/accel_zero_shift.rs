@@ -34,6 +34,11 @@ impl Diagnosed for AccelZeroShift {
         vec![((fs.avg(ZERO_SHIFT_SQ) - nominal_zs).max(0.0) / ZERO_SHIFT_SQ_FACTOR).sqrt()]
     }
 
+    fn model_free_z(fs: &FitSet) -> Option<f64> {
+        let (z2, se) = fs.off_nominal(ZERO_SHIFT_SQ);
+        (se > 0.0).then(|| z2 / se)
+    }
+
     fn evidence(fs: &FitSet) -> Option<String> {
         let (z, _) = fs.mean_se(ZERO_SHIFT_SQ);
         Some(format!(

@@ -44,6 +44,14 @@ impl Diagnosed for CoulombFriction {
             .collect()
     }
 
+    /// Both phases' offsets: friction opposes the motion in each.
+    fn model_free_z(fs: &FitSet) -> Option<f64> {
+        let (s, ss) = fs.off_nominal(F_STROKE);
+        let (b, sb) = fs.off_nominal(F_BACKHAUL);
+        let se = (ss * ss + sb * sb).sqrt();
+        (se > 0.0).then(|| (s + b) / se)
+    }
+
     fn evidence(fs: &FitSet) -> Option<String> {
         let (s, ss) = fs.mean_se(F_STROKE);
         let (b, sb) = fs.mean_se(F_BACKHAUL);

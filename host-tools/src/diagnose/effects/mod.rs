@@ -80,6 +80,13 @@ pub(super) trait Diagnosed: Effect {
         None
     }
 
+    /// How many standard errors the effect's signature in the force balance
+    /// stands off the nominal model's, in the direction the effect moves it;
+    /// `None` if the force balance cannot see it.
+    fn model_free_z(_fs: &FitSet) -> Option<f64> {
+        None
+    }
+
     /// A sensor effect on the pressure readings: the factors on the rear and
     /// front channels (reading = factor·true).
     fn pressure_reading_factors(&self) -> (f64, f64) {
@@ -104,6 +111,7 @@ pub(super) trait DiagnosisEntry: Sync {
     fn apply(&self, effects: &mut Effects, theta: &[f64], pressures: (f64, f64));
     fn start_values(&self, fs: &FitSet) -> Vec<f64>;
     fn evidence(&self, fs: &FitSet) -> Option<String>;
+    fn model_free_z(&self, fs: &FitSet) -> Option<f64>;
     fn pressure_reading_factors(&self, effects: &Effects) -> (f64, f64);
     fn shift_expected_features(&self, effects: &Effects, mean: &mut [f64]);
     fn draw(&self, effects: &mut Effects, rng: &mut Rng);
@@ -128,6 +136,9 @@ impl<T: Diagnosed> DiagnosisEntry for Entry<T> {
     }
     fn evidence(&self, fs: &FitSet) -> Option<String> {
         T::evidence(fs)
+    }
+    fn model_free_z(&self, fs: &FitSet) -> Option<f64> {
+        T::model_free_z(fs)
     }
     fn pressure_reading_factors(&self, effects: &Effects) -> (f64, f64) {
         T::get(effects).map_or((1.0, 1.0), |e| e.pressure_reading_factors())

@@ -22,6 +22,19 @@ impl Diagnosed for PressureGainError {
         vec![fs.avg(GAIN_REAR), fs.avg(GAIN_FRONT)]
     }
 
+    /// The clearer of the two channels' gains, either sign.
+    fn model_free_z(fs: &FitSet) -> Option<f64> {
+        let z = |j| {
+            let (g, se) = fs.off_nominal(j);
+            if se > 0.0 {
+                (g / se).abs()
+            } else {
+                0.0
+            }
+        };
+        Some(z(GAIN_REAR).max(z(GAIN_FRONT)))
+    }
+
     fn evidence(fs: &FitSet) -> Option<String> {
         let (g1, s1) = fs.mean_se(GAIN_REAR);
         let (g2, s2) = fs.mean_se(GAIN_FRONT);

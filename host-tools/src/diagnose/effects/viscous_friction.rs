@@ -24,6 +24,11 @@ impl Diagnosed for ViscousFriction {
         vec![fs.avg(VISCOUS).max(0.05)]
     }
 
+    fn model_free_z(fs: &FitSet) -> Option<f64> {
+        let (c, se) = fs.off_nominal(VISCOUS);
+        (se > 0.0).then(|| c / se)
+    }
+
     fn evidence(fs: &FitSet) -> Option<String> {
         let (c, sc) = fs.mean_se(VISCOUS);
         Some(format!(

@@ -223,8 +223,35 @@ fn verdict_md(s: &mut String, report: &Report) {
     line!(s, "{params}");
     line!(s, "```");
     line!(s);
+    model_free_md(s, report);
     recalibration_md(s, report);
     remainder_md(s, report);
+}
+
+/// The force balance against the nominal model: the evidence no valve or
+/// port model stands behind.
+fn model_free_md(s: &mut String, report: &Report) {
+    if report.model_free.is_empty() {
+        return;
+    }
+    line!(s, "### Model-free evidence (the force balance)");
+    line!(s);
+    line!(s, "Fit points' mean; z = (measured − nominal) / standard error; an effect the force balance sees is named only at z ≥ {}.", num(report.options.min_model_free_z));
+    line!(s);
+    line!(s, "| quantity | measured | nominal model | ± | z |");
+    line!(s, "|---|---:|---:|---:|---:|");
+    for m in &report.model_free {
+        line!(
+            s,
+            "| {} | {} | {} | {} | {} |",
+            m.feature,
+            num(m.measured),
+            num(m.nominal),
+            num(m.se),
+            num(m.z)
+        );
+    }
+    line!(s);
 }
 
 /// Where the gap lies: the largest cells against the nominal model.
@@ -533,15 +560,16 @@ pub fn summary(report: &Report) -> String {
         }
     }
     if !report.effects.is_empty() {
-        line!(s, "which effect (score ΔBIC, explained):");
+        line!(s, "which effect (score ΔBIC, explained, force-balance z):");
         for (k, e) in report.effects.iter().take(3).enumerate() {
             line!(
                 s,
-                "  {}. {:<22} {:>9}  {:>5} %  {}",
+                "  {}. {:<22} {:>9}  {:>5} %  {:>6}  {}",
                 k + 1,
                 e.name,
                 num(e.score),
                 pct(100.0 * e.explained_fraction),
+                e.model_free_z.map_or_else(|| "-".to_string(), num),
                 fitted_params(e)
             );
         }

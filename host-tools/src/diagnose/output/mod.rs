@@ -77,6 +77,7 @@ mod tests {
             score,
             explained_fraction: explained,
             evidence: vec![format!("force balance: evidence for {name}")],
+            model_free_z: Some(9.5),
             simulations: 10,
             candidate: Candidate::default(),
         }
@@ -129,6 +130,7 @@ mod tests {
             recalibration: vec![],
             remainder: vec![],
             model_form: vec![],
+            model_free: vec![],
             shrink: Shrink {
                 impact_energy_error_before: 12.34,
                 impact_energy_error_after: 1.23,

@@ -84,6 +84,11 @@ pub(crate) fn fit_effects(
         })
         .collect();
     let evidence = evidence(fs, names, &cand);
+    // A pair is seen by the force balance as well as its clearer member.
+    let model_free_z = names
+        .iter()
+        .filter_map(|n| diagnosis(n).and_then(|d| d.model_free_z(fs)))
+        .reduce(f64::max);
     Some(EffectResult {
         name: names.join("+"),
         params: if names.len() == 1 {
@@ -96,6 +101,7 @@ pub(crate) fn fit_effects(
         score,
         explained_fraction: explained,
         evidence,
+        model_free_z,
         simulations: fs.sims.load(Ordering::Relaxed) - sims_before,
         candidate: cand,
     })

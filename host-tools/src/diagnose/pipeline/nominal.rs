@@ -78,6 +78,7 @@ pub(crate) fn fit_set<'a>(
             })
             .collect(),
         nominal_truth: fit_idx.iter().map(|&i| nominal.runs[i].truth.clone()).collect(),
+        nominal_features: fit_idx.iter().map(|&i| nominal.features[i].clone()).collect(),
         pressures,
         distinct: fit_bars.len(),
         sims: AtomicUsize::new(points.len()),

@@ -64,28 +64,32 @@ pub(crate) fn rank(fs: &FitSet, opts: &Options, step: &(dyn Fn(&str) + Sync)) ->
     let n_compared = fs.points.len() * N_FEATURES;
     let mut pairs = Vec::new();
     let mut verdict = None;
-    let reason = match effects.first() {
-        Some(best) if significant(best, opts) => {
+    // The best-scoring effect with evidence of its own: a higher score
+    // without it is the form error's shape, not an effect.
+    let reason = match effects.iter().position(|e| significant(e, opts)) {
+        Some(i) => {
+            let best = &effects[i];
             verdict = Some(best.clone());
-            let mut reason = single_reason(&effects);
+            let mut reason = single_reason(&effects, i, opts);
             if needs_pair(best, n_compared, ln_n, opts) {
-                pairs = fit_pairs(fs, &effects, chi2_nominal, ln_n, opts);
-                if let Some((p, extra)) = pairs.first().and_then(|p| pair_gain(best, p, ln_n, opts).map(|x| (p, x))) {
+                pairs = fit_pairs(fs, &effects, i, chi2_nominal, ln_n, opts);
+                let second_z = |p: &EffectResult| {
+                    let second = p.name.split('+').nth(1).unwrap_or_default();
+                    effects.iter().find(|e| e.name == second).and_then(|e| e.model_free_z)
+                };
+                if let Some((p, extra)) = pairs
+                    .iter()
+                    .find_map(|p| pair_gain(best, p, second_z(p), ln_n, opts).map(|x| (p, x)))
+                {
                     reason = pair_reason(best, p, n_compared, extra);
                     verdict = Some(p.clone());
                 }
             }
             reason
         }
-        Some(best) => format!(
-            "no effect explains a significant part of the gap: best {} (score {:.0}, {:.0} % explained; needs > {:.0} and {:.0} %)",
-            best.name,
-            best.score,
-            100.0 * best.explained_fraction,
-            opts.min_score,
-            100.0 * opts.min_explained
-        ),
-        None => "no effect could be fitted".into(),
+        None => effects
+            .first()
+            .map_or_else(|| "no effect could be fitted".into(), |best| none_reason(best, opts)),
     };
     step("pairs");
     Ranking {
@@ -98,9 +102,23 @@ pub(crate) fn rank(fs: &FitSet, opts: &Options, step: &(dyn Fn(&str) + Sync)) ->
     }
 }
 
-/// Scores above the threshold and explains enough of the nominal χ².
+/// Shows evidence of its own: the force balance's signature if it has
+/// one, and then the model-based fit need only agree (a positive score); a
+/// model-based fit cannot name such an effect without it. Else a score
+/// above the threshold and a share of the gap.
 fn significant(e: &EffectResult, opts: &Options) -> bool {
-    e.score > opts.min_score && e.explained_fraction >= opts.min_explained
+    own_evidence(e.model_free_z, e.score, e.explained_fraction, opts.min_explained, opts)
+}
+
+/// The rule of [`significant`] for a single or a pair's second effect: `z`
+/// its force-balance signature (`None` if it has none), `score` what it
+/// adds in BIC units, `share` the part of the gap it explains (of at least
+/// `min_share`).
+fn own_evidence(z: Option<f64>, score: f64, share: f64, min_share: f64, opts: &Options) -> bool {
+    match z {
+        Some(z) => score > 0.0 && z >= opts.min_model_free_z,
+        None => score > opts.min_score && share >= min_share,
+    }
 }
 
 /// A pair can only be named if the single leaves more than the threshold
@@ -110,22 +128,42 @@ fn needs_pair(best: &EffectResult, n_compared: usize, ln_n: f64, opts: &Options)
     reduced > opts.pair_residual || best.chi2 > opts.min_score + 2.0 * ln_n
 }
 
-/// The pair's score over the single, if it wins: it must beat the single by
-/// as much as a single beats nominal.
-fn pair_gain(best: &EffectResult, pair: &EffectResult, ln_n: f64, opts: &Options) -> Option<f64> {
+/// The pair's score over the single, if it wins: its second effect must
+/// show evidence of its own as a single must against nominal (`second_z`:
+/// its force-balance signature).
+fn pair_gain(
+    best: &EffectResult,
+    pair: &EffectResult,
+    second_z: Option<f64>,
+    ln_n: f64,
+    opts: &Options,
+) -> Option<f64> {
     let extra = best.chi2 - pair.chi2 - (pair.fitted.len() - best.fitted.len()) as f64 * ln_n;
-    (extra > opts.min_score && (best.chi2 - pair.chi2) >= opts.min_explained * best.chi2).then_some(extra)
+    let share = if best.chi2 > 0.0 {
+        (best.chi2 - pair.chi2) / best.chi2
+    } else {
+        0.0
+    };
+    own_evidence(second_z, extra, share, opts.min_explained_pair, opts).then_some(extra)
 }
 
-/// The best single with each runner-up; the next effects by their own
-/// score: a second effect shows there first, and each pair costs a fit.
-fn fit_pairs(fs: &FitSet, effects: &[EffectResult], chi2_nominal: f64, ln_n: f64, opts: &Options) -> Vec<EffectResult> {
-    let best = &effects[0];
+/// The named single (`effects[best]`) with each runner-up; the next effects
+/// by their own score: a second effect shows there first, and each pair
+/// costs a fit.
+fn fit_pairs(
+    fs: &FitSet,
+    effects: &[EffectResult],
+    best: usize,
+    chi2_nominal: f64,
+    ln_n: f64,
+    opts: &Options,
+) -> Vec<EffectResult> {
+    let best = &effects[best];
     let first = best.name.clone();
     let start: Vec<FittedParam> = best.fitted.clone();
     let jobs: Vec<(String, Vec<FittedParam>)> = effects
         .iter()
-        .skip(1)
+        .filter(|e| e.name != first)
         .take(opts.pair_candidates)
         .map(|o| (o.name.clone(), o.fitted.clone()))
         .collect();
@@ -141,15 +179,56 @@ fn fit_pairs(fs: &FitSet, effects: &[EffectResult], chi2_nominal: f64, ln_n: f64
     pairs
 }
 
-fn single_reason(effects: &[EffectResult]) -> String {
-    let best = &effects[0];
+/// Why the best single was not named, in the terms of the rule it failed.
+fn none_reason(best: &EffectResult, opts: &Options) -> String {
+    let evidence = match best.model_free_z {
+        Some(z) => format!(
+            "its force-balance signature is {z:.1} standard errors off nominal (needs {:.0})",
+            opts.min_model_free_z
+        ),
+        None => format!(
+            "it explains {:.0} % of the gap (needs {:.0} %, the force balance cannot see it)",
+            100.0 * best.explained_fraction,
+            100.0 * opts.min_explained
+        ),
+    };
     format!(
-        "{} explains {:.0} % of the nominal gap (score {:.0}, next {} at {:.0})",
-        best.name,
-        100.0 * best.explained_fraction,
-        best.score,
-        effects.get(1).map_or("-", |e| e.name.as_str()),
-        effects.get(1).map_or(0.0, |e| e.score)
+        "no effect shows enough evidence: best {} scores {:.0} (needs > {:.0}); {evidence}",
+        best.name, best.score, opts.min_score
+    )
+}
+
+fn single_reason(effects: &[EffectResult], best: usize, opts: &Options) -> String {
+    let e = &effects[best];
+    let next = effects.iter().find(|x| x.name != e.name);
+    let evidence = match e.model_free_z {
+        Some(z) => format!(
+            "its force-balance signature stands {z:.1} standard errors off nominal (needs {:.0})",
+            opts.min_model_free_z
+        ),
+        None => format!(
+            "it explains {:.0} % of the nominal gap (the force balance cannot see it)",
+            100.0 * e.explained_fraction
+        ),
+    };
+    let passed = if best > 0 {
+        format!(
+            "; {} scored higher without evidence of its own",
+            effects[..best]
+                .iter()
+                .map(|x| x.name.as_str())
+                .collect::<Vec<_>>()
+                .join(", ")
+        )
+    } else {
+        String::new()
+    };
+    format!(
+        "{} scores {:.0}, {evidence} (next {} at {:.0}){passed}",
+        e.name,
+        e.score,
+        next.map_or("-", |x| x.name.as_str()),
+        next.map_or(0.0, |x| x.score)
     )
 }
 
@@ -182,25 +261,52 @@ mod tests {
             score: chi2_nominal - chi2 - params as f64 * ln_n,
             explained_fraction: ((chi2_nominal - chi2) / chi2_nominal).max(0.0),
             evidence: Vec::new(),
+            model_free_z: None,
             simulations: 0,
             candidate: Candidate::default(),
         }
     }
 
-    /// A large gap closed by a third is evidence of something, not an
-    /// explanation: a high score alone does not name an effect.
+    /// An effect the force balance cannot see needs a share of the gap: a
+    /// large gap closed by a fifth is the form error's shape, not an effect.
     #[test]
-    fn an_effect_must_explain_most_of_the_gap() {
+    fn an_unseen_effect_must_explain_a_share_of_the_gap() {
         let opts = Options::default();
         let ln_n = 20f64.ln();
-        assert!(significant(&result("a", 1, 100.0, 1000.0, ln_n), &opts));
-        let partial = result("b", 1, 700.0, 1000.0, ln_n);
+        assert!(significant(&result("a", 1, 500.0, 1000.0, ln_n), &opts));
+        let partial = result("b", 1, 800.0, 1000.0, ln_n);
         assert!(partial.score > opts.min_score);
         assert!(!significant(&partial, &opts));
         assert!(
-            !significant(&result("c", 1, 90.0, 100.0, ln_n), &opts),
+            !significant(&result("c", 1, 12.0, 30.0, ln_n), &opts),
             "score below threshold"
         );
+    }
+
+    /// An effect the force balance sees is named on that evidence however
+    /// little of a gap with other causes it explains, and not without it
+    /// however well its model-based fit scores.
+    #[test]
+    fn a_seen_effect_is_named_on_its_force_balance() {
+        let opts = Options::default();
+        let ln_n = 20f64.ln();
+        let small_share = EffectResult {
+            model_free_z: Some(12.0),
+            ..result("friction", 2, 900.0, 1000.0, ln_n)
+        };
+        assert!(small_share.explained_fraction < opts.min_explained);
+        assert!(significant(&small_share, &opts));
+        let unseen = EffectResult {
+            model_free_z: Some(1.0),
+            ..result("friction", 2, 100.0, 1000.0, ln_n)
+        };
+        assert!(!significant(&unseen, &opts));
+        assert!(none_reason(&unseen, &opts).contains("1.0 standard errors"));
+        let weak = EffectResult {
+            model_free_z: Some(12.0),
+            ..result("friction", 2, 999.0, 1000.0, ln_n)
+        };
+        assert!(!significant(&weak, &opts), "the model-based fit disagrees");
     }
 
     /// A single that leaves only noise spends no simulations on pairs; one
@@ -215,7 +321,8 @@ mod tests {
     }
 
     /// Occam: a pair's lower χ² wins only when the second effect pays for
-    /// its parameters as a single does against nominal, and removes most of the rest.
+    /// its parameters as a single does against nominal, and shows evidence
+    /// of its own: a share of the rest, or its force-balance signature.
     #[test]
     fn a_pair_must_earn_its_parameters() {
         let opts = Options::default();
@@ -223,9 +330,14 @@ mod tests {
         let best = result("a", 1, 400.0, 1000.0, ln_n);
         let slightly = result("a+b", 3, 385.0, 1000.0, ln_n);
         assert!(slightly.chi2 < best.chi2);
-        assert_eq!(pair_gain(&best, &slightly, ln_n, &opts), None);
+        assert_eq!(pair_gain(&best, &slightly, None, ln_n, &opts), None);
+        let tenth = result("a+b", 3, 360.0, 1000.0, ln_n);
+        assert_eq!(pair_gain(&best, &tenth, None, ln_n, &opts), None);
+        assert!(pair_gain(&best, &tenth, Some(8.0), ln_n, &opts).is_some());
+        assert!(pair_gain(&best, &slightly, Some(8.0), ln_n, &opts).is_some());
+        assert_eq!(pair_gain(&best, &tenth, Some(1.0), ln_n, &opts), None);
         let most = result("a+b", 3, 40.0, 1000.0, ln_n);
-        let extra = pair_gain(&best, &most, ln_n, &opts).unwrap();
+        let extra = pair_gain(&best, &most, None, ln_n, &opts).unwrap();
         assert!((extra - (360.0 - 2.0 * ln_n)).abs() < 1e-9);
         assert!(pair_reason(&best, &most, 88, extra).contains("removes 90 %"));
     }

@@ -1,0 +1,95 @@
+//! One case of `hammer diagnose-bench` with the ranking laid open: every
+//! effect's score and explained share, the model-form factors, the
+//! recalibration and the remainder. For finding why a case is misnamed.
+//!
+//! `cargo run --release -p hammer-host --example bench_case -- [--structural] SEED INDEX...`
+
+use hammer_host::diagnose::bench::{run_case, BenchOptions};
+use hammer_host::diagnose::engine::Options;
+
+fn main() {
+    let mut args: Vec<String> = std::env::args().skip(1).collect();
+    let structural = args.iter().any(|a| a == "--structural");
+    args.retain(|a| a != "--structural");
+    let seed: u64 = args.first().and_then(|s| s.parse().ok()).unwrap_or(7);
+    let bench = BenchOptions {
+        seed,
+        structural,
+        jitter: if structural { 0.1 } else { 0.03 },
+        ..BenchOptions::default()
+    };
+    let diag = Options {
+        figures: false,
+        ..Options::default()
+    };
+    for index in args.iter().skip(1).filter_map(|s| s.parse::<usize>().ok()) {
+        let c = match run_case(&bench, index, &diag) {
+            Ok(c) => c,
+            Err(e) => {
+                println!("case {index}: {e}");
+                continue;
+            }
+        };
+        let Some(r) = &c.report else { continue };
+        println!(
+            "case {index} {:?} hidden {:?} named {:?} ({:.1} s)",
+            c.variants, c.hidden, c.named, c.diagnose_s
+        );
+        println!("  hidden params: {}", c.hidden_params);
+        println!(
+            "  χ² nominal {:.0} over {} features; {}",
+            r.chi2_nominal, r.features_compared, r.verdict.reason
+        );
+        for e in r.effects.iter().chain(&r.pairs) {
+            let fitted: Vec<String> = e
+                .fitted
+                .iter()
+                .map(|p| format!("{}={:.3}±{:.3}", p.key, p.value, p.sd))
+                .collect();
+            println!(
+                "  {:<40} score {:>8.1} explained {:>5.1} % χ² {:>8.1} [{}]",
+                e.name,
+                e.score,
+                100.0 * e.explained_fraction,
+                e.chi2,
+                fitted.join(" ")
+            );
+            if let Some(z) = e.model_free_z {
+                println!("      model-free z {z:.1}");
+            }
+            for ev in &e.evidence {
+                println!("      {ev}");
+            }
+        }
+        for m in &r.model_free {
+            println!(
+                "  model-free {:<32} {:>10.4} vs {:>10.4} ± {:.4}  z {:>6.1}",
+                m.feature, m.measured, m.nominal, m.se, m.z
+            );
+        }
+        let mf: Vec<String> = r
+            .model_form
+            .iter()
+            .map(|m| format!("{} {:.2}", m.group, m.factor))
+            .collect();
+        println!("  model form: {}", mf.join(", "));
+        for rc in &r.recalibration {
+            println!(
+                "  recal {:<32} {:.4e} -> {:.4e} ({:+.2} sd)",
+                rc.parameter, rc.nominal, rc.value, rc.prior_sds
+            );
+        }
+        for rm in r.remainder.iter().take(4) {
+            println!("  remainder {}", rm.statement);
+        }
+        let s = &r.shrink;
+        println!(
+            "  energy {:.2} % -> recal {:.2} % -> {:.2} %; freq {:.2} % -> {:.2} %",
+            s.impact_energy_error_before,
+            s.impact_energy_error_recalibrated_only,
+            s.impact_energy_error_after,
+            s.frequency_error_before,
+            s.frequency_error_after
+        );
+    }
+}
