@@ -655,8 +655,13 @@ fn diagnose_bench_structural_small_run() {
             assert!(named.is_empty(), "a control was flagged: {named:?}");
         }
         if hidden.len() == 1
-            && ["coulomb_friction", "viscous_friction", "pressure_gain_error", "accel_zero_shift"]
-                .contains(&hidden[0].as_str())
+            && [
+                "coulomb_friction",
+                "viscous_friction",
+                "pressure_gain_error",
+                "accel_zero_shift",
+            ]
+            .contains(&hidden[0].as_str())
         {
             assert_eq!(named, hidden, "a force-balance effect missed");
             let e = c["param_errors"][&hidden[0]].as_f64().unwrap();

@@ -96,17 +96,21 @@ fn paper_friction_is_named_on_a_hammer_of_another_form() {
     println!("friction {low:.2} N at 4 bar, {high:.2} N at 7 bar");
     assert!((low - 10.27).abs() < 0.10 * 10.27, "{low}");
     assert!((high - 16.7).abs() < 0.10 * 16.7, "{high}");
-    // Held-out 5.5 bar: the recalibrated model with the friction either
-    // closes the impact-energy gap at least threefold, or the report says
-    // where the model's form keeps it open (the nine nominal parameters
-    // cannot stand in for every law of another hammer).
+    // Held-out 5.5 bar: the recalibrated model with the friction closes the
+    // impact-energy gap at least threefold (the acceptance), and
+    // better than the recalibration alone: the friction is what closes it.
     let s = &r.shrink;
-    let closed = s.impact_energy_error_after * 3.0 <= s.impact_energy_error_before;
     assert!(
-        closed || r.remainder.first().is_some_and(|c| c.relative_rms >= 0.1),
-        "{} -> {} and no remainder located",
+        s.impact_energy_error_after * 3.0 <= s.impact_energy_error_before,
+        "{} -> {}",
         s.impact_energy_error_before,
         s.impact_energy_error_after
+    );
+    assert!(
+        s.impact_energy_error_after < s.impact_energy_error_recalibrated_only,
+        "{} with the friction, {} recalibrated alone",
+        s.impact_energy_error_after,
+        s.impact_energy_error_recalibrated_only
     );
 }
 

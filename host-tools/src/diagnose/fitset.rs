@@ -176,7 +176,19 @@ impl FitSet<'_> {
     /// each parameter's prior N(0, 1) in units of `h` of its nominal value.
     /// At a real hammer's ±20 % the model is far from linear, so the
     /// profile's one linearisation at nominal would overshoot.
-    pub(crate) fn recalibrate(&self, cand: &Candidate, h: f64, steps: usize, threads: usize) -> Option<Recalibrated> {
+    ///
+    /// `from`, if given, is a start (in prior standard deviations) tried
+    /// against nominal: the nominal model's own recalibration, from which a
+    /// model with an effect the force balance pinned is a few steps away,
+    /// where from nominal it may be more than three.
+    pub(crate) fn recalibrate(
+        &self,
+        cand: &Candidate,
+        h: f64,
+        steps: usize,
+        threads: usize,
+        from: Option<&[f64]>,
+    ) -> Option<Recalibrated> {
         let k = NUISANCE.len();
         let runner_at = |d: &[f64]| {
             let mut r = self.runner.clone();
@@ -200,6 +212,14 @@ impl FitSet<'_> {
         const STEP: f64 = 0.25;
         let mut delta = vec![0.0; k];
         let mut r = whitened(&delta)?;
+        if let Some(start) = from.filter(|d| d.len() == k) {
+            if let Some(rs) = whitened(start) {
+                if cost(&rs, start) < cost(&r, &delta) {
+                    delta = start.to_vec();
+                    r = rs;
+                }
+            }
+        }
         let mut sd = vec![1.0; k];
         for _ in 0..steps {
             let jobs: Vec<usize> = (0..k).collect();
@@ -220,11 +240,32 @@ impl FitSet<'_> {
                     super::fit::solve(a.clone(), e).map_or(1.0, |x| x[i].max(0.0).sqrt())
                 })
                 .collect();
-            let Some(step) = super::fit::solve(a, b) else { break };
-            // Halve the step until the cost falls (at most three times).
+            let Some(mut step) = super::fit::solve(a.clone(), b.clone()) else {
+                break;
+            };
+            // A parameter at its bound that the step pushes further is held
+            // there, and the step solved for the others: clamped afterwards,
+            // it would be a step the linearisation never proposed.
+            let held: Vec<usize> = (0..k)
+                .filter(|&i| delta[i].abs() >= MAX_PRIOR_SDS && step[i] * delta[i] > 0.0)
+                .collect();
+            if !held.is_empty() {
+                let (mut a, mut b) = (a, b);
+                for &i in &held {
+                    for j in 0..k {
+                        a[i][j] = 0.0;
+                        a[j][i] = 0.0;
+                    }
+                    a[i][i] = 1.0;
+                    b[i] = 0.0;
+                }
+                let Some(s) = super::fit::solve(a, b) else { break };
+                step = s;
+            }
+            // Halve the step until the cost falls (at most five times).
             let mut scale = 1.0;
             let mut moved = false;
-            for _ in 0..3 {
+            for _ in 0..5 {
                 let d: Vec<f64> = delta
                     .iter()
                     .zip(&step)

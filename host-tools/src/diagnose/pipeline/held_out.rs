@@ -59,9 +59,9 @@ impl Models {
 pub(crate) fn models(fs: &FitSet, bars: &[f64], verdict: Option<&EffectResult>, opts: &Options) -> Models {
     let fitted_cand = verdict.map(|v| v.candidate.clone());
     let h = opts.nominal_uncertainty;
-    let recalibrated = |cand: &Candidate| -> Option<Recalibrated> {
+    let recalibrated = |cand: &Candidate, from: Option<&[f64]>| -> Option<Recalibrated> {
         if h > 0.0 {
-            fs.recalibrate(cand, h, RECALIBRATION_STEPS, opts.threads)
+            fs.recalibrate(cand, h, RECALIBRATION_STEPS, opts.threads, from)
         } else {
             None
         }
@@ -75,8 +75,13 @@ pub(crate) fn models(fs: &FitSet, bars: &[f64], verdict: Option<&EffectResult>, 
         (r, runs)
     };
     let nominal = Candidate::default();
-    let recal_nominal = recalibrated(&nominal);
-    let recal_verdict = fitted_cand.as_ref().and_then(recalibrated);
+    let recal_nominal = recalibrated(&nominal, None);
+    // The verdict's model starts where the nominal one got to (if that is
+    // better than nominal for it): the effects move the nominal parameters
+    // less than the hammer's form does.
+    let recal_verdict = fitted_cand
+        .as_ref()
+        .and_then(|c| recalibrated(c, recal_nominal.as_ref().map(|r| r.delta.as_slice())));
     let (fitted_runner, fitted_runs) = match &fitted_cand {
         Some(c) => model_runs(&recal_verdict, c),
         None => (fs.runner.clone(), bars.iter().map(|_| None).collect()),
