@@ -86,6 +86,12 @@ impl FitSet<'_> {
         (d, self.mean_se(j).1)
     }
 
+    /// [`Self::off_nominal`] in standard errors; `None` without an error to weigh it by.
+    pub(crate) fn off_nominal_z(&self, j: usize) -> Option<f64> {
+        let (d, se) = self.off_nominal(j);
+        (se > 0.0).then(|| d / se)
+    }
+
     /// The force balance's quantities against the nominal model's.
     pub(crate) fn model_free_stats(&self) -> Vec<ModelFreeStat> {
         MODEL_FREE
@@ -98,7 +104,7 @@ impl FitSet<'_> {
                     measured: nominal + d,
                     nominal,
                     se,
-                    z: if se > 0.0 { d / se } else { 0.0 },
+                    z: self.off_nominal_z(j).unwrap_or(0.0),
                 }
             })
             .collect()

@@ -35,8 +35,7 @@ impl Diagnosed for AccelZeroShift {
     }
 
     fn model_free_z(fs: &FitSet) -> Option<f64> {
-        let (z2, se) = fs.off_nominal(ZERO_SHIFT_SQ);
-        (se > 0.0).then(|| z2 / se)
+        fs.off_nominal_z(ZERO_SHIFT_SQ)
     }
 
     fn evidence(fs: &FitSet) -> Option<String> {

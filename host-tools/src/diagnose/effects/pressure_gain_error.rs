@@ -24,14 +24,7 @@ impl Diagnosed for PressureGainError {
 
     /// The clearer of the two channels' gains, either sign.
     fn model_free_z(fs: &FitSet) -> Option<f64> {
-        let z = |j| {
-            let (g, se) = fs.off_nominal(j);
-            if se > 0.0 {
-                (g / se).abs()
-            } else {
-                0.0
-            }
-        };
+        let z = |j| fs.off_nominal_z(j).map_or(0.0, f64::abs);
         Some(z(GAIN_REAR).max(z(GAIN_FRONT)))
     }
 

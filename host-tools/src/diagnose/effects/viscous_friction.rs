@@ -25,8 +25,7 @@ impl Diagnosed for ViscousFriction {
     }
 
     fn model_free_z(fs: &FitSet) -> Option<f64> {
-        let (c, se) = fs.off_nominal(VISCOUS);
-        (se > 0.0).then(|| c / se)
+        fs.off_nominal_z(VISCOUS)
     }
 
     fn evidence(fs: &FitSet) -> Option<String> {

@@ -179,38 +179,36 @@ fn fit_pairs(
     pairs
 }
 
-/// Why the best single was not named, in the terms of the rule it failed.
-fn none_reason(best: &EffectResult, opts: &Options) -> String {
-    let evidence = match best.model_free_z {
+/// The evidence an effect showed, in the terms of the rule it is judged by.
+fn evidence_phrase(e: &EffectResult, opts: &Options) -> String {
+    match e.model_free_z {
         Some(z) => format!(
-            "its force-balance signature is {z:.1} standard errors off nominal (needs {:.0})",
+            "its force-balance signature stands {z:.1} standard errors off nominal (needs {:.0})",
             opts.min_model_free_z
         ),
         None => format!(
             "it explains {:.0} % of the gap (needs {:.0} %, the force balance cannot see it)",
-            100.0 * best.explained_fraction,
+            100.0 * e.explained_fraction,
             100.0 * opts.min_explained
         ),
-    };
+    }
+}
+
+/// Why the best single was not named, in the terms of the rule it failed.
+fn none_reason(best: &EffectResult, opts: &Options) -> String {
     format!(
-        "no effect shows enough evidence: best {} scores {:.0} (needs > {:.0}); {evidence}",
-        best.name, best.score, opts.min_score
+        "no effect shows enough evidence: best {} scores {:.0} (needs > {:.0}); {}",
+        best.name,
+        best.score,
+        opts.min_score,
+        evidence_phrase(best, opts)
     )
 }
 
 fn single_reason(effects: &[EffectResult], best: usize, opts: &Options) -> String {
     let e = &effects[best];
     let next = effects.iter().find(|x| x.name != e.name);
-    let evidence = match e.model_free_z {
-        Some(z) => format!(
-            "its force-balance signature stands {z:.1} standard errors off nominal (needs {:.0})",
-            opts.min_model_free_z
-        ),
-        None => format!(
-            "it explains {:.0} % of the nominal gap (the force balance cannot see it)",
-            100.0 * e.explained_fraction
-        ),
-    };
+    let evidence = evidence_phrase(e, opts);
     let passed = if best > 0 {
         format!(
             "; {} scored higher without evidence of its own",
@@ -301,7 +299,7 @@ mod tests {
             ..result("friction", 2, 100.0, 1000.0, ln_n)
         };
         assert!(!significant(&unseen, &opts));
-        assert!(none_reason(&unseen, &opts).contains("1.0 standard errors"));
+        assert!(none_reason(&unseen, &opts).contains("1.0 standard errors off nominal (needs 3)"));
         let weak = EffectResult {
             model_free_z: Some(12.0),
             ..result("friction", 2, 999.0, 1000.0, ln_n)
