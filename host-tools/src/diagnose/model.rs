@@ -116,24 +116,32 @@ impl ModelRunner {
         self.features_of_truth(truth, &cand.effects)
     }
 
-    /// Features of a simulated solution seen through the candidate's sensor effects.
-    pub fn features_of_truth(&self, truth: &TruthTrace, effects: &Effects) -> Option<Vec<f64>> {
+    /// Whether the measurement's transducers read the model's pressures as
+    /// they are (no gain effect, no floor): then they need no copy.
+    fn reads_as_is(&self, effects: &Effects) -> bool {
+        pressure_reading_factors(effects) == (1.0, 1.0)
+            && self.extractor.pressure_floor_pa.iter().all(|f| !f.is_finite())
+    }
+
+    /// A model's pressures as the measurement's transducers read them: the
+    /// candidate's sensor gains, then the transducers' floor. Every model
+    /// signal compared with the measurement goes through here.
+    pub fn read_pressures(&self, effects: &Effects, p_rear_pa: &mut [f64], p_front_pa: &mut [f64]) {
         let (f1, f2) = pressure_reading_factors(effects);
         let [floor1, floor2] = self.extractor.pressure_floor_pa;
-        let scaled;
-        // Read as the measurement's transducers read: gain, then their floor.
-        let (p1, p2): (&[f64], &[f64]) = if f1 != 1.0 || f2 != 1.0 || floor1.is_finite() || floor2.is_finite() {
-            scaled = (
-                truth.p_rear_pa.iter().map(|p| (p * f1).max(floor1)).collect::<Vec<_>>(),
-                truth
-                    .p_front_pa
-                    .iter()
-                    .map(|p| (p * f2).max(floor2))
-                    .collect::<Vec<_>>(),
-            );
-            (&scaled.0, &scaled.1)
-        } else {
+        p_rear_pa.iter_mut().for_each(|p| *p = (*p * f1).max(floor1));
+        p_front_pa.iter_mut().for_each(|p| *p = (*p * f2).max(floor2));
+    }
+
+    /// Features of a simulated solution seen through the candidate's sensor effects.
+    pub fn features_of_truth(&self, truth: &TruthTrace, effects: &Effects) -> Option<Vec<f64>> {
+        let mut read;
+        let (p1, p2): (&[f64], &[f64]) = if self.reads_as_is(effects) {
             (&truth.p_rear_pa, &truth.p_front_pa)
+        } else {
+            read = (truth.p_rear_pa.clone(), truth.p_front_pa.clone());
+            self.read_pressures(effects, &mut read.0, &mut read.1);
+            (&read.0, &read.1)
         };
         let s = Signals {
             dt_s: truth.dt_s,

@@ -10,6 +10,7 @@ use super::group::Point;
 use crate::diagnose::engine::Options;
 use crate::diagnose::features::{summarize, wave_index, BINS, ENERGY, PERIOD, WAVE_SIGNALS};
 use crate::diagnose::fitset::{FitSet, Recalibrated, RECALIBRATION_STEPS};
+use crate::diagnose::gap::CycleSignals;
 use crate::diagnose::model::{Candidate, ModelRunner, NUISANCE};
 use crate::diagnose::parallel::parallel;
 use crate::diagnose::report::{EffectResult, PointShrink, Recalibration, Shrink};
@@ -42,6 +43,15 @@ impl Models {
         } else {
             self.recal_runs[i].as_ref()
         }
+    }
+
+    /// A model cycle's pressures as the measurement's transducers read
+    /// them ([`ModelRunner::read_pressures`]), with `cand`'s sensor effects.
+    pub(crate) fn read(&self, cycle: &mut CycleSignals, cand: Option<&Candidate>) {
+        let none = Default::default();
+        let effects = cand.map_or(&none, |c| &c.effects);
+        self.recal_runner
+            .read_pressures(effects, &mut cycle.p_rear_pa, &mut cycle.p_front_pa);
     }
 
     /// The recalibration the verdict's model carries.

@@ -9,7 +9,6 @@
 use super::group::Grouped;
 use super::held_out::Models;
 use super::nominal::Nominal;
-use crate::diagnose::effects::pressure_reading_factors;
 use crate::diagnose::engine::{MeasuredInput, Options, PointWaves};
 use crate::diagnose::gap::{breakdown, measured_cycles, normalized, template, CycleSignals, GapCell};
 use crate::diagnose::report::{Remainder, WhereCell};
@@ -44,15 +43,17 @@ pub(crate) fn locate(
         waves: Vec::new(),
     };
     for (i, p) in grouped.points.iter().enumerate() {
-        let Some((tpl, stages)) = template(&nominal.runs[i], &base.hammer) else {
+        let Some((mut tpl, stages)) = template(&nominal.runs[i], &base.hammer) else {
             continue;
         };
+        models.read(&mut tpl, None);
         let mut meas = Vec::new();
         for &k in &p.inputs {
             meas.extend(measured_cycles(&inputs[k].trace, &grouped.steady_impacts[k]));
         }
         let nominal_cells = breakdown(&tpl, &stages, &meas);
-        if let Some((after, after_stages)) = models.verdict_run(i).and_then(|r| template(r, &base.hammer)) {
+        if let Some((mut after, after_stages)) = models.verdict_run(i).and_then(|r| template(r, &base.hammer)) {
+            models.read(&mut after, models.fitted_cand.as_ref());
             let after_cells = breakdown(&after, &after_stages, &meas);
             out.remainder
                 .extend(remainder(p.supply_bar, after_cells, &nominal_cells));
@@ -120,13 +121,7 @@ fn fitted_cycle(models: &Models, i: usize, hammer: &HammerParams) -> Option<Cycl
         .as_ref()
         .and_then(|r| template(r, hammer))
         .map(|(mut f, _)| {
-            if let Some(c) = &models.fitted_cand {
-                let (f1, f2) = pressure_reading_factors(&c.effects);
-                if f1 != 1.0 || f2 != 1.0 {
-                    f.p_rear_pa.iter_mut().for_each(|x| *x *= f1);
-                    f.p_front_pa.iter_mut().for_each(|x| *x *= f2);
-                }
-            }
+            models.read(&mut f, models.fitted_cand.as_ref());
             f
         })
 }
