@@ -492,6 +492,12 @@ mod tests {
         ex.pressure_floor_pa = [floor, floor];
         let aware = mean(&ex);
         let worst = |f: &[f64]| f[F_STROKE].abs().max(f[F_BACKHAUL].abs());
+        for (what, f) in [("floor unknown", &blind), ("floor known", &aware)] {
+            println!(
+                "{what}: offsets {:.2} N stroke, {:.2} N backhaul; gains {:.4} rear, {:.4} front",
+                f[F_STROKE], f[F_BACKHAUL], f[GAIN_REAR], f[GAIN_FRONT]
+            );
+        }
         assert!(worst(&blind) > 2.0, "{} N {} N", blind[F_STROKE], blind[F_BACKHAUL]);
         assert!(worst(&aware) < 0.3, "{} N {} N", aware[F_STROKE], aware[F_BACKHAUL]);
         assert!(
