@@ -169,6 +169,9 @@ pub struct CaseResult {
     pub hidden: Hidden,
     pub hidden_params: serde_json::Value,
     pub named: Vec<String>,
+    /// What the verdict flagged the named effect confusable with.
+    #[serde(default)]
+    pub confusable_with: Vec<String>,
     pub correct: bool,
     /// Relative error of each named-right effect's magnitude.
     pub param_errors: BTreeMap<String, f64>,
@@ -254,6 +257,7 @@ pub fn run_case(opts: &BenchOptions, index: usize, diag: &Options) -> anyhow::Re
         hidden_params: serde_json::to_value(&gen.effects).unwrap_or_default(),
         hidden,
         named,
+        confusable_with: r.verdict.confusable_with.clone(),
         correct,
         param_errors,
         score: r.verdict.score,
@@ -307,6 +311,13 @@ pub struct BenchSummary {
     pub frequency_error_before: f64,
     pub frequency_error_after: f64,
     pub mean_diagnose_s: f64,
+    /// Cases that named an effect that was not hidden: (flagged
+    /// confusable, all). A wrong name must come flagged.
+    #[serde(default)]
+    pub wrong_names_flagged: (usize, usize),
+    /// Cases with an effect named right: (flagged confusable, all).
+    #[serde(default)]
+    pub right_names_flagged: (usize, usize),
 }
 
 pub fn summarize(options: &BenchOptions, cases: Vec<CaseResult>) -> BenchSummary {
@@ -314,7 +325,17 @@ pub fn summarize(options: &BenchOptions, cases: Vec<CaseResult>) -> BenchSummary
     let (mut single, mut none, mut pair, mut params) = ((0, 0), (0, 0), (0, 0), (0, 0));
     let mut params15 = (0, 0);
     let mut errs: BTreeMap<String, Vec<f64>> = BTreeMap::new();
+    let (mut wrong_flagged, mut right_flagged) = ((0, 0), (0, 0));
     for c in &cases {
+        let flagged = usize::from(!c.confusable_with.is_empty());
+        let hidden = c.hidden.names();
+        if c.named.iter().any(|n| !hidden.contains(n)) {
+            wrong_flagged.0 += flagged;
+            wrong_flagged.1 += 1;
+        } else if c.correct && !c.named.is_empty() {
+            right_flagged.0 += flagged;
+            right_flagged.1 += 1;
+        }
         let col = match (&c.hidden, c.named.len()) {
             (Hidden::Two(..), _) if c.correct => "pair (right)".to_string(),
             (_, 0) => "none".to_string(),
@@ -375,6 +396,8 @@ pub fn summarize(options: &BenchOptions, cases: Vec<CaseResult>) -> BenchSummary
         frequency_error_before: mean(&|c| c.frequency_error_before),
         frequency_error_after: mean(&|c| c.frequency_error_after),
         mean_diagnose_s: cases.iter().map(|c| c.diagnose_s).sum::<f64>() / cases.len().max(1) as f64,
+        wrong_names_flagged: wrong_flagged,
+        right_names_flagged: right_flagged,
         cases,
     }
 }
@@ -432,9 +455,12 @@ pub fn render(s: &BenchSummary) -> String {
         }
         let _ = writeln!(out);
     }
+    // Issue 10's targets: a model of another form than the hammer's is held
+    // to less than one of the same form.
+    let (single_target, pair_target) = if o.structural { (90, 70) } else { (95, 80) };
     let _ = writeln!(
         out,
-        "\nsingle effect named right: {}   (target ≥ 95 %)",
+        "\nsingle effect named right: {}   (target ≥ {single_target} %)",
         fraction(s.single_right)
     );
     let _ = writeln!(
@@ -444,7 +470,7 @@ pub fn render(s: &BenchSummary) -> String {
     );
     let _ = writeln!(
         out,
-        "pairs named right:          {}   (target ≥ 80 %)",
+        "pairs named right:          {}   (target ≥ {pair_target} %)",
         fraction(s.pair_right)
     );
     let _ = writeln!(out, "parameters within 10 %:     {}", fraction(s.params_within_10pct));
@@ -469,19 +495,30 @@ pub fn render(s: &BenchSummary) -> String {
         s.energy_error_after_median
     );
     let _ = writeln!(out, "mean diagnosis time per case: {:.2} s", s.mean_diagnose_s);
+    let (wf, wn) = s.wrong_names_flagged;
+    let (rf, rn) = s.right_names_flagged;
+    let _ = writeln!(
+        out,
+        "named an effect not hidden: {wn} cases, {wf} of them flagged confusable; named right: {rn} cases, {rf} flagged"
+    );
     let wrong: Vec<&CaseResult> = s.cases.iter().filter(|c| !c.correct).collect();
     if !wrong.is_empty() {
         let _ = writeln!(out, "\nmisnamed cases:");
         for c in wrong {
             let _ = writeln!(
                 out,
-                "  case {:>3}: hidden {:?}, named {:?}",
+                "  case {:>3}: hidden {:?}, named {:?}{}",
                 c.index,
                 c.hidden.names(),
                 if c.named.is_empty() {
                     vec!["none".to_string()]
                 } else {
                     c.named.clone()
+                },
+                if c.confusable_with.is_empty() {
+                    String::new()
+                } else {
+                    format!(", confusable with {:?}", c.confusable_with)
                 }
             );
         }

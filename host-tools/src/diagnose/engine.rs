@@ -99,6 +99,14 @@ pub struct Options {
     /// rest is mostly noise and form error, whose shape any effect fits a little.
     #[serde(default = "default_min_explained_pair")]
     pub min_explained_pair: f64,
+    /// A named effect the force balance cannot see is flagged confusable
+    /// with each other such effect scoring within this many BIC units of it:
+    /// leakage, heat transfer and a supply restriction lower the same
+    /// pressures (the isolability matrix), and on a hammer of another form
+    /// the last few percent that part them are within the form error. Set
+    /// on the structural benchmark's calibration seed (docs/diagnosis.md).
+    #[serde(default = "default_confusable_margin")]
+    pub confusable_margin: f64,
     /// Pairs are tried when the best single effect leaves a reduced χ² above this.
     pub pair_residual: f64,
     /// How many runners-up are tried as the second effect of a pair.
@@ -122,6 +130,7 @@ impl Default for Options {
             min_model_free_z: default_min_model_free_z(),
             min_explained: 0.4,
             min_explained_pair: default_min_explained_pair(),
+            confusable_margin: default_confusable_margin(),
             pair_residual: 2.0,
             pair_candidates: 5,
             threads: std::thread::available_parallelism().map_or(2, |n| n.get()),
@@ -133,6 +142,10 @@ impl Default for Options {
 
 fn default_min_model_free_z() -> f64 {
     3.0
+}
+
+fn default_confusable_margin() -> f64 {
+    20.0
 }
 
 fn default_min_explained_pair() -> f64 {

@@ -71,6 +71,11 @@ pub struct Verdict {
     /// The named model's score (the best single effect's when `none`).
     pub score: f64,
     pub reason: String,
+    /// Effects the force balance cannot see that score nearly as well as
+    /// the named one, which cannot see it either: on this measurement the
+    /// name is one of these (see [`super::engine::Options::confusable_margin`]).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub confusable_with: Vec<String>,
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize)]

@@ -24,6 +24,8 @@ pub(crate) struct Ranking {
     /// The named single effect or pair.
     pub(crate) verdict: Option<EffectResult>,
     pub(crate) reason: String,
+    /// Unseen effects scoring nearly as well as an unseen named single.
+    pub(crate) confusable: Vec<String>,
     pub(crate) chi2_nominal: f64,
     pub(crate) features_compared: usize,
 }
@@ -37,12 +39,14 @@ impl Ranking {
                 params: v.params.clone(),
                 score: v.score,
                 reason: self.reason.clone(),
+                confusable_with: self.confusable.clone(),
             },
             None => Verdict {
                 effects: vec!["none".into()],
                 params: serde_json::json!({}),
                 score: self.effects.first().map_or(0.0, |e| e.score),
                 reason: self.reason.clone(),
+                confusable_with: Vec::new(),
             },
         }
     }
@@ -92,11 +96,25 @@ pub(crate) fn rank(fs: &FitSet, opts: &Options, step: &(dyn Fn(&str) + Sync)) ->
             .map_or_else(|| "no effect could be fitted".into(), |best| none_reason(best, opts)),
     };
     step("pairs");
+    let confusable = match &verdict {
+        Some(v) if v.name.contains('+') => confusable_with(v, &pairs, &effects, opts),
+        Some(v) => confusable_with(v, &effects, &effects, opts),
+        None => Vec::new(),
+    };
+    let reason = match confusable.as_slice() {
+        [] => reason,
+        c => format!(
+            "{reason}; confusable here with {} (within {:.0} of its score, and no force-balance signature to part them)",
+            c.join(", "),
+            opts.confusable_margin
+        ),
+    };
     Ranking {
         effects,
         pairs,
         verdict,
         reason,
+        confusable,
         chi2_nominal,
         features_compared: n_compared,
     }
@@ -119,6 +137,30 @@ fn own_evidence(z: Option<f64>, score: f64, share: f64, min_share: f64, opts: &O
         Some(z) => score > 0.0 && z >= opts.min_model_free_z,
         None => score > opts.min_score && share >= min_share,
     }
+}
+
+/// The effects the named single, or a named pair's second effect, cannot
+/// be told from when the force balance cannot see it: the effect each other
+/// candidate (`candidates`: the singles, or the pairs with the same first)
+/// adds instead, if the force balance cannot see that one either and it
+/// scores within `confusable_margin` of the named.
+fn confusable_with(
+    named: &EffectResult,
+    candidates: &[EffectResult],
+    singles: &[EffectResult],
+    opts: &Options,
+) -> Vec<String> {
+    let last = |e: &EffectResult| e.name.rsplit('+').next().unwrap_or_default().to_string();
+    let unseen = |name: &str| singles.iter().any(|s| s.name == name && s.model_free_z.is_none());
+    if !unseen(&last(named)) {
+        return Vec::new();
+    }
+    candidates
+        .iter()
+        .filter(|e| e.name != named.name && unseen(&last(e)))
+        .filter(|e| e.score >= named.score - opts.confusable_margin)
+        .map(last)
+        .collect()
 }
 
 /// A pair can only be named if the single leaves more than the threshold
@@ -305,6 +347,35 @@ mod tests {
             ..result("friction", 2, 999.0, 1000.0, ln_n)
         };
         assert!(!significant(&weak, &opts), "the model-based fit disagrees");
+    }
+
+    /// An unseen effect named with another unseen one close behind is
+    /// flagged; one the force balance sees, or one far ahead, is not.
+    #[test]
+    fn a_close_unseen_runner_up_is_flagged_confusable() {
+        let opts = Options::default();
+        let ln_n = 20f64.ln();
+        let heat = result("heat_transfer", 1, 500.0, 1000.0, ln_n);
+        let leak = result("leakage", 1, 510.0, 1000.0, ln_n);
+        let supply = result("supply_restriction", 1, 530.0, 1000.0, ln_n);
+        let friction = EffectResult {
+            model_free_z: Some(0.5),
+            ..result("coulomb_friction", 2, 510.0, 1000.0, ln_n)
+        };
+        let seen = EffectResult {
+            model_free_z: Some(9.0),
+            ..result("pressure_gain_error", 2, 100.0, 1000.0, ln_n)
+        };
+        let all = [seen.clone(), heat.clone(), friction.clone(), leak, supply];
+        assert_eq!(confusable_with(&heat, &all, &all, &opts), ["leakage"]);
+        assert!(confusable_with(&seen, &all, &all, &opts).is_empty());
+        // A pair's unseen second effect, against the pairs with the same first.
+        let pairs = [
+            result("pressure_gain_error+heat_transfer", 3, 80.0, 1000.0, ln_n),
+            result("pressure_gain_error+leakage", 3, 85.0, 1000.0, ln_n),
+            result("pressure_gain_error+coulomb_friction", 4, 82.0, 1000.0, ln_n),
+        ];
+        assert_eq!(confusable_with(&pairs[0], &pairs, &all, &opts), ["leakage"]);
     }
 
     /// A single that leaves only noise spends no simulations on pairs; one
