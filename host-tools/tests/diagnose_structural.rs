@@ -138,3 +138,48 @@ fn a_hammer_of_another_form_without_an_effect_gets_none_and_a_located_remainder(
     );
     assert!(r.model_form.iter().any(|m| m.factor > 1.0), "{:?}", r.model_form);
 }
+
+/// Within the cluster the force balance cannot see (leakage, heat
+/// transfer, a supply restriction), a hammer of another form can make the
+/// diagnosis name the wrong member; the verdict must then say which effect
+/// it cannot tell the named one from. Cases 13 and 26 of the structural
+/// benchmark (seed 7): a leakage and a heat transfer, each on two
+/// structural variants.
+#[test]
+fn a_name_within_the_unseen_cluster_is_right_or_flagged() {
+    use hammer_host::diagnose::bench::{run_case, BenchOptions};
+    let bench = BenchOptions {
+        seed: 7,
+        structural: true,
+        jitter: 0.1,
+        ..BenchOptions::default()
+    };
+    let opts = Options {
+        figures: false,
+        ..Options::default()
+    };
+    for index in [13, 26] {
+        let c = run_case(&bench, index, &opts).unwrap();
+        let hidden = c.hidden.names();
+        let r = c.report.as_ref().unwrap();
+        println!(
+            "case {index}: hidden {hidden:?}, named {:?}, confusable with {:?}: {}",
+            c.named, c.confusable_with, r.verdict.reason
+        );
+        assert_eq!(hidden.len(), 1);
+        assert!(
+            c.named == hidden || hidden.iter().all(|h| c.confusable_with.contains(h)),
+            "case {index}: hidden {hidden:?}, named {:?}, flagged {:?}",
+            c.named,
+            c.confusable_with
+        );
+        if !c.confusable_with.is_empty() {
+            assert!(
+                r.verdict.reason.contains("confusable here with"),
+                "{}",
+                r.verdict.reason
+            );
+            assert_eq!(r.verdict.confusable_with, c.confusable_with);
+        }
+    }
+}

@@ -501,6 +501,13 @@ pub fn render(s: &BenchSummary) -> String {
         out,
         "named an effect not hidden: {wn} cases, {wf} of them flagged confusable; named right: {rn} cases, {rf} flagged"
     );
+    misnamed(&mut out, s);
+    out
+}
+
+/// The cases named wrong, with what each was flagged confusable with.
+fn misnamed(out: &mut String, s: &BenchSummary) {
+    use std::fmt::Write as _;
     let wrong: Vec<&CaseResult> = s.cases.iter().filter(|c| !c.correct).collect();
     if !wrong.is_empty() {
         let _ = writeln!(out, "\nmisnamed cases:");
@@ -523,5 +530,4 @@ pub fn render(s: &BenchSummary) -> String {
             );
         }
     }
-    out
 }
