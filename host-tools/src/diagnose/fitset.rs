@@ -74,15 +74,14 @@ impl FitSet<'_> {
     /// The measurement's feature `j` against the nominal model's, over the
     /// fit points: the mean difference and its standard error.
     pub(crate) fn off_nominal(&self, j: usize) -> (f64, f64) {
-        let n = self.points.len().max(1) as f64;
-        let d = self
+        let diffs: Vec<f64> = self
             .points
             .iter()
             .zip(&self.nominal_features)
             .map(|(p, nom)| p.1.mean[j] - nom[j])
             .filter(|x| x.is_finite())
-            .sum::<f64>()
-            / n;
+            .collect();
+        let d = diffs.iter().sum::<f64>() / diffs.len().max(1) as f64;
         (d, self.mean_se(j).1)
     }
 
@@ -104,7 +103,7 @@ impl FitSet<'_> {
                     measured: nominal + d,
                     nominal,
                     se,
-                    z: self.off_nominal_z(j).unwrap_or(0.0),
+                    z: if se > 0.0 { d / se } else { 0.0 },
                 }
             })
             .collect()

@@ -366,7 +366,7 @@ mod tests {
             model_free_z: Some(9.0),
             ..result("pressure_gain_error", 2, 100.0, 1000.0, ln_n)
         };
-        let all = [seen.clone(), heat.clone(), friction.clone(), leak, supply];
+        let all = [seen.clone(), heat.clone(), friction, leak, supply];
         assert_eq!(confusable_with(&heat, &all, &all, &opts), ["leakage"]);
         assert!(confusable_with(&seen, &all, &all, &opts).is_empty());
         // A pair's unseen second effect, against the pairs with the same first.
