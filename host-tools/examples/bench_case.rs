@@ -36,6 +36,9 @@ fn main() {
             c.variants, c.hidden, c.named, c.diagnose_s
         );
         println!("  hidden params: {}", c.hidden_params);
+        for f in &r.detection_floors {
+            println!("  floor: {}", f.statement);
+        }
         println!(
             "  χ² nominal {:.0} over {} features; {}",
             r.chi2_nominal, r.features_compared, r.verdict.reason

@@ -190,6 +190,9 @@ pub struct CaseResult {
     pub model_free: Vec<super::report::ModelFreeStat>,
     #[serde(default)]
     pub model_form: Vec<super::report::ModelForm>,
+    /// How large each unseen effect would have had to be to be named.
+    #[serde(default)]
+    pub detection_floors: Vec<super::report::DetectionFloor>,
     #[serde(skip)]
     pub report: Option<super::engine::Report>,
 }
@@ -278,6 +281,7 @@ pub fn run_case(opts: &BenchOptions, index: usize, diag: &Options) -> anyhow::Re
             .collect(),
         model_free: r.model_free.clone(),
         model_form: r.model_form.clone(),
+        detection_floors: r.detection_floors.clone(),
         report: Some(out.report),
     })
 }
@@ -318,6 +322,28 @@ pub struct BenchSummary {
     /// Cases with an effect named right: (flagged confusable, all).
     #[serde(default)]
     pub right_names_flagged: (usize, usize),
+    /// Single unseen effects against the floor their case reported:
+    /// (named right, all) above it, and the same below it.
+    #[serde(default)]
+    pub floor_above: (usize, usize),
+    #[serde(default)]
+    pub floor_below: (usize, usize),
+}
+
+/// Whether a case's hidden single effect stood at or beyond the detection
+/// floor its diagnosis reported (`None`: no floor for it, as for an effect
+/// the force balance sees).
+pub fn above_floor(c: &CaseResult) -> Option<bool> {
+    let Hidden::One(name) = &c.hidden else {
+        return None;
+    };
+    let f = c.detection_floors.iter().find(|f| &f.effect == name)?;
+    let hidden = c.hidden_params.get(name)?.get(&f.parameter)?.as_f64()?;
+    Some(match f.value {
+        Some(v) if f.stronger_above => hidden >= v,
+        Some(v) => hidden <= v,
+        None => false,
+    })
 }
 
 pub fn summarize(options: &BenchOptions, cases: Vec<CaseResult>) -> BenchSummary {
@@ -326,7 +352,13 @@ pub fn summarize(options: &BenchOptions, cases: Vec<CaseResult>) -> BenchSummary
     let mut params15 = (0, 0);
     let mut errs: BTreeMap<String, Vec<f64>> = BTreeMap::new();
     let (mut wrong_flagged, mut right_flagged) = ((0, 0), (0, 0));
+    let (mut floor_above, mut floor_below) = ((0, 0), (0, 0));
     for c in &cases {
+        if let Some(above) = above_floor(c) {
+            let tally = if above { &mut floor_above } else { &mut floor_below };
+            tally.0 += usize::from(c.correct);
+            tally.1 += 1;
+        }
         let flagged = usize::from(!c.confusable_with.is_empty());
         let hidden = c.hidden.names();
         if c.named.iter().any(|n| !hidden.contains(n)) {
@@ -398,6 +430,8 @@ pub fn summarize(options: &BenchOptions, cases: Vec<CaseResult>) -> BenchSummary
         mean_diagnose_s: cases.iter().map(|c| c.diagnose_s).sum::<f64>() / cases.len().max(1) as f64,
         wrong_names_flagged: wrong_flagged,
         right_names_flagged: right_flagged,
+        floor_above,
+        floor_below,
         cases,
     }
 }
@@ -500,6 +534,11 @@ pub fn render(s: &BenchSummary) -> String {
     let _ = writeln!(
         out,
         "named an effect not hidden: {wn} cases, {wf} of them flagged confusable; named right: {rn} cases, {rf} flagged"
+    );
+    let ((ar, an), (br, bn)) = (s.floor_above, s.floor_below);
+    let _ = writeln!(
+        out,
+        "unseen single effects against the detection floor their diagnosis reported: at or beyond it {ar} of {an} named right, below it {br} of {bn}"
     );
     misnamed(&mut out, s);
     out

@@ -20,7 +20,7 @@ use serde::{Deserialize, Serialize};
 use super::features::{pressure_floor, Extractor};
 use super::gap::CycleSignals;
 use super::model::ModelRunner;
-use super::pipeline::{group, held_out, nominal, rank, where_};
+use super::pipeline::{floor, group, held_out, nominal, rank, where_};
 use super::stages::Stage;
 use hammer_sim::effects::EFFECT_NAMES;
 use hammer_sim::SimConfig;
@@ -220,7 +220,7 @@ pub fn diagnose(
     let grouped = group::group(inputs, &runner.extractor)?;
     let points = &grouped.points;
 
-    let total_steps = points.len() + EFFECT_NAMES.len() + 2;
+    let total_steps = points.len() + EFFECT_NAMES.len() + 3;
     let done = AtomicUsize::new(0);
     let step = |what: &str| {
         let d = done.fetch_add(1, Ordering::Relaxed) + 1;
@@ -230,6 +230,8 @@ pub fn diagnose(
     let nominal = nominal::nominal(points, &runner, opts, &step)?;
     let (fs, model_form) = nominal::fit_set(points, &nominal, &runner, opts);
     let ranking = rank::rank(&fs, opts, &step);
+    let detection_floors = floor::floors(&fs, &ranking, opts);
+    step("detection floors");
 
     let models = held_out::models(&fs, &nominal.bars, ranking.verdict.as_ref(), opts);
     step("held-out check");
@@ -251,6 +253,7 @@ pub fn diagnose(
             remainder: located.remainder,
             model_form,
             model_free: fs.model_free_stats(),
+            detection_floors,
             shrink,
             chi2_nominal: ranking.chi2_nominal,
             features_compared: ranking.features_compared,

@@ -297,6 +297,20 @@ impl FitSet<'_> {
         })
     }
 
+    /// What of `cand`'s effect no nominal parameter can absorb, in χ²
+    /// units of the fit set's weights: the nominal model's profiled χ²
+    /// against `cand`'s own simulated features, as if the hammer were the
+    /// model with that effect. The detection floors weigh an effect by it.
+    pub(crate) fn signature_chi2(&self, cand: &Candidate) -> Option<f64> {
+        let mut r = Vec::with_capacity(self.points.len() * N_FEATURES);
+        for (((bar, _, sigma), truth), nom) in self.points.iter().zip(&self.nominal_truth).zip(&self.nominal_features) {
+            self.sims.fetch_add(1, Ordering::Relaxed);
+            let m = self.runner.features(*bar, cand, Some(truth))?;
+            r.extend((0..N_FEATURES).map(|j| residual(nom[j], m[j], sigma[j])));
+        }
+        Some(self.profile(r).iter().map(|x| x * x).sum())
+    }
+
     pub(crate) fn chi2(&self, cand: &Candidate) -> Option<f64> {
         self.residuals(cand).map(|r| r.iter().map(|x| x * x).sum())
     }

@@ -167,6 +167,23 @@ pub struct Remainder {
     pub statement: String,
 }
 
+/// The weakest magnitude of an effect the force balance cannot see that
+/// the ranking would have named on this data (`pipeline::floor`): below
+/// it, the verdict cannot exclude the effect.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct DetectionFloor {
+    pub effect: String,
+    /// The catalogue parameter the floor is on (the effect's one free parameter).
+    pub parameter: String,
+    /// `None` when no value in the catalogue's range would be named.
+    pub value: Option<f64>,
+    /// A larger value is a stronger effect (a gap, a delay); false for an orifice.
+    pub stronger_above: bool,
+    /// The signature χ² the naming rule asks of it here.
+    pub chi2_needed: f64,
+    pub statement: String,
+}
+
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Report {
     pub tool: String,
@@ -185,6 +202,9 @@ pub struct Report {
     /// The force balance's model-free quantities, measured against nominal.
     #[serde(default)]
     pub model_free: Vec<ModelFreeStat>,
+    /// How large each unseen effect would have to be to be named here.
+    #[serde(default)]
+    pub detection_floors: Vec<DetectionFloor>,
     pub shrink: Shrink,
     pub chi2_nominal: f64,
     pub features_compared: usize,

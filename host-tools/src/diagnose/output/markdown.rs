@@ -226,6 +226,7 @@ fn verdict_md(s: &mut String, report: &Report) {
     model_free_md(s, report);
     recalibration_md(s, report);
     remainder_md(s, report);
+    floors_md(s, report);
 }
 
 /// The force balance against the nominal model: the evidence no valve or
@@ -517,6 +518,44 @@ fn remainder_md(s: &mut String, report: &Report) {
     line!(s);
 }
 
+/// How large each effect the force balance cannot see would have to be to
+/// be named: what a `none` (or the named effects) cannot exclude.
+fn floors_md(s: &mut String, report: &Report) {
+    if report.detection_floors.is_empty() {
+        return;
+    }
+    line!(s, "### What could hide in the remainder");
+    line!(s);
+    line!(
+        s,
+        "The weakest magnitude at which each effect the force balance cannot see would have been named on this data (its signature against what is unexplained, by the naming rule):"
+    );
+    line!(s);
+    for f in &report.detection_floors {
+        line!(s, "- {}", f.statement);
+    }
+    line!(s);
+}
+
+/// The floors in one line: the magnitude each unseen effect could have and not be named.
+fn floors_inline(report: &Report) -> String {
+    report
+        .detection_floors
+        .iter()
+        .map(|f| match f.value {
+            Some(v) => format!(
+                "{} {} {} {}",
+                f.effect,
+                f.parameter,
+                if f.stronger_above { "<" } else { ">" },
+                num(v)
+            ),
+            None => format!("{} at any {}", f.effect, f.parameter),
+        })
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
 /// One-screen terminal summary: verdict, top 3 'where' cells, top 3 effects, shrink line.
 pub fn summary(report: &Report) -> String {
     let mut s = String::new();
@@ -552,6 +591,9 @@ pub fn summary(report: &Report) -> String {
     match report.remainder.first() {
         Some(r) => line!(s, "unexplained: {} ({} bar)", r.statement, fmt_bar(r.supply_bar)),
         None => line!(s, "unexplained: nothing above 10 % of a signal's RMS"),
+    }
+    if !report.detection_floors.is_empty() {
+        line!(s, "could hide unnamed: {}", floors_inline(report));
     }
     if !report.where_.is_empty() {
         line!(s, "where the gap lies:");

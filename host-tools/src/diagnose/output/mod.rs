@@ -62,6 +62,7 @@ mod tests {
     };
     use crate::diagnose::gap::{CycleSignals, SIGNALS};
     use crate::diagnose::model::Candidate;
+    use crate::diagnose::report::DetectionFloor;
     use crate::diagnose::stages::Stage;
 
     fn effect(name: &str, score: f64, explained: f64, value: f64) -> EffectResult {
@@ -132,6 +133,24 @@ mod tests {
             remainder: vec![],
             model_form: vec![],
             model_free: vec![],
+            detection_floors: vec![
+                DetectionFloor {
+                    effect: "leakage".into(),
+                    parameter: "gap_m".into(),
+                    value: Some(2.4e-5),
+                    stronger_above: true,
+                    chi2_needed: 41.0,
+                    statement: "leakage with gap_m ≥ 2.400e-5 would have been named".into(),
+                },
+                DetectionFloor {
+                    effect: "valve_delay".into(),
+                    parameter: "tau_s".into(),
+                    value: None,
+                    stronger_above: true,
+                    chi2_needed: 41.0,
+                    statement: "valve_delay could not be named".into(),
+                },
+            ],
             shrink: Shrink {
                 impact_energy_error_before: 12.34,
                 impact_energy_error_after: 1.23,
@@ -240,6 +259,10 @@ mod tests {
         assert!(md.contains("**coulomb_friction** (score 1234 ΔBIC)"), "{md}");
         assert!(md.contains("explains 87 % of the nominal chi2"));
         assert!(md.contains("\"force_n\": 2.3"));
+        assert!(
+            md.contains("- leakage with gap_m ≥ 2.400e-5 would have been named\n"),
+            "{md}"
+        );
         // The top where cell, in the sentence and the table.
         assert!(
             md.contains("rear pressure in stroke_closed at 4 bar: RMS 0.120 bar (8.3 %"),
@@ -300,6 +323,10 @@ mod tests {
         assert!(s.contains("  params: force_n=2.30\n"), "{s}");
         assert!(s.contains("recalibrated: no nominal parameter beyond its prior"), "{s}");
         assert!(s.contains("unexplained: nothing above 10 %"), "{s}");
+        assert!(
+            s.contains("could hide unnamed: leakage gap_m < 2.40e-5, valve_delay at any tau_s"),
+            "{s}"
+        );
         assert_eq!(
             params_inline(&serde_json::json!({"a": {"x": 1.5, "on": true}, "b": {"y": 0.012345}})),
             "a.on=true, a.x=1.50, b.y=0.0123"

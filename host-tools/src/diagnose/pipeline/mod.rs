@@ -4,6 +4,7 @@
 //! 1. [`group`]: inputs → operating points, cycles split into fit and held out;
 //! 2. [`nominal`]: the nominal model at every point → the fit set;
 //! 3. [`rank`]: every effect fitted ([`effect_fit`]) and ranked → the verdict;
+//!    [`floor`]: how large each unseen effect must be to be named here;
 //! 4. [`held_out`]: the verdict's model against the held-out data → the shrink;
 //! 5. [`where_`]: the gap and its remainder by signal × stage → where to look.
 //!
@@ -11,6 +12,7 @@
 //! assembles the report; a stage's unit test runs it alone.
 
 pub(crate) mod effect_fit;
+pub(crate) mod floor;
 pub(crate) mod group;
 pub(crate) mod held_out;
 pub(crate) mod nominal;

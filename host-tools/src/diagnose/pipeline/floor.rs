@@ -1,0 +1,174 @@
+//! Stage 3b, detection floors: for every effect the force balance cannot
+//! see, the weakest magnitude the ranking would have named on this data.
+//!
+//! A `none` verdict on a hammer whose model differs in form says "nothing
+//! above the form error", and the form error here can be ten times the
+//! noise: a small leak or a slight supply restriction hides in it. The
+//! floor says how small: the magnitude at which the effect's own signature
+//! — what no nominal parameter can absorb, in the fit set's weights —
+//! would meet the naming rule against what is left unexplained now. Below
+//! it the verdict cannot exclude the effect; above it, it would have named
+//! it. The force balance's effects need no floor of this kind: their
+//! threshold is `min_model_free_z` standard errors of a model-free quantity
+//! (`model_free` in the report).
+
+use super::rank::Ranking;
+use crate::diagnose::engine::Options;
+use crate::diagnose::fitset::FitSet;
+use crate::diagnose::model::{apply, free_params, Candidate};
+use crate::diagnose::parallel::parallel;
+use crate::diagnose::report::DetectionFloor;
+
+/// Bisection steps on the parameter's (log) scale: the catalogue's ranges
+/// span up to five decades, 2⁻⁸ of that is a few percent.
+const STEPS: usize = 8;
+
+/// The floor of every unseen single-parameter effect of the ranking.
+pub(crate) fn floors(fs: &FitSet, ranking: &Ranking, opts: &Options) -> Vec<DetectionFloor> {
+    let Some(needed) = chi2_needed(fs, ranking, opts) else {
+        return Vec::new();
+    };
+    let unseen: Vec<String> = ranking
+        .effects
+        .iter()
+        .filter(|e| e.model_free_z.is_none() && !e.name.contains('+'))
+        .map(|e| e.name.clone())
+        .collect();
+    parallel(opts.threads, unseen, &|name| floor_of(fs, &name, needed))
+        .into_iter()
+        .flatten()
+        .collect()
+}
+
+/// The signature χ² an unseen effect must bring to be named now: a score
+/// above `min_score` for its parameter, and the share of the gap the rule
+/// asks — of the nominal χ² with no verdict, of what the named single
+/// leaves as a pair's second — assuming the effect's signature adds to
+/// what is there (it is orthogonal to the form error, or the form error
+/// would have lent it a score already).
+fn chi2_needed(fs: &FitSet, ranking: &Ranking, opts: &Options) -> Option<f64> {
+    let ln_n = (fs.fit_cycles().max(2) as f64).ln();
+    let (rest, share) = match &ranking.verdict {
+        Some(v) => (v.chi2, opts.min_explained_pair),
+        None => (ranking.chi2_nominal, opts.min_explained),
+    };
+    if !rest.is_finite() || !(0.0..1.0).contains(&share) {
+        return None;
+    }
+    Some((opts.min_score + ln_n).max(rest * share / (1.0 - share)))
+}
+
+/// One effect's floor by bisection between the ends of its catalogue range.
+fn floor_of(fs: &FitSet, name: &str, needed: f64) -> Option<DetectionFloor> {
+    let specs = free_params(name, fs.distinct);
+    let [spec] = specs.as_slice() else {
+        return None;
+    };
+    let to_u = |x: f64| if spec.log { x.ln() } else { x };
+    let from_u = |u: f64| if spec.log { u.exp() } else { u };
+    // A simulation that fails (a hammer stalled by the effect) is as seen
+    // as an effect can be.
+    let signature = |u: f64| {
+        let mut c = Candidate::default();
+        apply(&mut c.effects, name, &[from_u(u)], fs.pressures);
+        fs.signature_chi2(&c).unwrap_or(f64::INFINITY)
+    };
+    let (lo, hi) = (to_u(spec.lo), to_u(spec.hi));
+    let (s_lo, s_hi) = (signature(lo), signature(hi));
+    let stronger_above = s_hi >= s_lo;
+    let (mut weak, mut strong) = if stronger_above { (lo, hi) } else { (hi, lo) };
+    let value = if s_hi.max(s_lo) < needed {
+        None
+    } else if s_hi.min(s_lo) >= needed {
+        Some(from_u(weak))
+    } else {
+        for _ in 0..STEPS {
+            let mid = 0.5 * (weak + strong);
+            if signature(mid) >= needed {
+                strong = mid;
+            } else {
+                weak = mid;
+            }
+        }
+        Some(from_u(strong))
+    };
+    Some(DetectionFloor {
+        effect: name.to_string(),
+        parameter: spec.key.to_string(),
+        value,
+        stronger_above,
+        chi2_needed: needed,
+        statement: statement(name, spec.key, value, stronger_above, (spec.lo, spec.hi)),
+    })
+}
+
+fn statement(name: &str, key: &str, value: Option<f64>, stronger_above: bool, range: (f64, f64)) -> String {
+    let (dir, weaker) = if stronger_above {
+        ("≥", "below")
+    } else {
+        ("≤", "above")
+    };
+    match value {
+        Some(v) => format!(
+            "{name} with {key} {dir} {v:.3e} would have been named; {weaker} that it can hide in what is unexplained"
+        ),
+        None => format!(
+            "{name} could not be named anywhere in {key} {:.3e}…{:.3e}: its signature stays within what is unexplained",
+            range.0, range.1
+        ),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::diagnose::engine::extractor_for;
+    use crate::diagnose::model::ModelRunner;
+    use crate::diagnose::pipeline::tests::{measured, quiet};
+    use crate::diagnose::pipeline::{group, nominal, rank};
+    use hammer_sim::SimConfig;
+
+    /// On the nominal hammer itself (noise only), a floor is a bracket the
+    /// rule's own threshold closes: the signature at the floor meets what
+    /// is needed, a few percent weaker does not, and a leak of the bench's
+    /// range (12–35 µm) is above it.
+    #[test]
+    fn a_floor_is_where_the_signature_meets_the_rule() {
+        let base = SimConfig::default();
+        let runner = ModelRunner::new(base.clone(), extractor_for(&base));
+        let inputs = [measured(4.0, true), measured(7.0, true)];
+        let grouped = group::group(&inputs, &runner.extractor).unwrap();
+        let opts = Options {
+            figures: false,
+            threads: 2,
+            ..Options::default()
+        };
+        let nom = nominal::nominal(&grouped.points, &runner, &opts, &quiet).unwrap();
+        let (fs, _) = nominal::fit_set(&grouped.points, &nom, &runner, &opts);
+        let ranking = rank::rank(&fs, &opts, &quiet);
+        let needed = chi2_needed(&fs, &ranking, &opts).unwrap();
+        let floors = floors(&fs, &ranking, &opts);
+        let leak = floors
+            .iter()
+            .find(|f| f.effect == "leakage")
+            .expect("leakage has a floor");
+        let gap = leak.value.expect("a leak is seen somewhere in the catalogue's range");
+        println!("leakage floor {gap:.3e} m at χ² {needed:.1}; all: {floors:#?}");
+        assert!(leak.stronger_above);
+        assert!(
+            gap < 12e-6,
+            "a bench-sized leak hides on the model's own hammer: floor {gap:.3e}"
+        );
+        let sig = |g: f64| {
+            let mut c = Candidate::default();
+            apply(&mut c.effects, "leakage", &[g], fs.pressures);
+            fs.signature_chi2(&c).unwrap()
+        };
+        assert!(sig(gap) >= needed);
+        assert!(sig(gap * 0.95) < needed);
+        // Every unseen effect of the catalogue has its floor; no seen one does.
+        let mut names: Vec<&str> = floors.iter().map(|f| f.effect.as_str()).collect();
+        names.sort();
+        assert_eq!(names, ["heat_transfer", "leakage", "supply_restriction", "valve_delay"]);
+    }
+}
