@@ -670,6 +670,19 @@ fn diagnose_bench_structural_small_run() {
         }
     }
     assert_eq!(force_balance_named, 4, "the plan has one case of each");
+    // The effects the force balance cannot see: each case's report says how
+    // large one would have had to be to be named. Hidden below that floor
+    // it must not be named (the floor would be wrong), and at or beyond it
+    // it must be (on these twelve: a heat transfer above, a leak, a valve
+    // delay and a supply restriction below).
+    let tally = |k: &str| {
+        let t = json[k].as_array().unwrap();
+        (t[0].as_u64().unwrap(), t[1].as_u64().unwrap())
+    };
+    let (above, below) = (tally("floor_above"), tally("floor_below"));
+    assert!(above.1 >= 1 && below.1 >= 1, "above {above:?}, below {below:?}");
+    assert_eq!(above.0, above.1, "an effect beyond its floor was missed");
+    assert_eq!(below.0, 0, "an effect below its floor was named");
 }
 
 /// The catalogue's isolability from the model alone: every effect put into
