@@ -330,14 +330,14 @@ pub struct BenchSummary {
     pub floor_below: (usize, usize),
 }
 
-/// Whether a case's hidden single effect stood at or beyond the detection
-/// floor its diagnosis reported (`None`: no floor for it, as for an effect
-/// the force balance sees).
+/// Whether a case's hidden single effect, one the force balance cannot
+/// see, stood at or beyond the detection floor its diagnosis reported
+/// (`None` for any other case).
 pub fn above_floor(c: &CaseResult) -> Option<bool> {
     let Hidden::One(name) = &c.hidden else {
         return None;
     };
-    let f = c.detection_floors.iter().find(|f| &f.effect == name)?;
+    let f = c.detection_floors.iter().find(|f| &f.effect == name && !f.model_free)?;
     let hidden = c.hidden_params.get(name)?.get(&f.parameter)?.as_f64()?;
     Some(match f.value {
         Some(v) if f.stronger_above => hidden >= v,

@@ -167,9 +167,9 @@ pub struct Remainder {
     pub statement: String,
 }
 
-/// The weakest magnitude of an effect the force balance cannot see that
-/// the ranking would have named on this data (`pipeline::floor`): below
-/// it, the verdict cannot exclude the effect.
+/// The weakest magnitude of an effect that the ranking would have named on
+/// this data (`pipeline::floor`): below it, the verdict cannot exclude the
+/// effect.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct DetectionFloor {
     pub effect: String,
@@ -179,8 +179,12 @@ pub struct DetectionFloor {
     pub value: Option<f64>,
     /// A larger value is a stronger effect (a gap, a delay); false for an orifice.
     pub stronger_above: bool,
-    /// The signature χ² the naming rule asks of it here.
+    /// The signature χ² the naming rule asks of it here (the force balance's
+    /// effects: `min_model_free_z`², their rule being in standard errors).
     pub chi2_needed: f64,
+    /// Found from the force balance's standard errors, not the waveforms.
+    #[serde(default)]
+    pub model_free: bool,
     pub statement: String,
 }
 

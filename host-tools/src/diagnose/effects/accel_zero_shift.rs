@@ -38,6 +38,12 @@ impl Diagnosed for AccelZeroShift {
         fs.off_nominal_z(ZERO_SHIFT_SQ)
     }
 
+    /// An amplitude A adds E[u²]·A² to the mean square.
+    fn model_free_floor(fs: &FitSet, z_min: f64) -> Option<(&'static str, f64)> {
+        let se = fs.mean_se(ZERO_SHIFT_SQ).1;
+        (se > 0.0).then(|| ("amplitude_mps2", (z_min * se / ZERO_SHIFT_SQ_FACTOR).sqrt()))
+    }
+
     fn evidence(fs: &FitSet) -> Option<String> {
         let (z, _) = fs.mean_se(ZERO_SHIFT_SQ);
         Some(format!(

@@ -52,6 +52,12 @@ impl Diagnosed for CoulombFriction {
         (se > 0.0).then(|| (s + b) / se)
     }
 
+    /// A friction F offsets both phases by F: z = 2F / se.
+    fn model_free_floor(fs: &FitSet, z_min: f64) -> Option<(&'static str, f64)> {
+        let se = (fs.mean_se(F_STROKE).1.powi(2) + fs.mean_se(F_BACKHAUL).1.powi(2)).sqrt();
+        (se > 0.0).then(|| ("friction_n", 0.5 * z_min * se))
+    }
+
     fn evidence(fs: &FitSet) -> Option<String> {
         let (s, ss) = fs.mean_se(F_STROKE);
         let (b, sb) = fs.mean_se(F_BACKHAUL);

@@ -87,6 +87,14 @@ pub(super) trait Diagnosed: Effect {
         None
     }
 
+    /// The magnitude (a catalogue key and its value) at which its
+    /// force-balance signature stands `z_min` standard errors off nominal:
+    /// below it, the verdict cannot exclude the effect. `None` if the force
+    /// balance cannot see it.
+    fn model_free_floor(_fs: &FitSet, _z_min: f64) -> Option<(&'static str, f64)> {
+        None
+    }
+
     /// A sensor effect on the pressure readings: the factors on the rear and
     /// front channels (reading = factor·true).
     fn pressure_reading_factors(&self) -> (f64, f64) {
@@ -112,6 +120,7 @@ pub(super) trait DiagnosisEntry: Sync {
     fn start_values(&self, fs: &FitSet) -> Vec<f64>;
     fn evidence(&self, fs: &FitSet) -> Option<String>;
     fn model_free_z(&self, fs: &FitSet) -> Option<f64>;
+    fn model_free_floor(&self, fs: &FitSet, z_min: f64) -> Option<(&'static str, f64)>;
     fn pressure_reading_factors(&self, effects: &Effects) -> (f64, f64);
     fn shift_expected_features(&self, effects: &Effects, mean: &mut [f64]);
     fn draw(&self, effects: &mut Effects, rng: &mut Rng);
@@ -139,6 +148,9 @@ impl<T: Diagnosed> DiagnosisEntry for Entry<T> {
     }
     fn model_free_z(&self, fs: &FitSet) -> Option<f64> {
         T::model_free_z(fs)
+    }
+    fn model_free_floor(&self, fs: &FitSet, z_min: f64) -> Option<(&'static str, f64)> {
+        T::model_free_floor(fs, z_min)
     }
     fn pressure_reading_factors(&self, effects: &Effects) -> (f64, f64) {
         T::get(effects).map_or((1.0, 1.0), |e| e.pressure_reading_factors())

@@ -28,6 +28,12 @@ impl Diagnosed for PressureGainError {
         Some(z(GAIN_REAR).max(z(GAIN_FRONT)))
     }
 
+    /// The clearer channel names it: the floor of the smaller error.
+    fn model_free_floor(fs: &FitSet, z_min: f64) -> Option<(&'static str, f64)> {
+        let se = fs.mean_se(GAIN_REAR).1.min(fs.mean_se(GAIN_FRONT).1);
+        (se > 0.0).then(|| ("gain", z_min * se))
+    }
+
     fn evidence(fs: &FitSet) -> Option<String> {
         let (g1, s1) = fs.mean_se(GAIN_REAR);
         let (g2, s2) = fs.mean_se(GAIN_FRONT);

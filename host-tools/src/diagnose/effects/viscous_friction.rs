@@ -28,6 +28,11 @@ impl Diagnosed for ViscousFriction {
         fs.off_nominal_z(VISCOUS)
     }
 
+    fn model_free_floor(fs: &FitSet, z_min: f64) -> Option<(&'static str, f64)> {
+        let se = fs.mean_se(VISCOUS).1;
+        (se > 0.0).then(|| ("c_n_s_per_m", z_min * se))
+    }
+
     fn evidence(fs: &FitSet) -> Option<String> {
         let (c, sc) = fs.mean_se(VISCOUS);
         Some(format!(

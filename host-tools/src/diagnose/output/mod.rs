@@ -140,6 +140,7 @@ mod tests {
                     value: Some(2.4e-5),
                     stronger_above: true,
                     chi2_needed: 41.0,
+                    model_free: false,
                     statement: "leakage with gap_m ≥ 2.400e-5 would have been named".into(),
                 },
                 DetectionFloor {
@@ -148,6 +149,7 @@ mod tests {
                     value: None,
                     stronger_above: true,
                     chi2_needed: 41.0,
+                    model_free: false,
                     statement: "valve_delay could not be named".into(),
                 },
             ],

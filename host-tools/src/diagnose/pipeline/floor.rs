@@ -1,43 +1,65 @@
-//! Stage 3b, detection floors: for every effect the force balance cannot
-//! see, the weakest magnitude the ranking would have named on this data.
+//! Stage 3b, detection floors: for every effect, the weakest magnitude
+//! the ranking would have named on this data.
 //!
 //! A `none` verdict on a hammer whose model differs in form says "nothing
 //! above the form error", and the form error here can be ten times the
 //! noise: a small leak or a slight supply restriction hides in it. The
-//! floor says how small: the magnitude at which the effect's own signature
-//! — what no nominal parameter can absorb, in the fit set's weights —
-//! would meet the naming rule against what is left unexplained now. Below
-//! it the verdict cannot exclude the effect; above it, it would have named
-//! it. The force balance's effects need no floor of this kind: their
-//! threshold is `min_model_free_z` standard errors of a model-free quantity
-//! (`model_free` in the report).
+//! floor says how small. For an effect the force balance cannot see: the
+//! magnitude at which its own signature — what no nominal parameter can
+//! absorb, in the fit set's weights — would meet the naming rule against
+//! what is left unexplained now. For one it sees: the magnitude at which
+//! its force-balance signature stands `min_model_free_z` standard errors
+//! off nominal, which no form error moves. Below the floor the verdict
+//! cannot exclude the effect; above it, it would have named it.
 
 use super::rank::Ranking;
+use crate::diagnose::effects::diagnosis;
 use crate::diagnose::engine::Options;
 use crate::diagnose::fitset::FitSet;
 use crate::diagnose::model::{apply, free_params, Candidate};
 use crate::diagnose::parallel::parallel;
 use crate::diagnose::report::DetectionFloor;
+use hammer_sim::effects::EFFECT_NAMES;
 
 /// Bisection steps on the parameter's (log) scale: the catalogue's ranges
 /// span up to five decades, 2⁻⁸ of that is a few percent.
 const STEPS: usize = 8;
 
-/// The floor of every unseen single-parameter effect of the ranking.
+/// The floor of every effect of the ranking, in the catalogue's order
+/// (an unseen effect's only if it has one free parameter).
 pub(crate) fn floors(fs: &FitSet, ranking: &Ranking, opts: &Options) -> Vec<DetectionFloor> {
-    let Some(needed) = chi2_needed(fs, ranking, opts) else {
-        return Vec::new();
+    let seen = |name: &str| {
+        ranking
+            .effects
+            .iter()
+            .find(|e| e.name == name)
+            .map(|e| e.model_free_z.is_some())
     };
-    let unseen: Vec<String> = ranking
-        .effects
-        .iter()
-        .filter(|e| e.model_free_z.is_none() && !e.name.contains('+'))
-        .map(|e| e.name.clone())
-        .collect();
-    parallel(opts.threads, unseen, &|name| floor_of(fs, &name, needed))
-        .into_iter()
-        .flatten()
-        .collect()
+    let needed = chi2_needed(fs, ranking, opts);
+    let names: Vec<&str> = EFFECT_NAMES.iter().copied().filter(|n| seen(n).is_some()).collect();
+    parallel(opts.threads, names, &|name| match seen(name) {
+        Some(true) => model_free_floor(fs, name, opts.min_model_free_z),
+        _ => needed.and_then(|needed| floor_of(fs, name, needed)),
+    })
+    .into_iter()
+    .flatten()
+    .collect()
+}
+
+/// A force-balance effect's floor: its signature at `z_min` standard errors.
+fn model_free_floor(fs: &FitSet, name: &str, z_min: f64) -> Option<DetectionFloor> {
+    let (key, value) = diagnosis(name)?.model_free_floor(fs, z_min)?;
+    Some(DetectionFloor {
+        effect: name.to_string(),
+        parameter: key.to_string(),
+        value: Some(value),
+        stronger_above: true,
+        chi2_needed: z_min * z_min,
+        model_free: true,
+        statement: format!(
+            "{name} with {key} ≥ {value:.3} would have been named (its force-balance signature at {z_min:.0} standard errors); below that it is within the force balance's uncertainty"
+        ),
+    })
 }
 
 /// The signature χ² an unseen effect must bring to be named now: a score
@@ -98,6 +120,7 @@ fn floor_of(fs: &FitSet, name: &str, needed: f64) -> Option<DetectionFloor> {
         value,
         stronger_above,
         chi2_needed: needed,
+        model_free: false,
         statement: statement(name, spec.key, value, stronger_above, (spec.lo, spec.hi)),
     })
 }
@@ -128,10 +151,10 @@ mod tests {
     use crate::diagnose::pipeline::{group, nominal, rank};
     use hammer_sim::SimConfig;
 
-    /// On the nominal hammer itself (noise only), a floor is a bracket the
-    /// rule's own threshold closes: the signature at the floor meets what
-    /// is needed, a few percent weaker does not, and a leak of the bench's
-    /// range (12–35 µm) is above it.
+    /// On the nominal hammer itself (noise only), an unseen effect's floor
+    /// is a bracket the rule's own threshold closes: the signature at the
+    /// floor meets what is needed, a few percent weaker does not, and a leak
+    /// of the bench's range (12–35 µm) is above it.
     #[test]
     fn a_floor_is_where_the_signature_meets_the_rule() {
         let base = SimConfig::default();
@@ -166,9 +189,13 @@ mod tests {
         };
         assert!(sig(gap) >= needed);
         assert!(sig(gap * 0.95) < needed);
-        // Every unseen effect of the catalogue has its floor; no seen one does.
-        let mut names: Vec<&str> = floors.iter().map(|f| f.effect.as_str()).collect();
-        names.sort();
-        assert_eq!(names, ["heat_transfer", "leakage", "supply_restriction", "valve_delay"]);
+        // Every effect of the catalogue has its floor, the force balance's
+        // from their standard errors: the paper's friction (10.27 N at
+        // 4 bar) is more than ten times its floor.
+        let names: Vec<&str> = floors.iter().map(|f| f.effect.as_str()).collect();
+        assert_eq!(names, EFFECT_NAMES);
+        let friction = floors.iter().find(|f| f.effect == "coulomb_friction").unwrap();
+        assert!(friction.model_free && friction.value.unwrap() < 1.0, "{friction:?}");
+        assert!(!leak.model_free);
     }
 }
