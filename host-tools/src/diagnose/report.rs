@@ -206,7 +206,8 @@ pub struct Report {
     /// The force balance's model-free quantities, measured against nominal.
     #[serde(default)]
     pub model_free: Vec<ModelFreeStat>,
-    /// How large each unseen effect would have to be to be named here.
+    /// How large each effect would have to be to be named here (for an
+    /// effect the verdict names: a further one, against what it leaves).
     #[serde(default)]
     pub detection_floors: Vec<DetectionFloor>,
     pub shrink: Shrink,

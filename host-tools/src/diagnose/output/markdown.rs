@@ -5,6 +5,7 @@ use std::fmt::Write as _;
 
 use crate::diagnose::engine::{EffectResult, Report, WhereCell};
 use crate::diagnose::gap::SIGNALS;
+use crate::diagnose::report::DetectionFloor;
 use crate::numfmt::{bar as fmt_bar, pct, sig3 as num, MISSING};
 
 /// `writeln!` into a `String`, which cannot fail.
@@ -521,27 +522,35 @@ fn remainder_md(s: &mut String, report: &Report) {
 /// How large each effect the force balance cannot see would have to be to
 /// be named: what a `none` (or the named effects) cannot exclude.
 fn floors_md(s: &mut String, report: &Report) {
-    if report.detection_floors.is_empty() {
+    if unnamed_floors(report).next().is_none() {
         return;
     }
     line!(s, "### What could hide in the remainder");
     line!(s);
     line!(
         s,
-        "The weakest magnitude at which each effect the force balance cannot see would have been named on this data (its signature against what is unexplained, by the naming rule):"
+        "The weakest magnitude at which each effect not named would have been named on this data (one the force balance sees: its signature there at {} standard errors; one it cannot see: its signature in the waveforms against what is unexplained, by the naming rule):",
+        num(report.options.min_model_free_z)
     );
     line!(s);
-    for f in &report.detection_floors {
+    for f in unnamed_floors(report) {
         line!(s, "- {}", f.statement);
     }
     line!(s);
 }
 
-/// The floors in one line: the magnitude each unseen effect could have and not be named.
-fn floors_inline(report: &Report) -> String {
+/// The floors of the effects the verdict did not name: a named effect is
+/// not hiding.
+fn unnamed_floors(report: &Report) -> impl Iterator<Item = &DetectionFloor> {
     report
         .detection_floors
         .iter()
+        .filter(|f| !report.verdict.effects.contains(&f.effect))
+}
+
+/// The floors in one line: the magnitude each effect could have and not be named.
+fn floors_inline(report: &Report) -> String {
+    unnamed_floors(report)
         .map(|f| match f.value {
             Some(v) => format!(
                 "{} {} {} {}",
@@ -592,7 +601,7 @@ pub fn summary(report: &Report) -> String {
         Some(r) => line!(s, "unexplained: {} ({} bar)", r.statement, fmt_bar(r.supply_bar)),
         None => line!(s, "unexplained: nothing above 10 % of a signal's RMS"),
     }
-    if !report.detection_floors.is_empty() {
+    if unnamed_floors(report).next().is_some() {
         line!(s, "could hide unnamed: {}", floors_inline(report));
     }
     if !report.where_.is_empty() {

@@ -329,6 +329,11 @@ mod tests {
             s.contains("could hide unnamed: leakage gap_m < 2.40e-5, valve_delay at any tau_s"),
             "{s}"
         );
+        // A named effect is not hiding.
+        let mut named = report();
+        named.verdict.effects = vec!["leakage".into()];
+        let s = summary(&named);
+        assert!(s.contains("could hide unnamed: valve_delay at any tau_s\n"), "{s}");
         assert_eq!(
             params_inline(&serde_json::json!({"a": {"x": 1.5, "on": true}, "b": {"y": 0.012345}})),
             "a.on=true, a.x=1.50, b.y=0.0123"
