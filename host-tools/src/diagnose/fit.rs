@@ -15,7 +15,8 @@ pub struct ParamSpec {
 }
 
 impl ParamSpec {
-    fn to_u(&self, x: f64) -> f64 {
+    /// The value on the scale the fit moves in (its log for a log-scale parameter), clamped to the bounds.
+    pub(crate) fn to_u(&self, x: f64) -> f64 {
         let x = x.clamp(self.lo, self.hi);
         if self.log {
             x.ln()
@@ -24,7 +25,8 @@ impl ParamSpec {
         }
     }
 
-    fn from_u(&self, u: f64) -> f64 {
+    /// Back from the fit's scale, clamped to the bounds.
+    pub(crate) fn from_u(&self, u: f64) -> f64 {
         let x = if self.log { u.exp() } else { u };
         x.clamp(self.lo, self.hi)
     }

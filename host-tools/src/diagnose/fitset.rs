@@ -45,6 +45,13 @@ impl FitSet<'_> {
         self.points.iter().map(|p| p.1.cycles).sum()
     }
 
+    /// ln of the measured cycles: the BIC's price of one parameter (the
+    /// features are per-cycle means; counting samples would overstate the
+    /// evidence).
+    pub(crate) fn ln_cycles(&self) -> f64 {
+        (self.fit_cycles().max(2) as f64).ln()
+    }
+
     /// Simulations run so far on the fit set's account.
     pub(crate) fn simulations(&self) -> usize {
         self.sims.load(Ordering::Relaxed)

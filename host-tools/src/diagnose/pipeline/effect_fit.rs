@@ -200,19 +200,17 @@ fn bin_stages(truth: &TruthTrace, hammer: &hammer_sim::params::HammerParams, ext
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::diagnose::engine::extractor_for;
-    use crate::diagnose::model::ModelRunner;
-    use hammer_sim::{simulate_truth, SimConfig};
+    use crate::diagnose::pipeline::tests::nominal_runner;
+    use hammer_sim::simulate_truth;
 
     /// The nominal cycle's bins, from the impact on, run through the cycle
     /// in its physical order: the backhaul before the stroke, the stroke
     /// into the next impact, and no stage of the backhaul once the stroke began.
     #[test]
     fn bins_follow_the_cycle() {
-        let base = SimConfig::default();
-        let runner = ModelRunner::new(base.clone(), extractor_for(&base));
+        let runner = nominal_runner();
         let run = simulate_truth(&runner.config(4.0, &hammer_sim::effects::Effects::default())).unwrap();
-        let st = bin_stages(&run.truth, &base.hammer, &runner.extractor);
+        let st = bin_stages(&run.truth, &runner.base.hammer, &runner.extractor);
         assert_eq!(st.len(), BINS);
         let stroke = |s: &Stage| matches!(s, Stage::StrokeIntake | Stage::StrokeClosed | Stage::StrokeVenting);
         assert!(!stroke(&st[0]), "{st:?}");

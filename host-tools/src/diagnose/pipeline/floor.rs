@@ -69,7 +69,7 @@ fn model_free_floor(fs: &FitSet, name: &str, z_min: f64) -> Option<DetectionFloo
 /// what is there (it is orthogonal to the form error, or the form error
 /// would have lent it a score already).
 fn chi2_needed(fs: &FitSet, ranking: &Ranking, opts: &Options) -> Option<f64> {
-    let ln_n = (fs.fit_cycles().max(2) as f64).ln();
+    let ln_n = fs.ln_cycles();
     let (rest, share) = match &ranking.verdict {
         Some(v) => (v.chi2, opts.min_explained_pair),
         None => (ranking.chi2_nominal, opts.min_explained),
@@ -86,23 +86,21 @@ fn floor_of(fs: &FitSet, name: &str, needed: f64) -> Option<DetectionFloor> {
     let [spec] = specs.as_slice() else {
         return None;
     };
-    let to_u = |x: f64| if spec.log { x.ln() } else { x };
-    let from_u = |u: f64| if spec.log { u.exp() } else { u };
     // A simulation that fails (a hammer stalled by the effect) is as seen
     // as an effect can be.
     let signature = |u: f64| {
         let mut c = Candidate::default();
-        apply(&mut c.effects, name, &[from_u(u)], fs.pressures);
+        apply(&mut c.effects, name, &[spec.from_u(u)], fs.pressures);
         fs.signature_chi2(&c).unwrap_or(f64::INFINITY)
     };
-    let (lo, hi) = (to_u(spec.lo), to_u(spec.hi));
+    let (lo, hi) = (spec.to_u(spec.lo), spec.to_u(spec.hi));
     let (s_lo, s_hi) = (signature(lo), signature(hi));
     let stronger_above = s_hi >= s_lo;
     let (mut weak, mut strong) = if stronger_above { (lo, hi) } else { (hi, lo) };
     let value = if s_hi.max(s_lo) < needed {
         None
     } else if s_hi.min(s_lo) >= needed {
-        Some(from_u(weak))
+        Some(spec.from_u(weak))
     } else {
         for _ in 0..STEPS {
             let mid = 0.5 * (weak + strong);
@@ -112,7 +110,7 @@ fn floor_of(fs: &FitSet, name: &str, needed: f64) -> Option<DetectionFloor> {
                 weak = mid;
             }
         }
-        Some(from_u(strong))
+        Some(spec.from_u(strong))
     };
     Some(DetectionFloor {
         effect: name.to_string(),
@@ -145,11 +143,8 @@ fn statement(name: &str, key: &str, value: Option<f64>, stronger_above: bool, ra
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::diagnose::engine::extractor_for;
-    use crate::diagnose::model::ModelRunner;
-    use crate::diagnose::pipeline::tests::{measured, quiet};
+    use crate::diagnose::pipeline::tests::{measured, nominal_runner, quiet};
     use crate::diagnose::pipeline::{group, nominal, rank};
-    use hammer_sim::SimConfig;
 
     /// On the nominal hammer itself (noise only), an unseen effect's floor
     /// is a bracket the rule's own threshold closes: the signature at the
@@ -157,8 +152,7 @@ mod tests {
     /// of the bench's range (12–35 µm) is above it.
     #[test]
     fn a_floor_is_where_the_signature_meets_the_rule() {
-        let base = SimConfig::default();
-        let runner = ModelRunner::new(base.clone(), extractor_for(&base));
+        let runner = nominal_runner();
         let inputs = [measured(4.0, true), measured(7.0, true)];
         let grouped = group::group(&inputs, &runner.extractor).unwrap();
         let opts = Options {

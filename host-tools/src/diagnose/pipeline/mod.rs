@@ -21,7 +21,8 @@ pub(crate) mod where_;
 
 #[cfg(test)]
 pub(crate) mod tests {
-    use crate::diagnose::engine::MeasuredInput;
+    use crate::diagnose::engine::{extractor_for, MeasuredInput};
+    use crate::diagnose::model::ModelRunner;
     use hammer_sim::simulate::simulate;
     use hammer_sim::SimConfig;
 
@@ -37,6 +38,12 @@ pub(crate) mod tests {
             trace: sim.trace(),
             fit,
         }
+    }
+
+    /// The diagnosis' model of the default hammer, as the engine builds it.
+    pub(crate) fn nominal_runner() -> ModelRunner {
+        let base = SimConfig::default();
+        ModelRunner::new(base.clone(), extractor_for(&base))
     }
 
     /// A progress callback that reports nothing.

@@ -138,11 +138,9 @@ fn nuisance_sensitivities(fs: &FitSet, nominal_features: &[&[f64]], opts: &Optio
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::diagnose::engine::extractor_for;
     use crate::diagnose::features::{ENERGY, PERIOD};
     use crate::diagnose::pipeline::group::group;
-    use crate::diagnose::pipeline::tests::{measured, quiet};
-    use hammer_sim::SimConfig;
+    use crate::diagnose::pipeline::tests::{measured, nominal_runner, quiet};
 
     /// The nominal model hits harder and faster at 7 bar than at 4; the fit
     /// set holds the fit point only, every weight at least its floor, one
@@ -150,8 +148,7 @@ mod tests {
     /// least 1 (the model is never credited beyond the noise).
     #[test]
     fn nominal_model_and_fit_set() {
-        let base = SimConfig::default();
-        let runner = ModelRunner::new(base.clone(), extractor_for(&base));
+        let runner = nominal_runner();
         let inputs = [measured(4.0, true), measured(7.0, false)];
         let g = group(&inputs, &runner.extractor).unwrap();
         let opts = Options {

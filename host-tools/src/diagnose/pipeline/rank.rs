@@ -54,7 +54,7 @@ impl Ranking {
 
 /// Ranks the catalogue on `fs`; `step` is called once per effect and once for the pairs.
 pub(crate) fn rank(fs: &FitSet, opts: &Options, step: &(dyn Fn(&str) + Sync)) -> Ranking {
-    let ln_n = (fs.fit_cycles().max(2) as f64).ln();
+    let ln_n = fs.ln_cycles();
     let chi2_nominal = fs.chi2(&Candidate::default()).unwrap_or(f64::INFINITY);
     let mut effects: Vec<EffectResult> = parallel(opts.threads, EFFECT_NAMES.to_vec(), &|name| {
         let r = fit_effects(fs, &[name], &[], chi2_nominal, ln_n, opts);
