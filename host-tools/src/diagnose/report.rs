@@ -112,6 +112,45 @@ pub struct Shrink {
     pub points: Vec<PointShrink>,
 }
 
+/// How much worse (percentage points) the verdict's model may predict the
+/// held-out data than the nominal model before the report says so: above the
+/// impact energy's own floor (0.3 %) and the cycle-to-cycle scatter of a
+/// second's mean.
+const WORSE_BY_PCT: f64 = 0.5;
+
+impl Shrink {
+    /// A warning when the verdict's model predicts the held-out data worse
+    /// than the nominal model. On a hammer of another form the recalibration
+    /// bends the nominal parameters to the fit points' form error (they end
+    /// at the prior's edge), and that need not carry to another pressure:
+    /// the user must not take the refitted model for a better predictor
+    /// there. It says nothing against a named effect's own evidence.
+    pub fn caution(&self) -> Option<String> {
+        let mut worse = Vec::new();
+        if self.impact_energy_error_after > self.impact_energy_error_before + WORSE_BY_PCT {
+            worse.push(format!(
+                "impact energy error {:.1} % → {:.1} %",
+                self.impact_energy_error_before, self.impact_energy_error_after
+            ));
+        }
+        if self.frequency_error_after > self.frequency_error_before + WORSE_BY_PCT {
+            worse.push(format!(
+                "frequency error {:.1} % → {:.1} %",
+                self.frequency_error_before, self.frequency_error_after
+            ));
+        }
+        (!worse.is_empty()).then(|| {
+            format!(
+                "the refitted model predicts the held-out data worse than the nominal model ({}): its \
+                 recalibrated nominal parameters absorb form error at the fit points that does not carry \
+                 there; do not use it to predict other operating points (a named effect's evidence stands \
+                 apart from this)",
+                worse.join(", ")
+            )
+        })
+    }
+}
+
 /// The model-form error of one group of model-based features: how much
 /// larger the recalibrated nominal model's residual is than the measurement
 /// noise and floors allow. The group's weights are divided by it, so a model

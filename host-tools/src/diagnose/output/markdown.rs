@@ -352,6 +352,10 @@ fn shrink_md(s: &mut String, report: &Report) {
         "- control, the nominal parameters recalibrated and no effect added: impact energy error {} %",
         pct(sh.impact_energy_error_recalibrated_only)
     );
+    if let Some(c) = sh.caution() {
+        line!(s);
+        line!(s, "**Caution:** {c}.");
+    }
     line!(s);
     line!(
         s,
@@ -635,5 +639,8 @@ pub fn summary(report: &Report) -> String {
         pct(sh.frequency_error_after),
         bars_list(&sh.held_out_points)
     );
+    if let Some(c) = sh.caution() {
+        line!(s, "caution: {c}");
+    }
     s
 }

@@ -292,6 +292,31 @@ mod tests {
         assert!(md.contains("| – | – |"));
     }
 
+    /// A refitted model that predicts the held-out data worse than nominal
+    /// (the structural benchmark's case 0: friction named right, energy
+    /// 17 % → 22 %) is said so in both outputs; one that predicts better is not.
+    #[test]
+    fn a_refit_worse_than_nominal_on_held_out_data_is_said() {
+        let good = report();
+        assert!(good.shrink.caution().is_none());
+        assert!(!markdown(&good, &[]).contains("Caution"));
+        assert!(!summary(&good).contains("caution"));
+        let mut r = report();
+        r.shrink.impact_energy_error_before = 17.1;
+        r.shrink.impact_energy_error_after = 21.9;
+        let md = markdown(&r, &[]);
+        assert!(
+            md.contains("**Caution:** the refitted model predicts the held-out data worse than the nominal model (impact energy error 17.1 % → 21.9 %)"),
+            "{md}"
+        );
+        assert!(summary(&r).contains("caution: the refitted model"));
+        // Within the energy's own noise it is not a finding.
+        r.shrink.impact_energy_error_after = 17.4;
+        assert!(r.shrink.caution().is_none());
+        r.shrink.frequency_error_after = 6.0;
+        assert!(r.shrink.caution().unwrap().contains("frequency error 5.0 % → 6.0 %"));
+    }
+
     #[test]
     fn markdown_and_summary_of_an_empty_report() {
         let mut r = report();
