@@ -87,9 +87,10 @@ fn main() {
         }
         let s = &r.shrink;
         println!(
-            "  energy {:.2} % -> recal {:.2} % -> {:.2} %; freq {:.2} % -> {:.2} %",
+            "  energy {:.2} % -> recal {:.2} % / effects in nominal {:.2} % -> {:.2} %; freq {:.2} % -> {:.2} %",
             s.impact_energy_error_before,
             s.impact_energy_error_recalibrated_only,
+            s.impact_energy_error_effects_only,
             s.impact_energy_error_after,
             s.frequency_error_before,
             s.frequency_error_after

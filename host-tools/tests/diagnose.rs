@@ -48,12 +48,13 @@ fn paper_friction_is_named_and_the_energy_gap_closes_on_held_out_pressures() {
     let r = run(&inputs);
     let s = &r.shrink;
     println!(
-        "verdict {:?} ({}); energy error {:.2} % -> {:.2} % (recalibrated only {:.2} %), frequency {:.2} % -> {:.2} % on {:?}",
+        "verdict {:?} ({}); energy error {:.2} % -> {:.2} % (recalibrated only {:.2} %, effects in nominal {:.2} %), frequency {:.2} % -> {:.2} % on {:?}",
         r.verdict.effects,
         r.verdict.reason,
         s.impact_energy_error_before,
         s.impact_energy_error_after,
         s.impact_energy_error_recalibrated_only,
+        s.impact_energy_error_effects_only,
         s.frequency_error_before,
         s.frequency_error_after,
         s.held_out_points
@@ -80,6 +81,15 @@ fn paper_friction_is_named_and_the_energy_gap_closes_on_held_out_pressures() {
     );
     assert!(s.impact_energy_error_after <= 1.0, "{}", s.impact_energy_error_after);
     assert!(s.frequency_error_after < s.frequency_error_before);
+    // The paper's own check: its friction put into the nominal model,
+    // nothing refitted, closes most of the friction-blind gap on a hammer
+    // of the model's form (what is left is the ±3 % the generator jitters).
+    assert!(
+        s.impact_energy_error_effects_only < s.impact_energy_error_before / 3.0,
+        "{} vs nominal {}",
+        s.impact_energy_error_effects_only,
+        s.impact_energy_error_before
+    );
     // Nine nominal parameters with a real hammer's ±20 % can bend the impact
     // energy too, so the recalibration alone is a control, not a proof: the
     // named model does at least as well, and the nominal parameters it needs

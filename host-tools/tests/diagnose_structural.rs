@@ -36,11 +36,12 @@ fn run(inputs: &[MeasuredInput]) -> Report {
 fn print(r: &Report) {
     let s = &r.shrink;
     println!(
-        "verdict {:?} ({}); energy error {:.2} % nominal, {:.2} % recalibrated, {:.2} % with the effects; frequency {:.2} % -> {:.2} %",
+        "verdict {:?} ({}); energy error {:.2} % nominal, {:.2} % recalibrated, {:.2} % effects in nominal, {:.2} % with the effects; frequency {:.2} % -> {:.2} %",
         r.verdict.effects,
         r.verdict.reason,
         s.impact_energy_error_before,
         s.impact_energy_error_recalibrated_only,
+        s.impact_energy_error_effects_only,
         s.impact_energy_error_after,
         s.frequency_error_before,
         s.frequency_error_after

@@ -352,6 +352,11 @@ fn shrink_md(s: &mut String, report: &Report) {
         "- control, the nominal parameters recalibrated and no effect added: impact energy error {} %",
         pct(sh.impact_energy_error_recalibrated_only)
     );
+    line!(
+        s,
+        "- the named effects in the nominal model, nothing recalibrated: impact energy error {} %",
+        pct(sh.impact_energy_error_effects_only)
+    );
     if let Some(c) = sh.caution() {
         line!(s);
         line!(s, "**Caution:** {c}.");
@@ -631,10 +636,11 @@ pub fn summary(report: &Report) -> String {
     }
     let sh = &report.shrink;
     line!(s,
-        "shrink: impact energy error {} % nominal, {} % recalibrated, {} % with the effects; frequency error {} % → {} % (held out: {})",
+        "shrink: impact energy error {} % nominal, {} % recalibrated, {} % with the effects ({} % with them in the nominal model); frequency error {} % → {} % (held out: {})",
         pct(sh.impact_energy_error_before),
         pct(sh.impact_energy_error_recalibrated_only),
         pct(sh.impact_energy_error_after),
+        pct(sh.impact_energy_error_effects_only),
         pct(sh.frequency_error_before),
         pct(sh.frequency_error_after),
         bars_list(&sh.held_out_points)

@@ -159,6 +159,7 @@ mod tests {
                 frequency_error_before: 5.0,
                 frequency_error_after: 0.4,
                 impact_energy_error_recalibrated_only: 7.5,
+                impact_energy_error_effects_only: 3.4,
                 held_out_points: vec![],
                 judged_on: "the later half of the cycles".into(),
                 points: vec![PointShrink {
@@ -169,6 +170,7 @@ mod tests {
                     impact_energy_nominal_j: 1.12,
                     impact_energy_fitted_j: 1.01,
                     impact_energy_recalibrated_j: 0.95,
+                    impact_energy_effects_only_j: 1.03,
                     frequency_measured_hz: 30.0,
                     frequency_nominal_hz: 31.5,
                     frequency_fitted_hz: 30.1,
@@ -283,6 +285,9 @@ mod tests {
         assert!(md.contains("impact energy error: 12.3 % → 1.2 %"));
         assert!(md.contains("frequency error: 5.0 % → 0.40 %"));
         assert!(
+            md.contains("- the named effects in the nominal model, nothing recalibrated: impact energy error 3.4 %")
+        );
+        assert!(
             md.contains("| 4 | no | 13 | 1.00 / 1.12 / 1.01 | 30.0 / 31.5 / 30.1 | 0.0100 → – |"),
             "{md}"
         );
@@ -344,7 +349,7 @@ mod tests {
         assert!(s.starts_with("verdict: coulomb_friction"));
         assert!(s.contains("1. rear pressure in stroke_closed at 4 bar"));
         assert!(
-            s.contains("impact energy error 12.3 % nominal, 7.5 % recalibrated, 1.2 % with the effects"),
+            s.contains("impact energy error 12.3 % nominal, 7.5 % recalibrated, 1.2 % with the effects (3.4 % with them in the nominal model)"),
             "{s}"
         );
         assert!(s.contains("  params: force_n=2.30\n"), "{s}");

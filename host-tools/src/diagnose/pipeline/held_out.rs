@@ -3,6 +3,8 @@
 //! (within their prior), is run at every operating point and compared with
 //! the held-out cycles. The nominal model recalibrated alone is the
 //! control: the shrink must come from the effect, not the recalibration.
+//! The named effects in the nominal model as it stands (the paper's own
+//! check) are the other side: what the effects do without any refit.
 
 use std::collections::BTreeMap;
 
@@ -26,13 +28,19 @@ pub(crate) struct Models {
     /// The nominal model recalibrated alone (the control).
     pub(crate) recal_runner: ModelRunner,
     pub(crate) recal_runs: Vec<Option<SimRun>>,
+    /// The verdict's effects in the nominal model, nothing refitted; None
+    /// everywhere when no effect was named.
+    pub(crate) effects_only_runs: Vec<Option<SimRun>>,
     pub(crate) recal_nominal: Option<Recalibrated>,
     pub(crate) recal_verdict: Option<Recalibrated>,
 }
 
 impl Models {
     pub(crate) fn simulations(&self) -> usize {
-        self.fitted_runs.iter().flatten().count() + self.recal_runs.iter().flatten().count()
+        [&self.fitted_runs, &self.recal_runs, &self.effects_only_runs]
+            .iter()
+            .map(|runs| runs.iter().flatten().count())
+            .sum()
     }
 
     /// The verdict's model at point `i`: the fitted one, or with no effect
@@ -84,6 +92,7 @@ pub(crate) fn models(fs: &FitSet, bars: &[f64], verdict: Option<&EffectResult>, 
         });
         (r, runs)
     };
+    let none = || bars.iter().map(|_| None).collect::<Vec<_>>();
     let nominal = Candidate::default();
     let recal_nominal = recalibrated(&nominal, None);
     // The verdict's model starts where the nominal one got to (if that is
@@ -94,15 +103,17 @@ pub(crate) fn models(fs: &FitSet, bars: &[f64], verdict: Option<&EffectResult>, 
         .and_then(|c| recalibrated(c, recal_nominal.as_ref().map(|r| r.delta.as_slice())));
     let (fitted_runner, fitted_runs) = match &fitted_cand {
         Some(c) => model_runs(&recal_verdict, c),
-        None => (fs.runner.clone(), bars.iter().map(|_| None).collect()),
+        None => (fs.runner.clone(), none()),
     };
     let (recal_runner, recal_runs) = model_runs(&recal_nominal, &nominal);
+    let effects_only_runs = fitted_cand.as_ref().map_or_else(none, |c| model_runs(&None, c).1);
     Models {
         fitted_cand,
         fitted_runner,
         fitted_runs,
         recal_runner,
         recal_runs,
+        effects_only_runs,
         recal_nominal,
         recal_verdict,
     }
@@ -138,6 +149,12 @@ fn point_shrink(i: usize, p: &Point, nom: &[f64], models: &Models) -> Option<Poi
         .as_ref()
         .and_then(|run| models.recal_runner.features_of_truth(&run.truth, &nominal.effects))
         .unwrap_or_else(|| nom.to_vec());
+    // Any runner reads a solution alike (one extractor, one settling time).
+    let effects_only = match (&models.fitted_cand, &models.effects_only_runs[i]) {
+        (Some(c), Some(run)) => models.recal_runner.features_of_truth(&run.truth, &c.effects),
+        _ => None,
+    }
+    .unwrap_or_else(|| nom.to_vec());
     // With no effect named, the verdict's model is the recalibrated nominal one.
     let fitted = fitted.unwrap_or_else(|| recal.clone());
     let rms = |m: &[f64]| -> BTreeMap<String, f64> {
@@ -162,6 +179,7 @@ fn point_shrink(i: usize, p: &Point, nom: &[f64], models: &Models) -> Option<Poi
         impact_energy_nominal_j: nom[ENERGY],
         impact_energy_fitted_j: fitted[ENERGY],
         impact_energy_recalibrated_j: recal[ENERGY],
+        impact_energy_effects_only_j: effects_only[ENERGY],
         frequency_measured_hz: 1.0 / s.mean[PERIOD],
         frequency_nominal_hz: 1.0 / nom[PERIOD],
         frequency_fitted_hz: 1.0 / fitted[PERIOD],
@@ -189,6 +207,7 @@ fn judged(shrink_points: Vec<PointShrink>, held_out_points: Vec<f64>) -> Shrink 
         frequency_error_before: mean_err(&|p| frequency(p, p.frequency_nominal_hz)),
         frequency_error_after: mean_err(&|p| frequency(p, p.frequency_fitted_hz)),
         impact_energy_error_recalibrated_only: mean_err(&|p| energy(p, p.impact_energy_recalibrated_j)),
+        impact_energy_error_effects_only: mean_err(&|p| energy(p, p.impact_energy_effects_only_j)),
         judged_on: if held_out_points.is_empty() {
             "the later half of the cycles of every trace (one operating point: no held-out pressure)".into()
         } else {
@@ -238,6 +257,7 @@ mod tests {
             impact_energy_nominal_j: energy.1,
             impact_energy_fitted_j: energy.2,
             impact_energy_recalibrated_j: energy.1,
+            impact_energy_effects_only_j: energy.1,
             frequency_measured_hz: freq.0,
             frequency_nominal_hz: freq.1,
             frequency_fitted_hz: freq.2,
