@@ -95,5 +95,17 @@ fn main() {
             s.frequency_error_before,
             s.frequency_error_after
         );
+        for p in &s.points {
+            println!(
+                "    {} bar{}: energy measured {:.3} J, nominal {:.3}, recalibrated {:.3}, effects in nominal {:.3}, verdict {:.3}",
+                p.supply_bar,
+                if p.held_out_point { " (held out)" } else { "" },
+                p.impact_energy_measured_j,
+                p.impact_energy_nominal_j,
+                p.impact_energy_recalibrated_j,
+                p.impact_energy_effects_only_j,
+                p.impact_energy_fitted_j
+            );
+        }
     }
 }

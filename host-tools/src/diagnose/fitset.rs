@@ -275,6 +275,7 @@ impl FitSet<'_> {
                 step = s;
             }
             // Halve the step until the cost falls (at most five times).
+            let before = cost(&r, &delta);
             let mut scale = 1.0;
             let mut moved = false;
             for _ in 0..5 {
@@ -293,7 +294,7 @@ impl FitSet<'_> {
                 }
                 scale *= 0.5;
             }
-            if !moved {
+            if !moved || before - cost(&r, &delta) < CONVERGED * before {
                 break;
             }
         }
@@ -353,8 +354,14 @@ pub(crate) struct Recalibrated {
 /// A recalibration stops at this many prior standard deviations: beyond,
 /// the parameter is no longer the hammer's but a stand-in for a form error.
 pub(crate) const MAX_PRIOR_SDS: f64 = 2.5;
-/// Gauss–Newton steps of a recalibration.
-pub(crate) const RECALIBRATION_STEPS: usize = 3;
+/// Gauss–Newton steps of a recalibration, at most. Three were too few on
+/// a hammer of another form: the structural benchmark's case 0 ended with
+/// the impact energy 21 % short at the fit points (valve damping at its
+/// bound, the valve's area not yet moved), eight closed it to 1 %.
+pub(crate) const RECALIBRATION_STEPS: usize = 8;
+/// A recalibration stops earlier once a step gains less than this share of
+/// the cost.
+const CONVERGED: f64 = 1e-3;
 /// Groups of model-based features whose weight the model's form limits:
 /// one per waveform. The period and the impact energy keep their floors
 /// (the recalibration must meet them), and the force balance's features
