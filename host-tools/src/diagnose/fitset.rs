@@ -357,7 +357,7 @@ pub(crate) const MAX_PRIOR_SDS: f64 = 2.5;
 /// Gauss–Newton steps of a recalibration, at most. Three were too few on
 /// a hammer of another form: the structural benchmark's case 0 ended with
 /// the impact energy 21 % short at the fit points (valve damping at its
-/// bound, the valve's area not yet moved), eight closed it to 1 %.
+/// bound, the valve's area not yet moved), eight closed it to 0.4 %.
 pub(crate) const RECALIBRATION_STEPS: usize = 8;
 /// A recalibration stops earlier once a step gains less than this share of
 /// the cost.

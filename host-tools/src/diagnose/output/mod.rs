@@ -298,8 +298,9 @@ mod tests {
     }
 
     /// A refitted model that predicts the held-out data worse than nominal
-    /// (the structural benchmark's case 0: friction named right, energy
-    /// 17 % → 22 %) is said so in both outputs; one that predicts better is not.
+    /// (the structural benchmark's case 0 with a three-step recalibration:
+    /// friction named right, energy 17 % → 22 %) is said so in both outputs;
+    /// one that predicts better is not.
     #[test]
     fn a_refit_worse_than_nominal_on_held_out_data_is_said() {
         let good = report();
