@@ -277,7 +277,7 @@ impl FitSet<'_> {
             // Halve the step until the cost falls (at most five times).
             let before = cost(&r, &delta);
             let mut scale = 1.0;
-            let mut moved = false;
+            let mut gain = None;
             for _ in 0..5 {
                 let d: Vec<f64> = delta
                     .iter()
@@ -285,16 +285,17 @@ impl FitSet<'_> {
                     .map(|(x, s)| (x + scale * s).clamp(-MAX_PRIOR_SDS, MAX_PRIOR_SDS))
                     .collect();
                 if let Some(rn) = whitened(&d) {
-                    if cost(&rn, &d) < cost(&r, &delta) {
+                    let after = cost(&rn, &d);
+                    if after < before {
                         delta = d;
                         r = rn;
-                        moved = true;
+                        gain = Some(before - after);
                         break;
                     }
                 }
                 scale *= 0.5;
             }
-            if !moved || before - cost(&r, &delta) < CONVERGED * before {
+            if gain.is_none_or(|g| g < CONVERGED * before) {
                 break;
             }
         }

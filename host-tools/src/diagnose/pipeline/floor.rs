@@ -143,7 +143,7 @@ fn statement(name: &str, key: &str, value: Option<f64>, stronger_above: bool, ra
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::diagnose::pipeline::tests::{measured, nominal_runner, quiet};
+    use crate::diagnose::pipeline::tests::{measured, nominal_runner, options, quiet};
     use crate::diagnose::pipeline::{group, nominal, rank};
 
     /// On the nominal hammer itself (noise only), an unseen effect's floor
@@ -155,11 +155,7 @@ mod tests {
         let runner = nominal_runner();
         let inputs = [measured(4.0, true), measured(7.0, true)];
         let grouped = group::group(&inputs, &runner.extractor).unwrap();
-        let opts = Options {
-            figures: false,
-            threads: 2,
-            ..Options::default()
-        };
+        let opts = options();
         let nom = nominal::nominal(&grouped.points, &runner, &opts, &quiet).unwrap();
         let (fs, _) = nominal::fit_set(&grouped.points, &nom, &runner, &opts);
         let ranking = rank::rank(&fs, &opts, &quiet);

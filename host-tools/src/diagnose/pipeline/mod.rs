@@ -21,7 +21,7 @@ pub(crate) mod where_;
 
 #[cfg(test)]
 pub(crate) mod tests {
-    use crate::diagnose::engine::{extractor_for, MeasuredInput};
+    use crate::diagnose::engine::{extractor_for, MeasuredInput, Options};
     use crate::diagnose::model::ModelRunner;
     use hammer_sim::simulate::simulate;
     use hammer_sim::SimConfig;
@@ -44,6 +44,15 @@ pub(crate) mod tests {
     pub(crate) fn nominal_runner() -> ModelRunner {
         let base = SimConfig::default();
         ModelRunner::new(base.clone(), extractor_for(&base))
+    }
+
+    /// The options a stage's test runs with: two threads, no figures.
+    pub(crate) fn options() -> Options {
+        Options {
+            figures: false,
+            threads: 2,
+            ..Options::default()
+        }
     }
 
     /// A progress callback that reports nothing.

@@ -140,7 +140,7 @@ mod tests {
     use super::*;
     use crate::diagnose::features::{ENERGY, PERIOD};
     use crate::diagnose::pipeline::group::group;
-    use crate::diagnose::pipeline::tests::{measured, nominal_runner, quiet};
+    use crate::diagnose::pipeline::tests::{measured, nominal_runner, options, quiet};
 
     /// The nominal model hits harder and faster at 7 bar than at 4; the fit
     /// set holds the fit point only, every weight at least its floor, one
@@ -151,10 +151,7 @@ mod tests {
         let runner = nominal_runner();
         let inputs = [measured(4.0, true), measured(7.0, false)];
         let g = group(&inputs, &runner.extractor).unwrap();
-        let opts = Options {
-            threads: 2,
-            ..Options::default()
-        };
+        let opts = options();
         let nom = nominal(&g.points, &runner, &opts, &quiet).unwrap();
         assert_eq!(nom.bars, [4.0, 7.0]);
         assert!(nom.features[1][ENERGY] > nom.features[0][ENERGY]);
