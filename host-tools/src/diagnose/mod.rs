@@ -29,7 +29,8 @@
 //! - [`model`], `effects`, [`fit`]: the candidate models, the catalogue's
 //!   diagnosis hooks (start values, evidence) and the optimiser;
 //! - [`output`]: the report for people (Markdown, terminal, figures);
-//! - [`bench`](mod@bench), [`isolability`], [`command`]: proving it on generated data, and the CLI.
+//! - [`bench`](mod@bench), [`isolability`], [`command`]: proving it on generated data, and the CLI;
+//!   [`valve_timing`]: a valve's timing read off any hammer with a true position.
 
 pub mod bench;
 pub mod command;
@@ -46,3 +47,4 @@ mod parallel;
 mod pipeline;
 pub mod report;
 pub mod stages;
+pub mod valve_timing;
