@@ -532,6 +532,81 @@ fn diagnose_writes_its_report_and_names_the_hidden_effect() {
     assert!(!err.contains("diagnose ["), "{err}");
 }
 
+/// Against a record of the same hammer without the effect (`--reference`):
+/// the change is diagnosed, the report says so, and a measured operating
+/// point without a reference is refused with a reason.
+#[test]
+fn diagnose_reads_a_change_from_a_reference_record() {
+    let dir = tmp_dir("diagnose-ref");
+    let record = |name: &str, bar: &str, effect: Option<&str>, seed: &str| {
+        let p = dir.join(format!("{name}{bar}.csv"));
+        let mut args = vec![
+            "simulate",
+            "--supply-bar",
+            bar,
+            "--duration",
+            "0.8",
+            "--seed",
+            seed,
+            "--out",
+            p.to_str().unwrap(),
+        ];
+        if let Some(e) = effect {
+            args.extend_from_slice(&["--effect", e]);
+        }
+        let (code, _, err) = hammer(&args);
+        assert_eq!(code, 0, "{err}");
+        p.to_str().unwrap().to_string()
+    };
+    let m4 = record("m", "4", Some("viscous_friction:c_n_s_per_m=3"), "5");
+    let m7 = record("m", "7", Some("viscous_friction:c_n_s_per_m=3"), "5");
+    let r4 = record("r", "4", None, "6");
+    let r7 = record("r", "7", None, "6");
+    let out = dir.join("report");
+    let out_s = out.to_str().unwrap();
+    let (code, stdout, err) = hammer(&[
+        "diagnose",
+        "--measured",
+        &m4,
+        "--measured",
+        &m7,
+        "--reference",
+        &r4,
+        "--reference",
+        &r7,
+        "--fit-on",
+        &m4,
+        "--out",
+        out_s,
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        stdout.contains("read as a change from 2 reference record(s)"),
+        "{stdout}"
+    );
+    assert!(stdout.contains("verdict: viscous_friction"), "{stdout}");
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    assert_eq!(json["references"].as_array().map(Vec::len), Some(2));
+    let c = json["verdict"]["params"]["c_n_s_per_m"].as_f64().unwrap();
+    assert!((c - 3.0).abs() < 0.3, "{c}");
+    let md = std::fs::read_to_string(out.join("report.md")).unwrap();
+    assert!(md.contains("reference record"), "{md}");
+    let (code, _, err) = hammer(&[
+        "diagnose",
+        "--measured",
+        &m4,
+        "--measured",
+        &m7,
+        "--reference",
+        &r4,
+        "--out",
+        out_s,
+    ]);
+    assert_ne!(code, 0);
+    assert!(err.contains("no reference record at 7 bar"), "{err}");
+}
+
 #[test]
 fn diagnose_refuses_bad_inputs_with_a_reason() {
     let dir = tmp_dir("diagnose-bad");

@@ -8,12 +8,13 @@ use std::collections::BTreeMap;
 use serde::{Deserialize, Serialize};
 
 use super::effects::diagnosis;
-use super::engine::{diagnose, MeasuredInput, Options};
+use super::engine::{diagnose_against, MeasuredInput, Options};
 use crate::numfmt::fraction;
 use hammer_sim::effects::{Effects, EFFECT_NAMES};
 use hammer_sim::sensor::Rng;
 use hammer_sim::simulate::simulate;
 use hammer_sim::SimConfig;
+use hammer_trace::trace::Trace;
 use hammer_variants::{generate, Structure, VariantParams};
 
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -29,6 +30,12 @@ pub struct BenchOptions {
     /// two structural variants per case, its parameters jittered by `jitter`.
     #[serde(default)]
     pub structural: bool,
+    /// Each case also records its hammer with no effect hidden (same
+    /// structure and parameters, its own noise) at every point, and the
+    /// diagnosis reads the case as a change from it
+    /// ([`super::engine::diagnose_against`]).
+    #[serde(default)]
+    pub reference: bool,
 }
 
 impl Default for BenchOptions {
@@ -40,6 +47,7 @@ impl Default for BenchOptions {
             duration_s: 1.0,
             jitter: 0.03,
             structural: false,
+            reference: false,
         }
     }
 }
@@ -228,27 +236,41 @@ pub fn run_case(opts: &BenchOptions, index: usize, diag: &Options) -> anyhow::Re
     gen.solver.duration_s = opts.duration_s;
     let structural = opts.structural.then(|| structural_generator(opts.jitter, &mut rng));
     let mut inputs = Vec::new();
+    let mut references = Vec::new();
     let last = opts.points.len().saturating_sub(1);
-    for (k, &bar) in opts.points.iter().enumerate() {
-        let seed = rng.next_u64();
-        let trace = match &structural {
-            Some((structure, params)) => generate(params, *structure, &gen.effects, bar, opts.duration_s, seed).trace,
+    let record = |effects: &Effects, bar: f64, seed: u64| -> anyhow::Result<Trace> {
+        Ok(match &structural {
+            Some((structure, params)) => generate(params, *structure, effects, bar, opts.duration_s, seed).trace,
             None => {
                 let mut c = gen.clone();
+                c.effects = effects.clone();
                 c.supply.pressure_bar = bar;
                 c.seed = seed;
                 simulate(&c)?.trace()
             }
-        };
+        })
+    };
+    for (k, &bar) in opts.points.iter().enumerate() {
+        let seed = rng.next_u64();
         inputs.push(MeasuredInput {
             label: format!("case {index} at {bar} bar"),
             supply_bar: bar,
-            trace,
+            trace: record(&gen.effects, bar, seed)?,
             fit: k == 0 || k == last,
         });
+        if opts.reference {
+            // Its own noise, without drawing from the case's generator:
+            // the cases stay those of the benchmark without references.
+            references.push(MeasuredInput {
+                label: format!("case {index} reference at {bar} bar"),
+                supply_bar: bar,
+                trace: record(&Effects::default(), bar, seed ^ 0x5EED_5EED_5EED_5EED)?,
+                fit: false,
+            });
+        }
     }
     let t = std::time::Instant::now();
-    let out = diagnose(&inputs, &base, diag, &|_, _, _| {})?;
+    let out = diagnose_against(&inputs, &references, &base, diag, &|_, _, _| {})?;
     let diagnose_s = t.elapsed().as_secs_f64();
     let r = &out.report;
     let named: Vec<String> = r.verdict.effects.iter().filter(|e| *e != "none").cloned().collect();
@@ -461,10 +483,15 @@ pub fn render(s: &BenchSummary) -> String {
     let _ = writeln!(
         out,
         "diagnose-bench{}: {} cases, seed {}, points {:?} bar (first and last fitted), {:.1} s per trace, jitter ±{:.0} %",
-        if o.structural {
-            " --structural (generator: hammer-variants, one or two structural variants a case)"
-        } else {
-            " (generator: the simulator, jittered)"
+        match (o.structural, o.reference) {
+            (true, false) => " --structural (generator: hammer-variants, one or two structural variants a case)",
+            (true, true) => {
+                " --structural --reference (generator: hammer-variants, one or two structural variants a case; each read against a record of the same hammer without the effect)"
+            }
+            (false, false) => " (generator: the simulator, jittered)",
+            (false, true) => {
+                " --reference (generator: the simulator, jittered; each read against a record of the same hammer without the effect)"
+            }
         },
         s.cases.len(),
         o.seed,

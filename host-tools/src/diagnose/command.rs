@@ -8,10 +8,10 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use super::bench::{render, run_case, summarize, BenchOptions};
-use super::engine::{diagnose, MeasuredInput, Options};
+use super::engine::{diagnose_against, MeasuredInput, Options};
 use super::output::{summary, write_all};
 use hammer_sim::estimation::sensors_for;
-use hammer_sim::simulate::read_simulated_sidecar;
+use hammer_sim::simulate::{read_simulated_sidecar, Sidecar};
 use hammer_sim::SimConfig;
 use hammer_trace::config::load_toml;
 use hammer_trace::trace::read_csv;
@@ -26,6 +26,12 @@ pub struct DiagnoseArgs {
     /// Gauge supply pressure of the preceding `--measured`, bar.
     #[arg(long, value_name = "BAR")]
     pub supply_bar: Vec<f64>,
+    /// A record of the same hammer when it was known sound (repeatable; its
+    /// supply pressure like `--measured`'s): the measured traces are then
+    /// diagnosed as a change from it, which cancels the model's form error.
+    /// Every operating point of the measured traces needs one.
+    #[arg(long, value_name = "TRACE")]
+    pub reference: Vec<PathBuf>,
     /// Fit on these traces (repeatable; default: the first); the other
     /// operating points, and the later half of the fitted traces' cycles, are held out.
     #[arg(long, value_name = "TRACE")]
@@ -72,14 +78,24 @@ pub struct BenchArgs {
     /// alone (each effect at its default in the model, every effect fitted).
     #[arg(long, conflicts_with = "structural")]
     pub isolability: bool,
+    /// Give each case a record of the same hammer without the effect at
+    /// every point, and diagnose the change from it (`diagnose --reference`).
+    #[arg(long, conflicts_with = "isolability")]
+    pub reference: bool,
 }
 
 /// Pairs every `--supply-bar` of the raw command line with the `--measured`
-/// before it (clap keeps the two lists apart).
-fn supply_bars_by_position(raw: &[String], n_measured: usize) -> Vec<Option<f64>> {
-    let mut out = vec![None; n_measured];
-    let mut current: Option<usize> = None;
-    let mut seen = 0usize;
+/// or `--reference` before it (clap keeps the lists apart): the measured
+/// traces' pressures, then the references'.
+fn supply_bars_by_position(
+    raw: &[String],
+    n_measured: usize,
+    n_reference: usize,
+) -> (Vec<Option<f64>>, Vec<Option<f64>>) {
+    let mut out = (vec![None; n_measured], vec![None; n_reference]);
+    // The trace a `--supply-bar` belongs to: (is a reference, index).
+    let mut current: Option<(bool, usize)> = None;
+    let (mut measured, mut reference) = (0usize, 0usize);
     let mut it = raw.iter().peekable();
     while let Some(a) = it.next() {
         let (flag, inline) = match a.split_once('=') {
@@ -87,18 +103,21 @@ fn supply_bars_by_position(raw: &[String], n_measured: usize) -> Vec<Option<f64>
             _ => (a.as_str(), None),
         };
         match flag {
-            "--measured" => {
-                current = Some(seen);
-                seen += 1;
+            "--measured" | "--reference" => {
+                let is_ref = flag == "--reference";
+                let n = if is_ref { &mut reference } else { &mut measured };
+                current = Some((is_ref, *n));
+                *n += 1;
                 if inline.is_none() {
                     it.next();
                 }
             }
             "--supply-bar" => {
                 let v = inline.or_else(|| it.next().cloned());
-                if let (Some(i), Some(v)) = (current, v.and_then(|v| v.parse::<f64>().ok())) {
-                    if i < n_measured {
-                        out[i] = Some(v);
+                if let (Some((is_ref, i)), Some(v)) = (current, v.and_then(|v| v.parse::<f64>().ok())) {
+                    let list = if is_ref { &mut out.1 } else { &mut out.0 };
+                    if let Some(slot) = list.get_mut(i) {
+                        *slot = Some(v);
                     }
                 }
             }
@@ -121,8 +140,8 @@ fn progress_bar(len: u64, template: &str) -> ProgressBar {
 
 pub fn run(args: &DiagnoseArgs) -> Result<()> {
     let raw: Vec<String> = std::env::args().collect();
-    let mut bars = supply_bars_by_position(&raw, args.measured.len());
-    if bars.iter().all(Option::is_none) && args.supply_bar.len() == args.measured.len() {
+    let (mut bars, ref_bars) = supply_bars_by_position(&raw, args.measured.len(), args.reference.len());
+    if bars.iter().all(Option::is_none) && args.supply_bar.len() == args.measured.len() && args.reference.is_empty() {
         bars = args.supply_bar.iter().map(|b| Some(*b)).collect();
     }
     let mut base: SimConfig = match &args.config {
@@ -133,27 +152,18 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
     let same = |a: &Path, b: &Path| a == b || a.canonicalize().ok().is_some_and(|x| b.canonicalize().ok() == Some(x));
     let mut inputs = Vec::new();
     for (k, path) in args.measured.iter().enumerate() {
-        let trace = read_csv(path).with_context(|| format!("reading {}", path.display()))?;
-        let sidecar =
-            read_simulated_sidecar(path).with_context(|| format!("reading the sidecar of {}", path.display()))?;
+        let (input, sidecar) = read_input(path, bars[k])?;
         if k == 0 && args.config.is_none() {
             base.sensors = sensors_for(sidecar.as_ref(), &base.sensors);
         }
-        let supply_bar = bars[k]
-            .or_else(|| sidecar.as_ref().and_then(|s| s.supply_pressure_bar))
-            .with_context(|| {
-                format!(
-                    "{}: supply pressure unknown: not in its sidecar; give --supply-bar BAR right after it",
-                    path.display()
-                )
-            })?;
-        hammer_trace::config::check_range("--supply-bar", supply_bar, 0.5, 20.0)?;
         inputs.push(MeasuredInput {
-            label: path.display().to_string(),
-            supply_bar,
-            trace,
             fit: args.fit_on.iter().any(|f| same(f, path)),
+            ..input
         });
+    }
+    let mut references = Vec::new();
+    for (k, path) in args.reference.iter().enumerate() {
+        references.push(read_input(path, ref_bars[k])?.0);
     }
     for f in &args.fit_on {
         if !args.measured.iter().any(|m| same(f, m)) {
@@ -165,7 +175,7 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
         ..Options::default()
     };
     let pb = progress_bar(1, "{spinner} diagnose [{bar:30}] {pos}/{len} {msg} ({elapsed})");
-    let outcome = diagnose(&inputs, &base, &opts, &|done, total, what| {
+    let outcome = diagnose_against(&inputs, &references, &base, &opts, &|done, total, what| {
         pb.set_length(total as u64);
         pb.set_position(done as u64);
         pb.set_message(what.to_string());
@@ -184,6 +194,29 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
         outcome.report.elapsed_s
     );
     Ok(())
+}
+
+/// One trace with its sidecar; its supply pressure from `bar` (the
+/// command line) or the sidecar.
+fn read_input(path: &Path, bar: Option<f64>) -> Result<(MeasuredInput, Option<Sidecar>)> {
+    let trace = read_csv(path).with_context(|| format!("reading {}", path.display()))?;
+    let sidecar = read_simulated_sidecar(path).with_context(|| format!("reading the sidecar of {}", path.display()))?;
+    let supply_bar = bar
+        .or_else(|| sidecar.as_ref().and_then(|s| s.supply_pressure_bar))
+        .with_context(|| {
+            format!(
+                "{}: supply pressure unknown: not in its sidecar; give --supply-bar BAR right after it",
+                path.display()
+            )
+        })?;
+    hammer_trace::config::check_range("--supply-bar", supply_bar, 0.5, 20.0)?;
+    let input = MeasuredInput {
+        label: path.display().to_string(),
+        supply_bar,
+        trace,
+        fit: false,
+    };
+    Ok((input, sidecar))
 }
 
 pub fn bench(args: &BenchArgs) -> Result<()> {
@@ -206,6 +239,7 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         duration_s: args.duration,
         jitter,
         structural: args.structural,
+        reference: args.reference,
     };
     let diag = Options {
         figures: false,
@@ -282,6 +316,31 @@ mod tests {
         .iter()
         .map(|s| s.to_string())
         .collect();
-        assert_eq!(supply_bars_by_position(&raw, 3), vec![Some(4.0), None, Some(7.0)]);
+        assert_eq!(supply_bars_by_position(&raw, 3, 0).0, vec![Some(4.0), None, Some(7.0)]);
+    }
+
+    #[test]
+    fn a_references_supply_bar_is_its_own() {
+        let raw: Vec<String> = [
+            "hammer",
+            "diagnose",
+            "--measured",
+            "a.csv",
+            "--supply-bar",
+            "4",
+            "--reference",
+            "r.csv",
+            "--supply-bar=7",
+            "--measured=b.csv",
+            "--reference=s.csv",
+            "--supply-bar",
+            "5.5",
+        ]
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
+        let (m, r) = supply_bars_by_position(&raw, 2, 2);
+        assert_eq!(m, vec![Some(4.0), None]);
+        assert_eq!(r, vec![Some(7.0), Some(5.5)]);
     }
 }

@@ -20,7 +20,7 @@ use serde::{Deserialize, Serialize};
 use super::features::{pressure_floor, Extractor};
 use super::gap::CycleSignals;
 use super::model::ModelRunner;
-use super::pipeline::{floor, group, held_out, nominal, rank, where_};
+use super::pipeline::{floor, group, held_out, nominal, rank, reference, where_};
 use super::stages::Stage;
 use hammer_sim::effects::EFFECT_NAMES;
 use hammer_sim::SimConfig;
@@ -180,6 +180,8 @@ pub enum DiagnoseError {
     NoPressure(String),
     #[error("the nominal model does not run at {0} bar: {1}")]
     Model(f64, String),
+    #[error("no reference record at {0} bar: with references, every operating point needs one")]
+    NoReference(f64),
 }
 
 /// Progress: (done, total, what is running).
@@ -208,27 +210,54 @@ pub fn diagnose(
     opts: &Options,
     progress: Progress,
 ) -> Result<Outcome, DiagnoseError> {
+    diagnose_against(inputs, &[], base, opts, progress)
+}
+
+/// [`diagnose`] of what changed since `references`, records of the same
+/// hammer when it was known sound (one at least at every operating point
+/// of `inputs`; none: [`diagnose`]). The model's form error is common to
+/// both records and cancels; see [`super::pipeline::reference`].
+pub fn diagnose_against(
+    inputs: &[MeasuredInput],
+    references: &[MeasuredInput],
+    base: &SimConfig,
+    opts: &Options,
+    progress: Progress,
+) -> Result<Outcome, DiagnoseError> {
     let started = std::time::Instant::now();
     if inputs.is_empty() {
         return Err(DiagnoseError::NoInput);
     }
     let mut extractor = extractor_for(base);
-    let rear: Vec<&[f64]> = inputs.iter().map(|i| i.trace.p_rear_pa.as_slice()).collect();
-    let front: Vec<&[f64]> = inputs.iter().map(|i| i.trace.p_front_pa.as_slice()).collect();
+    let all = || inputs.iter().chain(references);
+    let rear: Vec<&[f64]> = all().map(|i| i.trace.p_rear_pa.as_slice()).collect();
+    let front: Vec<&[f64]> = all().map(|i| i.trace.p_front_pa.as_slice()).collect();
     extractor.pressure_floor_pa = [pressure_floor(&rear), pressure_floor(&front)];
     let runner = ModelRunner::new(base.clone(), extractor);
-    let grouped = group::group(inputs, &runner.extractor)?;
-    let points = &grouped.points;
-
-    let total_steps = points.len() + EFFECT_NAMES.len() + 3;
+    let mut grouped = group::group(inputs, &runner.extractor)?;
+    let total_steps = grouped.points.len() + EFFECT_NAMES.len() + 3;
     let done = AtomicUsize::new(0);
     let step = |what: &str| {
         let d = done.fetch_add(1, Ordering::Relaxed) + 1;
         progress(d.min(total_steps), total_steps, what);
     };
     progress(0, total_steps, "nominal model");
-    let nominal = nominal::nominal(points, &runner, opts, &step)?;
-    let (fs, model_form) = nominal::fit_set(points, &nominal, &runner, opts);
+    let nominal = nominal::nominal(&grouped.points, &runner, opts, &step)?;
+    let mut reference_infos = Vec::new();
+    if !references.is_empty() {
+        let (baselines, infos) = reference::baselines(references, &runner.extractor)?;
+        reference::transplant(&mut grouped.points, &nominal.features, &baselines)?;
+        reference_infos = infos;
+    }
+    let points = &grouped.points;
+    // Against a reference the model's form error has cancelled: what the
+    // nominal model misses is the change, and a form factor measured on it
+    // would weigh the effects down by their own size.
+    let fit_opts = Options {
+        model_form: opts.model_form && references.is_empty(),
+        ..opts.clone()
+    };
+    let (fs, model_form) = nominal::fit_set(points, &nominal, &runner, &fit_opts);
     let ranking = rank::rank(&fs, opts, &step);
     let detection_floors = floor::floors(&fs, &ranking, opts);
     step("detection floors");
@@ -244,6 +273,7 @@ pub fn diagnose(
         report: Report {
             tool: format!("hammer diagnose {}", env!("CARGO_PKG_VERSION")),
             inputs: grouped.infos,
+            references: reference_infos,
             fit_points: fs.bars(),
             where_: located.where_,
             verdict: ranking.verdict_report(),

@@ -239,6 +239,10 @@ pub struct DetectionFloor {
 pub struct Report {
     pub tool: String,
     pub inputs: Vec<InputInfo>,
+    /// Records of the same hammer the inputs were read against, as changes
+    /// from them (empty: against the model alone).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub references: Vec<InputInfo>,
     pub fit_points: Vec<f64>,
     #[serde(rename = "where")]
     pub where_: Vec<WhereCell>,

@@ -189,6 +189,26 @@ fn inputs_md(s: &mut String, report: &Report) {
         );
     }
     line!(s);
+    if !report.references.is_empty() {
+        let refs: Vec<String> = report
+            .references
+            .iter()
+            .map(|r| {
+                format!(
+                    "{} ({} bar, {} cycles)",
+                    cell(&r.label),
+                    fmt_bar(r.supply_bar),
+                    r.cycles
+                )
+            })
+            .collect();
+        line!(
+            s,
+            "Read as a change from the same hammer's reference record: {}. Each point's features are moved by the nominal model minus the reference's mean, so the model's form error, common to both records, cancels; the energies and frequencies below are the model's plus the measured change.",
+            refs.join(", ")
+        );
+        line!(s);
+    }
     line!(
         s,
         "Fit set: {} ({} cycles); {} features compared; χ² of the nominal model {}.",
@@ -577,6 +597,13 @@ fn floors_inline(report: &Report) -> String {
 /// One-screen terminal summary: verdict, top 3 'where' cells, top 3 effects, shrink line.
 pub fn summary(report: &Report) -> String {
     let mut s = String::new();
+    if !report.references.is_empty() {
+        line!(
+            s,
+            "read as a change from {} reference record(s) of the same hammer",
+            report.references.len()
+        );
+    }
     match verdict_name(report) {
         Some(v) => line!(s, "verdict: {v} (score {} ΔBIC)", num(report.verdict.score)),
         None => line!(

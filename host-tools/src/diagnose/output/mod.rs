@@ -96,6 +96,7 @@ mod tests {
                 fit_cycles: 14,
                 held_out_cycles: 13,
             }],
+            references: Vec::new(),
             fit_points: vec![4.0],
             where_: vec![
                 WhereCell {

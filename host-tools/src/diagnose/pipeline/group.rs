@@ -17,6 +17,9 @@ pub(crate) struct Point {
     pub(crate) is_fit_point: bool,
     /// Indices of its inputs.
     pub(crate) inputs: Vec<usize>,
+    /// Variance of the reference record's mean per feature, added to the
+    /// fit's (empty without a reference: [`super::reference`]).
+    pub(crate) reference_var: Vec<f64>,
 }
 
 pub(crate) struct Grouped {
@@ -63,6 +66,7 @@ pub(crate) fn group(inputs: &[MeasuredInput], extractor: &Extractor) -> Result<G
                 held: split.held,
                 is_fit_point: split.is_fit,
                 inputs: vec![k],
+                reference_var: Vec::new(),
             }),
         }
     }

@@ -2,6 +2,8 @@
 //! before's result (see [`crate::diagnose`] for the map):
 //!
 //! 1. [`group`]: inputs → operating points, cycles split into fit and held out;
+//!    [`reference`] (with reference records): each point read as a change
+//!    from the same hammer's earlier record, moved onto the nominal model;
 //! 2. [`nominal`]: the nominal model at every point → the fit set;
 //! 3. [`rank`]: every effect fitted ([`effect_fit`]) and ranked → the verdict;
 //!    [`floor`]: how large each unseen effect must be to be named here;
@@ -17,6 +19,7 @@ pub(crate) mod group;
 pub(crate) mod held_out;
 pub(crate) mod nominal;
 pub(crate) mod rank;
+pub(crate) mod reference;
 pub(crate) mod where_;
 
 #[cfg(test)]

@@ -73,7 +73,10 @@ pub(crate) fn fit_set<'a>(
             .iter()
             .map(|&i| {
                 let s = summarize(&points[i].fit);
-                let sig = sigmas(&s, &nominal.features[i], &opts.floors);
+                let mut sig = sigmas(&s, &nominal.features[i], &opts.floors);
+                for (x, v) in sig.iter_mut().zip(&points[i].reference_var) {
+                    *x = (*x * *x + v).sqrt();
+                }
                 (points[i].supply_bar, s, sig)
             })
             .collect(),
