@@ -43,24 +43,15 @@ fn timing() {
     ];
     let base = SimConfig::default();
     let extractor = extractor_for(&base);
-    let a2 = base.hammer.geometry().front_area_m2();
     for bar in [4.0, 7.0] {
         for (who, damping) in [("model", 1.0), ("model, valve damping ×0.5", 0.5)] {
             let mut cfg = base.clone();
             cfg.valve.damping_n_s_per_m *= damping;
             let runner = ModelRunner::new(cfg.clone(), extractor);
             for spec in delays {
-                let onset = runner.truth(bar, &Candidate { effects: effects(spec) }).and_then(|t| {
-                    front_feed_onset_ms(&FrontChamberRun {
-                        t_s: &t.t_s,
-                        x_m: &t.x_m,
-                        v_mps: &t.v_mps,
-                        p_front_pa: &t.p_front_pa,
-                        front_area_m2: a2,
-                        front_dead_m3: cfg.hammer.front_dead_volume_m3,
-                        x_impact_m: cfg.hammer.impact_position_m,
-                    })
-                });
+                let onset = runner
+                    .truth(bar, &Candidate { effects: effects(spec) })
+                    .and_then(|t| front_feed_onset_ms(&FrontChamberRun::of_model(&t, &cfg)));
                 show(bar, who, spec, onset);
             }
         }
@@ -72,16 +63,7 @@ fn timing() {
         for (who, structure) in structures {
             for spec in delays {
                 let g = generate(&p, structure, &effects(spec), bar, 0.6, 5);
-                let t = &g.trace;
-                let onset = front_feed_onset_ms(&FrontChamberRun {
-                    t_s: &t.t_s,
-                    x_m: &t.extra["x_m"],
-                    v_mps: &t.extra["v_mps"],
-                    p_front_pa: &t.p_front_pa,
-                    front_area_m2: a2,
-                    front_dead_m3: p.front_dead_m3,
-                    x_impact_m: p.x_impact_m,
-                });
+                let onset = FrontChamberRun::of_variant(&g.trace, &p).and_then(|r| front_feed_onset_ms(&r));
                 show(bar, who, spec, onset);
             }
         }

@@ -251,38 +251,21 @@ fn the_second_familys_valve_is_earlier_than_the_models_even_when_delayed() {
 
     let base = SimConfig::default();
     let runner = ModelRunner::new(base.clone(), extractor_for(&base));
-    let a2 = base.hammer.geometry().front_area_m2();
     let p = VariantParams::default();
     for bar in [4.0, 7.0] {
         let t = runner.truth(bar, &Candidate::default()).expect("the model runs");
-        let (model_ms, _) = front_feed_onset_ms(&FrontChamberRun {
-            t_s: &t.t_s,
-            x_m: &t.x_m,
-            v_mps: &t.v_mps,
-            p_front_pa: &t.p_front_pa,
-            front_area_m2: a2,
-            front_dead_m3: base.hammer.front_dead_volume_m3,
-            x_impact_m: base.hammer.impact_position_m,
-        })
-        .expect("the model's valve feeds the front chamber");
+        let (model_ms, _) = front_feed_onset_ms(&FrontChamberRun::of_model(&t, &base))
+            .expect("the model's valve feeds the front chamber");
         let variant = |spec: &str| {
             let mut e = Effects::default();
             if !spec.is_empty() {
                 e.apply_spec(spec).unwrap();
             }
             let g = generate(&p, Structure::BASE, &e, bar, 0.6, 5);
-            let t = &g.trace;
-            front_feed_onset_ms(&FrontChamberRun {
-                t_s: &t.t_s,
-                x_m: &t.extra["x_m"],
-                v_mps: &t.extra["v_mps"],
-                p_front_pa: &t.p_front_pa,
-                front_area_m2: a2,
-                front_dead_m3: p.front_dead_m3,
-                x_impact_m: p.x_impact_m,
-            })
-            .expect("the variant's valve feeds the front chamber")
-            .0
+            let run = FrontChamberRun::of_variant(&g.trace, &p).expect("truth columns");
+            front_feed_onset_ms(&run)
+                .expect("the variant's valve feeds the front chamber")
+                .0
         };
         let (plain_ms, delayed_ms) = (variant(""), variant("valve_delay:tau_s=0.0025"));
         println!("{bar} bar: model {model_ms:+.2} ms, second family {plain_ms:+.2} ms, with 2.5 ms delay {delayed_ms:+.2} ms");

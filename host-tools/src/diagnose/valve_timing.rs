@@ -10,6 +10,11 @@
 //! `docs/diagnosis.md` (why the structural benchmark never names a
 //! `valve_delay`) and `examples/valve_timing.rs` use it.
 
+use hammer_sim::run::TruthTrace;
+use hammer_sim::SimConfig;
+use hammer_trace::trace::Trace;
+use hammer_variants::VariantParams;
+
 /// One run's true position and front pressure, with the chamber's geometry.
 #[derive(Debug, Clone, Copy)]
 pub struct FrontChamberRun<'a> {
@@ -21,6 +26,35 @@ pub struct FrontChamberRun<'a> {
     pub front_area_m2: f64,
     pub front_dead_m3: f64,
     pub x_impact_m: f64,
+}
+
+impl<'a> FrontChamberRun<'a> {
+    /// A run of the diagnosis' model, with `cfg`'s geometry.
+    pub fn of_model(t: &'a TruthTrace, cfg: &SimConfig) -> Self {
+        Self {
+            t_s: &t.t_s,
+            x_m: &t.x_m,
+            v_mps: &t.v_mps,
+            p_front_pa: &t.p_front_pa,
+            front_area_m2: cfg.hammer.geometry().front_area_m2(),
+            front_dead_m3: cfg.hammer.front_dead_volume_m3,
+            x_impact_m: cfg.hammer.impact_position_m,
+        }
+    }
+
+    /// A trace of the second model family with its truth columns (`x_m`,
+    /// `v_mps`) and `p`'s geometry; `None` without them.
+    pub fn of_variant(t: &'a Trace, p: &VariantParams) -> Option<Self> {
+        Some(Self {
+            t_s: &t.t_s,
+            x_m: t.extra.get("x_m")?,
+            v_mps: t.extra.get("v_mps")?,
+            p_front_pa: &t.p_front_pa,
+            front_area_m2: 0.25 * std::f64::consts::PI * (p.bore_m * p.bore_m - p.rod_m * p.rod_m),
+            front_dead_m3: p.front_dead_m3,
+            x_impact_m: p.x_impact_m,
+        })
+    }
 }
 
 /// The stroke position from which the front chamber is read: its outlet

@@ -32,11 +32,9 @@ pub(crate) fn baselines(
     references: &[MeasuredInput],
     extractor: &Extractor,
 ) -> Result<(Vec<Baseline>, Vec<InputInfo>), DiagnoseError> {
-    let all_fit: Vec<MeasuredInput> = references
-        .iter()
-        .map(|r| MeasuredInput { fit: true, ..r.clone() })
-        .collect();
-    let g = group(&all_fit, extractor)?;
+    // Every steady cycle counts, the fit and held-out halves alike, so the
+    // fit flags the grouping goes by do not matter here.
+    let g = group(references, extractor)?;
     let baselines = g
         .points
         .iter()
