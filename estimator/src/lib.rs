@@ -21,12 +21,15 @@
 //! - `run`: the impact scan and the delay line's copies, as plain loops;
 //! - `history`: the neighbour check on period and stroke;
 //! - [`wear`]: the wear index, the drift CUSUM and their saved state;
-//! - [`math`]: the one path for transcendental functions (host = target).
+//! - [`math`]: the one path for transcendental functions (host = target);
+//! - [`chambers`]: the valve's switching, the fill and the closed phases of
+//!   both chambers from one cycle's samples (host side: not on the board).
 //!
 //! The report and its flags are `hammer_types`' (re-exported here).
 #![no_std]
 #![forbid(unsafe_code)]
 
+pub mod chambers;
 mod clock;
 pub mod config;
 pub mod cycle;

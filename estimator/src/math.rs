@@ -47,6 +47,19 @@ pub fn sin_small(x: f32) -> f32 {
     x * (1.0 - x2 * p)
 }
 
+/// Natural logarithm (the chambers' p·Vⁿ; not on the board's per-sample path).
+#[inline]
+pub fn ln(x: f32) -> f32 {
+    libm::logf(x)
+}
+
+/// `xʸ` for real exponents (the orifice flow function; not on the board's
+/// per-sample path, where `powi` serves).
+#[inline]
+pub fn powf(x: f32, y: f32) -> f32 {
+    libm::powf(x, y)
+}
+
 #[inline]
 pub fn abs(x: f32) -> f32 {
     libm::fabsf(x)

@@ -11,6 +11,7 @@
 //!   emulated board's ADC ring, and the board on QEMU's mps2-an386;
 //! - [`estimate`], [`report`], [`plot`]: offline: per-cycle records, the
 //!   report page, the effect figures;
+//! - [`chambers`]: the chamber characteristics against their truth on both model families;
 //! - [`diagnose`]: the sim-to-real gap diagnosis and its benchmarks;
 //! - [`flash`], [`capture`], [`calibrate`], [`selftest`], [`demo`], [`soak`], [`monitor`]: live: raw captures, calibration, the
 //!   no-hardware demo, the full-rate soak, the dashboard, logs and replay;
@@ -22,6 +23,7 @@ mod stdout;
 pub mod board;
 pub mod calibrate;
 pub mod capture;
+pub mod chambers;
 pub mod chart;
 pub mod cli;
 pub mod client;

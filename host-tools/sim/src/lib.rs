@@ -9,10 +9,12 @@
 //! - [`run`]: one solution with events, per-cycle truth and balances, handed to a sink as it is produced;
 //! - [`sensor`]: bandwidth, noise, clipping, quantisation and the sensor-side effects;
 //! - [`simulate`]: a complete simulated measurement as a trace plus sidecar, kept in memory or streamed to disk;
-//! - [`estimation`]: the one path from any trace to the estimator's ADC codes and calibration.
+//! - [`estimation`]: the one path from any trace to the estimator's ADC codes and calibration;
+//! - [`characteristics`]: per-cycle chamber characteristics of a trace, measured or true.
 
 use hammer_trace::config;
 
+pub mod characteristics;
 pub mod effects;
 pub mod estimation;
 pub mod gas;

@@ -42,20 +42,21 @@ pub struct HammerParams {
 impl Default for HammerParams {
     fn default() -> Self {
         let g = hammer_estimator::Geometry::PAPER;
+        let c = hammer_estimator::chambers::ChamberGeometry::paper();
         Self {
             piston_mass_kg: g.piston_mass_kg,
             bore_diameter_m: g.bore_diameter_m,
             rod_diameter_m: g.rod_diameter_m,
             piston_length_m: 0.035,
             initial_position_m: 0.010,
-            impact_position_m: 0.052,
-            rear_outlet_opens_m: 0.030,
-            front_outlet_opens_m: 0.020,
+            impact_position_m: c.impact_position_m,
+            rear_outlet_opens_m: c.rear_outlet_m,
+            front_outlet_opens_m: c.front_outlet_m,
             outlet_diameter_m: 0.005,
             outlet_count: 1,
             outlet_cd: 0.62,
-            rear_dead_volume_m3: 14.5e-6,
-            front_dead_volume_m3: 19.9e-6,
+            rear_dead_volume_m3: c.rear_dead_m3,
+            front_dead_volume_m3: c.front_dead_m3,
             inclination_deg: 0.0,
         }
     }
@@ -67,6 +68,21 @@ impl HammerParams {
             piston_mass_kg: self.piston_mass_kg,
             bore_diameter_m: self.bore_diameter_m,
             rod_diameter_m: self.rod_diameter_m,
+        }
+    }
+
+    /// What the chamber characteristics need of this hammer
+    /// (`hammer_estimator::chambers`).
+    pub fn chambers(&self) -> hammer_estimator::chambers::ChamberGeometry {
+        let g = self.geometry();
+        hammer_estimator::chambers::ChamberGeometry {
+            rear_area_m2: g.rear_area_m2(),
+            front_area_m2: g.front_area_m2(),
+            rear_dead_m3: self.rear_dead_volume_m3,
+            front_dead_m3: self.front_dead_volume_m3,
+            impact_position_m: self.impact_position_m,
+            rear_outlet_m: self.rear_outlet_opens_m,
+            front_outlet_m: self.front_outlet_opens_m,
         }
     }
 

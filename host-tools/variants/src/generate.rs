@@ -72,6 +72,10 @@ pub fn generate(
     // diagnosis reads the four measured channels only.
     trace.extra.insert("x_m".into(), r.x_m);
     trace.extra.insert("v_mps".into(), r.v_mps);
+    // The same names as the simulator's truth columns, and the spool.
+    trace.extra.insert("p_rear_true_pa".into(), r.p_rear_true_pa);
+    trace.extra.insert("p_front_true_pa".into(), r.p_front_true_pa);
+    trace.extra.insert("spool".into(), r.spool);
     Generated {
         trace,
         truth: VariantTruth {

@@ -34,6 +34,11 @@ pub struct Run {
     pub accel_mps2: Vec<f64>,
     pub x_m: Vec<f64>,
     pub v_mps: Vec<f64>,
+    /// The chambers' true pressures (gauge) and the spool's position
+    /// (0 feeds the front, 1 the rear; each port opens past 0.5).
+    pub p_rear_true_pa: Vec<f64>,
+    pub p_front_true_pa: Vec<f64>,
+    pub spool: Vec<f64>,
     pub cycles: Vec<VariantCycle>,
     /// Work balance over the run: pressure + contact + friction work − ΔKE.
     pub energy_residual_j: f64,
@@ -67,6 +72,9 @@ pub fn run(plant: &Plant, fe: &mut FrontEndState, seed: u64, duration_s: f64, h_
         accel_mps2: Vec::new(),
         x_m: Vec::new(),
         v_mps: Vec::new(),
+        p_rear_true_pa: Vec::new(),
+        p_front_true_pa: Vec::new(),
+        spool: Vec::new(),
         cycles: Vec::new(),
         energy_residual_j: 0.0,
         pressure_work_j: 0.0,
@@ -110,6 +118,9 @@ pub fn run(plant: &Plant, fe: &mut FrontEndState, seed: u64, duration_s: f64, h_
             out.accel_mps2.push(a);
             out.x_m.push(y[X]);
             out.v_mps.push(y[V]);
+            out.p_rear_true_pa.push(p_rear);
+            out.p_front_true_pa.push(p_front);
+            out.spool.push(y[crate::plant::S]);
         }
         if i == steps {
             break;

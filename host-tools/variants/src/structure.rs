@@ -254,3 +254,20 @@ impl Default for VariantParams {
         }
     }
 }
+
+impl VariantParams {
+    /// This hammer's chambers in the characteristics' terms
+    /// (`hammer_estimator::chambers`): the same geometry the plant integrates.
+    pub fn chambers(&self) -> hammer_estimator::chambers::ChamberGeometry {
+        let area = |d: f64| 0.25 * std::f64::consts::PI * d * d;
+        hammer_estimator::chambers::ChamberGeometry {
+            rear_area_m2: area(self.bore_m),
+            front_area_m2: area(self.bore_m) - area(self.rod_m),
+            rear_dead_m3: self.rear_dead_m3,
+            front_dead_m3: self.front_dead_m3,
+            impact_position_m: self.x_impact_m,
+            rear_outlet_m: self.rear_port_m,
+            front_outlet_m: self.front_port_m,
+        }
+    }
+}

@@ -1,0 +1,228 @@
+//! The valve, the supply and the chambers, read from the pressures and the
+//! piston's track with no model of the valve, the ports or the supply line.
+//!
+//! The force balance pins friction on any hammer because it needs no model.
+//! These characteristics do the same for what friction-style evidence cannot
+//! see (`docs/estimator.md`, "Chamber characteristics"):
+//! - a closed chamber holds p·Vⁿ constant; its fitted exponent `n` moves
+//!   with heat exchange and leakage (`closed`);
+//! - a feed starts where the chamber stops being closed: the onset of the
+//!   rise of ln p + n·ln V, timed from the impact, is the valve's switching
+//!   (`closed::onset`);
+//! - the energy equation of the fill gives the feed's effective area, which
+//!   a supply restriction or a worn valve makes smaller (`fill`).
+//!
+//! They run on one cycle's samples at a time (slices, no allocation), on the
+//! host from a raw trace or capture. The board does not compute them: its
+//! image has under 200 B of flash to spare (`docs/firmware.md`), and they
+//! need the samples around the impact that its checkpoint sums do not keep.
+//!
+//! Module map:
+//! - this file: [`ChamberGeometry`], [`Feed`] and [`Characteristics`], and
+//!   [`characterise`], which finds each chamber's closed phase in a cycle;
+//! - `track`: the piston's position from the force balance, closed over the cycle;
+//! - `closed`: the closed phase's polytropic fit and the feed onset after it;
+//! - `fill`: the effective feed area from the energy equation.
+
+mod closed;
+mod fill;
+pub mod track;
+
+pub use closed::P_ATM_PA;
+
+use crate::math;
+
+/// Position at which the piston's striking face meets the tool, for the
+/// paper's hammer (its 10 mm start + 42 mm stroke).
+pub const PAPER_IMPACT_POSITION_M: f64 = 0.052;
+
+/// What the characteristics need of the hammer beyond the force balance's
+/// mass and areas: where the chambers' volumes start and where the piston
+/// covers their outlets. Positions are of the piston's rear face from the
+/// rear end of the bore (x grows in the stroke).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ChamberGeometry {
+    pub rear_area_m2: f64,
+    pub front_area_m2: f64,
+    /// Rear chamber volume at x = 0.
+    pub rear_dead_m3: f64,
+    /// Front chamber volume at the impact position.
+    pub front_dead_m3: f64,
+    pub impact_position_m: f64,
+    /// The rear outlet is uncovered above this position.
+    pub rear_outlet_m: f64,
+    /// The front outlet is uncovered below this position.
+    pub front_outlet_m: f64,
+}
+
+impl ChamberGeometry {
+    /// The paper's hammer (its dead volumes are estimates: `docs/model.md`).
+    pub fn paper() -> Self {
+        let g = crate::Geometry::PAPER;
+        Self {
+            rear_area_m2: g.rear_area_m2(),
+            front_area_m2: g.front_area_m2(),
+            rear_dead_m3: 14.5e-6,
+            front_dead_m3: 19.9e-6,
+            impact_position_m: PAPER_IMPACT_POSITION_M,
+            rear_outlet_m: 0.030,
+            front_outlet_m: 0.020,
+        }
+    }
+
+    fn rear_volume_m3(&self, x: f32) -> f32 {
+        self.rear_dead_m3 as f32 + self.rear_area_m2 as f32 * x
+    }
+
+    fn front_volume_m3(&self, x: f32) -> f32 {
+        self.front_dead_m3 as f32 + self.front_area_m2 as f32 * (self.impact_position_m as f32 - x)
+    }
+
+    /// True when every length and volume is finite and the chambers exist.
+    pub fn is_valid(&self) -> bool {
+        let all = [
+            self.rear_area_m2,
+            self.front_area_m2,
+            self.rear_dead_m3,
+            self.front_dead_m3,
+            self.impact_position_m,
+            self.rear_outlet_m,
+            self.front_outlet_m,
+        ];
+        all.iter().all(|v| v.is_finite() && *v > 0.0)
+            && self.front_outlet_m < self.impact_position_m
+            && self.rear_outlet_m < self.impact_position_m
+    }
+}
+
+/// One chamber's feed in one cycle and the closed phase before it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Feed {
+    /// Onset of the feed from the reference impact, signed (negative:
+    /// before it). The front chamber's reference is the impact that closes
+    /// the cycle, the rear chamber's the one that opens it.
+    pub onset_s: f32,
+    /// Expanded uncertainty (k = 2) of the onset, random terms only.
+    pub onset_uncertainty_s: f32,
+    /// The chamber state at the onset (what the valve switched on).
+    pub x_m: f32,
+    pub p_rear_pa: f32,
+    pub p_front_pa: f32,
+    /// Polytropic exponent of the closed phase before the feed (1.4 sealed
+    /// and adiabatic; heat exchange pulls it towards 1, a leak moves it).
+    pub closed_exponent: f32,
+    pub closed_exponent_uncertainty: f32,
+    /// Effective area of the feed over its first millisecond (`fill`), from the
+    /// energy equation against the supply pressure (NaN without one).
+    pub feed_area_m2: f32,
+    pub feed_area_uncertainty_m2: f32,
+}
+
+/// Both chambers' feeds of one cycle; `None` where a chamber showed no
+/// closed phase long enough to read, or no feed after it.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Characteristics {
+    pub front: Option<Feed>,
+    pub rear: Option<Feed>,
+}
+
+/// One cycle's samples and the indices of its two impacts. All slices have
+/// the same length and reach past `close` far enough to see a feed that
+/// starts after the closing impact ([`LOOK_AFTER_S`]); pressures gauge.
+#[derive(Debug, Clone, Copy)]
+pub struct Window<'a> {
+    pub dt_s: f32,
+    pub p_rear_pa: &'a [f32],
+    pub p_front_pa: &'a [f32],
+    /// The piston's position: the [`track`] of the force balance, or a
+    /// simulator's truth.
+    pub x_m: &'a [f32],
+    pub open: usize,
+    pub close: usize,
+}
+
+/// How long after the closing impact a front feed is still looked for.
+pub const LOOK_AFTER_S: f32 = 8e-3;
+/// Distance from an outlet edge at which the chamber counts as closed (a
+/// port opens over its diameter's ramp; the paper's are 5 mm).
+const EDGE_GUARD_M: f32 = 2e-3;
+
+/// The characteristics of one cycle. `supply_abs_pa` is the supply pressure
+/// (absolute) that the fill is set against; NaN leaves the feed areas NaN.
+pub fn characterise(w: &Window, geo: &ChamberGeometry, supply_abs_pa: f32) -> Characteristics {
+    let n = w.p_rear_pa.len().min(w.p_front_pa.len()).min(w.x_m.len());
+    if !(w.open < w.close && w.close < n && w.dt_s > 0.0 && geo.is_valid()) {
+        return Characteristics::default();
+    }
+    let look_after = (LOOK_AFTER_S / w.dt_s) as usize;
+    // Front: closed once the stroke has covered its outlet, until the feed.
+    let front_edge = geo.front_outlet_m as f32 + EDGE_GUARD_M;
+    let front = (w.open..w.close)
+        .rev()
+        .find(|&i| w.x_m[i] <= front_edge)
+        .map(|i| i + 1)
+        .and_then(|start| {
+            let end = (w.close + look_after).min(n);
+            let p = &w.p_front_pa[start..end];
+            let x = &w.x_m[start..end];
+            feed(w, p, x, |x| geo.front_volume_m3(x), start, w.close, supply_abs_pa)
+        });
+    // Rear: closed once the backhaul has covered its outlet, until the feed;
+    // the search ends where the stroke uncovers it again.
+    let rear_edge = geo.rear_outlet_m as f32 - EDGE_GUARD_M;
+    let rear = (w.open..w.close).find(|&i| w.x_m[i] < rear_edge).and_then(|start| {
+        let turn = (start..w.close).fold(start, |m, i| if w.x_m[i] < w.x_m[m] { i } else { m });
+        let end = (turn..w.close).find(|&i| w.x_m[i] >= rear_edge).unwrap_or(w.close);
+        let p = &w.p_rear_pa[start..end];
+        let x = &w.x_m[start..end];
+        feed(w, p, x, |x| geo.rear_volume_m3(x), start, w.open, supply_abs_pa)
+    });
+    Characteristics { front, rear }
+}
+
+/// One chamber: the closed fit, the onset, the state there and the fill.
+fn feed(
+    w: &Window,
+    p: &[f32],
+    x: &[f32],
+    volume: impl Fn(f32) -> f32,
+    start: usize,
+    reference: usize,
+    supply_abs_pa: f32,
+) -> Option<Feed> {
+    let o = closed::onset(p, x, &volume, w.dt_s)?;
+    // Onset time from the reference impact.
+    let t_ref = (reference as f32 - start as f32) * w.dt_s;
+    let at = |s: &[f32]| interpolate(s, start, o.onset_s / w.dt_s);
+    let area = fill::feed_area(p, x, &volume, w.dt_s, o.onset_s, supply_abs_pa, o.noise_ln);
+    // The fill read from an onset one standard uncertainty either side: how
+    // far the onset's uncertainty moves the area.
+    let sigma_t = 0.5 * o.onset_uncertainty_s;
+    let early = fill::feed_area(p, x, &volume, w.dt_s, o.onset_s - sigma_t, supply_abs_pa, o.noise_ln);
+    let late = fill::feed_area(p, x, &volume, w.dt_s, o.onset_s + sigma_t, supply_abs_pa, o.noise_ln);
+    let u_onset = 0.5 * math::abs(late.area_m2 - early.area_m2);
+    let u_area = 2.0 * math::sqrt(area.sigma_m2 * area.sigma_m2 + u_onset * u_onset);
+    Some(Feed {
+        onset_s: o.onset_s - t_ref,
+        onset_uncertainty_s: o.onset_uncertainty_s,
+        x_m: at(w.x_m),
+        p_rear_pa: at(w.p_rear_pa),
+        p_front_pa: at(w.p_front_pa),
+        closed_exponent: o.exponent,
+        closed_exponent_uncertainty: o.exponent_uncertainty,
+        feed_area_m2: area.area_m2,
+        feed_area_uncertainty_m2: u_area,
+    })
+}
+
+/// `s` at the fractional sample `start + k`, linearly interpolated.
+fn interpolate(s: &[f32], start: usize, k: f32) -> f32 {
+    let k = if k > 0.0 { k } else { 0.0 };
+    let i = start + k as usize;
+    let frac = k - (k as usize) as f32;
+    match (s.get(i), s.get(i + 1)) {
+        (Some(a), Some(b)) => a + frac * (b - a),
+        (Some(a), None) => *a,
+        _ => f32::NAN,
+    }
+}

@@ -1,0 +1,246 @@
+//! A closed chamber's polytropic fit, and the onset of the feed that ends it.
+//!
+//! While both its ports are shut a chamber keeps p·Vⁿ constant: ln p_abs is
+//! a straight line in ln V of slope −n. The fit over the closed phase gives
+//! `n`; its residual r = ln p_abs + n·ln V − c stays in the noise until air
+//! enters, and the feed's onset is where that residual's rise, extended back
+//! along its tangent, meets zero. The tangent is fitted over a fixed band of
+//! the rise (2 % to 8 %), so the same onset is read from noisy and from
+//! noise-free pressures, whatever the fill's pace.
+
+use crate::math;
+
+/// Atmospheric pressure, for gauge → absolute.
+pub const P_ATM_PA: f32 = 101_325.0;
+/// The adiabatic exponent, used until the closed phase's own is known (and
+/// where the phase moves the volume too little to fit one).
+const KAPPA: f32 = 1.4;
+/// The band of the residual's rise the onset's tangent is fitted over.
+const RISE_LOW: f32 = 0.02;
+const RISE_HIGH: f32 = 0.08;
+/// A rise must hold this long to be a feed, not noise.
+const HOLD_S: f32 = 1e-4;
+/// The shortest closed phase that can be fitted.
+const MIN_CLOSED_S: f32 = 5e-4;
+/// An exponent fitted with a standard error above this is not used for the
+/// onset's residual (the volume hardly moved): the adiabatic one is.
+const MAX_EXPONENT_SD: f32 = 0.05;
+
+/// The closed phase and the feed after it, times from the slice's start.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Onset {
+    pub onset_s: f32,
+    /// Expanded (k = 2), random terms.
+    pub onset_uncertainty_s: f32,
+    pub exponent: f32,
+    /// Expanded (k = 2).
+    pub exponent_uncertainty: f32,
+    /// RMS of the closed fit's residual in ln p: the pressure's relative noise.
+    pub noise_ln: f32,
+}
+
+/// `p` (gauge) and `x` start in the closed phase and run past the feed.
+pub fn onset(p: &[f32], x: &[f32], volume: &impl Fn(f32) -> f32, dt_s: f32) -> Option<Onset> {
+    let len = p.len().min(x.len());
+    let hold = ((HOLD_S / dt_s) as usize).max(3);
+    let min_base = ((MIN_CLOSED_S / dt_s) as usize).max(8);
+    if len < min_base + 2 * hold {
+        return None;
+    }
+    let ln_p = |i: usize| math::ln(p[i] + P_ATM_PA);
+    let ln_v = |i: usize| math::ln(volume(x[i]));
+    if (0..len).any(|i| !(p[i] + P_ATM_PA > 0.0) || !(volume(x[i]) > 0.0)) {
+        return None;
+    }
+
+    // 1. A first onset with the adiabatic exponent, against the phase's start.
+    let y0 = (0..min_base).map(|i| ln_p(i) + KAPPA * ln_v(i)).sum::<f32>() / min_base as f32;
+    let first = rise_start(len, hold, min_base, |i| ln_p(i) + KAPPA * ln_v(i) - y0 > 3.0 * RISE_LOW)?;
+    // The closed phase ends before that rise began.
+    let mut base_end = first;
+    while base_end > min_base && ln_p(base_end - 1) + KAPPA * ln_v(base_end - 1) - y0 > 0.25 * RISE_LOW {
+        base_end -= 1;
+    }
+    let base_end = base_end.saturating_sub(hold);
+    if base_end < min_base {
+        return None;
+    }
+
+    // 2. The closed phase's exponent: ln p = c − n·ln V.
+    let line = Line::fit((0..base_end).map(|i| (ln_v(i), ln_p(i))))?;
+    let fitted = -line.slope;
+    let (rms, rho) = residual_noise((0..base_end).map(|i| ln_p(i) - line.at(ln_v(i))));
+    let inflation = (1.0 + rho) / (1.0 - rho);
+    let exponent_sd = math::sqrt(rms * rms * inflation / line.sxx);
+    let n_used = if exponent_sd < MAX_EXPONENT_SD { fitted } else { KAPPA };
+    let c = (0..base_end).map(|i| ln_p(i) + n_used * ln_v(i)).sum::<f32>() / base_end as f32;
+    let r = |i: usize| ln_p(i) + n_used * ln_v(i) - c;
+
+    // 3. The rise: where it holds above the band's foot, then the tangent
+    // over the band, extended back to zero.
+    let low = RISE_LOW.max(4.0 * rms);
+    let high = RISE_HIGH.max(4.0 * low);
+    let det = rise_start(len, hold, base_end, |i| r(i) > low)?;
+    let mut lo = det;
+    while lo > base_end && r(lo - 1) > low {
+        lo -= 1;
+    }
+    let mut hi = det;
+    while hi < len && r(hi) <= high {
+        hi += 1;
+    }
+    // At least three samples on a steep rise: one either side of the band.
+    let lo = if hi - lo < 3 {
+        lo.saturating_sub(1).max(base_end)
+    } else {
+        lo
+    };
+    let hi = if hi - lo < 3 { (hi + 1).min(len) } else { hi };
+    let tangent = Line::fit((lo..hi).map(|i| (i as f32, r(i))))?;
+    if !(tangent.slope > 0.0) {
+        return None;
+    }
+    let k0 = tangent.root();
+    // Its uncertainty: the band's mean and slope (independent about the
+    // band's centre), the baseline's level, the sample grid.
+    let m = (hi - lo) as f32;
+    let var_r = rms * rms * inflation;
+    let b = tangent.slope;
+    let d = k0 - tangent.x_mean;
+    let var_k =
+        var_r / (m * b * b) + d * d * var_r / (tangent.sxx * b * b) + var_r / (base_end as f32 * b * b) + 1.0 / 12.0;
+    let onset_s = k0 * dt_s;
+    Some(Onset {
+        onset_s,
+        onset_uncertainty_s: 2.0 * math::sqrt(var_k) * dt_s,
+        exponent: fitted,
+        exponent_uncertainty: 2.0 * exponent_sd,
+        noise_ln: rms,
+    })
+}
+
+/// The first index from `from` at which `above` holds for `hold` samples running.
+fn rise_start(len: usize, hold: usize, from: usize, above: impl Fn(usize) -> bool) -> Option<usize> {
+    let mut run = 0;
+    for i in from..len {
+        if above(i) {
+            run += 1;
+            if run == hold {
+                return Some(i + 1 - hold);
+            }
+        } else {
+            run = 0;
+        }
+    }
+    None
+}
+
+/// RMS of a residual and its lag-one autocorrelation (clamped to [0, 0.9]):
+/// a sensor's anti-alias filter correlates neighbouring samples, and a mean
+/// over correlated samples is worth fewer independent ones.
+fn residual_noise(r: impl Iterator<Item = f32> + Clone) -> (f32, f32) {
+    let (mut n, mut ss, mut lag, mut prev) = (0.0f32, 0.0f32, 0.0f32, None::<f32>);
+    for v in r {
+        n += 1.0;
+        ss += v * v;
+        if let Some(p) = prev {
+            lag += p * v;
+        }
+        prev = Some(v);
+    }
+    if n < 3.0 || !(ss > 0.0) {
+        return (0.0, 0.0);
+    }
+    let rho = math::clamp(lag / ss, 0.0, 0.9);
+    (math::sqrt(ss / (n - 2.0)), rho)
+}
+
+/// A least-squares line y = y_mean + slope·(x − x_mean).
+struct Line {
+    x_mean: f32,
+    y_mean: f32,
+    slope: f32,
+    sxx: f32,
+}
+
+impl Line {
+    fn fit(pts: impl Iterator<Item = (f32, f32)> + Clone) -> Option<Line> {
+        let (mut n, mut sx, mut sy) = (0.0f32, 0.0f32, 0.0f32);
+        for (x, y) in pts.clone() {
+            n += 1.0;
+            sx += x;
+            sy += y;
+        }
+        if n < 2.0 {
+            return None;
+        }
+        let (xm, ym) = (sx / n, sy / n);
+        let (mut sxx, mut sxy) = (0.0f32, 0.0f32);
+        for (x, y) in pts {
+            sxx += (x - xm) * (x - xm);
+            sxy += (x - xm) * (y - ym);
+        }
+        (sxx > 0.0).then(|| Line {
+            x_mean: xm,
+            y_mean: ym,
+            slope: sxy / sxx,
+            sxx,
+        })
+    }
+
+    fn at(&self, x: f32) -> f32 {
+        self.y_mean + self.slope * (x - self.x_mean)
+    }
+
+    /// Where the line meets zero.
+    fn root(&self) -> f32 {
+        self.x_mean - self.y_mean / self.slope
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A sealed adiabatic chamber compressed at a steady speed, then fed
+    /// from a known sample on at a known pace: the fitted exponent is 1.4
+    /// and the onset lies on the feed's start (its tangent is the rise
+    /// itself, which is linear in ln p here).
+    #[test]
+    fn a_sealed_chamber_gives_its_exponent_and_its_feed() {
+        let dt = 1e-5f32;
+        let vol = |x: f32| 20e-6 + 7e-4 * (0.052 - x);
+        let feed_at = 600usize;
+        let n = 1000;
+        let x: heapless::Vec<f32, 1000> = (0..n).map(|i| 0.025 + 2.5 * dt * i as f32).collect();
+        let c = math::ln(2e5) + 1.4 * math::ln(vol(x[0]));
+        let p: heapless::Vec<f32, 1000> = (0..n)
+            .map(|i| {
+                let rise = 40.0 * dt * (i as f32 - feed_at as f32).max(0.0);
+                math::exp(c - 1.4 * math::ln(vol(x[i])) + rise) - P_ATM_PA
+            })
+            .collect();
+        let o = onset(&p, &x, &vol, dt).expect("a feed");
+        assert!((o.exponent - 1.4).abs() < 1e-3, "n = {}", o.exponent);
+        let t_feed = feed_at as f32 * dt;
+        assert!(
+            (o.onset_s - t_feed).abs() < 0.5 * dt,
+            "onset {} s, fed at {t_feed} s",
+            o.onset_s
+        );
+        assert!(o.onset_uncertainty_s < 2.0 * dt, "U = {} s", o.onset_uncertainty_s);
+    }
+
+    /// No feed: no onset (the chamber stays closed).
+    #[test]
+    fn a_chamber_that_stays_closed_has_no_onset() {
+        let vol = |x: f32| 20e-6 + 7e-4 * (0.052 - x);
+        let x: heapless::Vec<f32, 800> = (0..800).map(|i| 0.025 + 2.5e-5 * i as f32).collect();
+        let c = math::ln(2e5) + 1.3 * math::ln(vol(x[0]));
+        let p: heapless::Vec<f32, 800> = x
+            .iter()
+            .map(|&x| math::exp(c - 1.3 * math::ln(vol(x))) - P_ATM_PA)
+            .collect();
+        assert_eq!(onset(&p, &x, &vol, 1e-5), None);
+    }
+}

@@ -1,0 +1,40 @@
+//! The chamber characteristics (valve switching, fills, closed phases)
+//! measured against their truth on both model families, at 4 and 7 bar,
+//! with no effect and with each of the catalogue's: how far the measured
+//! values fall from the same calculation on the true pressures and
+//! position, and how often their expanded uncertainty covers that.
+//!
+//! `cargo run --release -p hammer-host --example chambers [-- SECONDS]`
+
+use hammer_host::chambers::{compare, Family, Tally};
+use hammer_sim::effects::Effects;
+
+fn main() {
+    let seconds: f64 = std::env::args().nth(1).and_then(|s| s.parse().ok()).unwrap_or(1.0);
+    let specs = [
+        "none",
+        "coulomb_friction:f0_n=1.7,k_n_per_bar=2.14",
+        "viscous_friction",
+        "leakage",
+        "valve_delay:tau_s=0.0015",
+        "heat_transfer",
+        "supply_restriction",
+        "accel_zero_shift",
+        "pressure_gain_error",
+    ];
+    let mut total = Tally::default();
+    for family in [Family::Model, Family::Variant] {
+        for bar in [4.0, 7.0] {
+            for spec in specs {
+                let mut e = Effects::default();
+                if spec != "none" {
+                    e.apply_spec(spec).expect("catalogue effect");
+                }
+                let t = compare(family, bar, &e, seconds, 11);
+                println!("{:8} {bar} bar {spec:44} {}", family.name(), t.line());
+                total.add(&t);
+            }
+        }
+    }
+    println!("all {}", total.line());
+}

@@ -1,0 +1,286 @@
+//! The chamber characteristics measured against their truth, on the
+//! diagnosis' model and on the second model family: the accuracy figures
+//! of `docs/estimator.md` ("Chamber characteristics"), the tests that hold
+//! them, and `examples/chambers.rs`.
+//!
+//! A characteristic's truth is the same calculation on the true pressures
+//! and the true position; the measured one reads the sensor chain's
+//! pressures with the force balance's position track.
+
+use hammer_estimator::chambers::{Characteristics, Feed};
+use hammer_sim::characteristics::{characterise_cycles, CycleFeeds, Signals};
+use hammer_sim::effects::Effects;
+use hammer_sim::estimation;
+use hammer_sim::SimConfig;
+use hammer_trace::trace::Trace;
+use hammer_variants::{generate, Structure, VariantParams};
+
+/// Which hammer made the trace.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Family {
+    /// The diagnosis' own model (`hammer-sim`).
+    Model,
+    /// The second model family's base hammer (`hammer-variants`).
+    Variant,
+}
+
+impl Family {
+    pub fn name(self) -> &'static str {
+        match self {
+            Family::Model => "model",
+            Family::Variant => "variant",
+        }
+    }
+}
+
+/// A run's measured and true characteristics, cycle by cycle, and when the
+/// spool opened each port (the true crossings), from the trace's start.
+pub struct Compared {
+    pub measured: Vec<CycleFeeds>,
+    pub truth: Vec<CycleFeeds>,
+    /// Times the front and the rear supply port began to open.
+    pub front_port_opens_s: Vec<f64>,
+    pub rear_port_opens_s: Vec<f64>,
+}
+
+/// Times at which `open(i)` becomes true, from sample 0.
+fn crossings(dt_s: f64, n: usize, open: impl Fn(usize) -> bool) -> Vec<f64> {
+    (1..n)
+        .filter(|&i| open(i) && !open(i - 1))
+        .map(|i| i as f64 * dt_s)
+        .collect()
+}
+
+fn column<'a>(t: &'a Trace, name: &str) -> &'a [f64] {
+    t.extra.get(name).map_or(&[], |v| v.as_slice())
+}
+
+/// Runs `family` at `bar` with `effects` for `seconds` (noise seed `seed`)
+/// and reads its characteristics both ways.
+pub fn run(family: Family, bar: f64, effects: &Effects, seconds: f64, seed: u64) -> Compared {
+    let mut cfg = SimConfig::nominal(bar);
+    cfg.seed = seed;
+    let config = cfg.estimator_config(Some(bar)).expect("nominal estimator config");
+    let (trace, chambers, front_open, rear_open): (Trace, _, Box<dyn Fn(f64) -> bool>, Box<dyn Fn(f64) -> bool>) =
+        match family {
+            Family::Model => {
+                cfg.effects = effects.clone();
+                cfg.solver.duration_s = seconds;
+                let sim = hammer_sim::simulate(&cfg).expect("simulation");
+                let (travel, opening) = (cfg.valve.travel_m, cfg.valve.opening_m);
+                (
+                    sim.trace(),
+                    cfg.hammer.chambers(),
+                    Box::new(move |xv| xv < opening),
+                    Box::new(move |xv| xv > travel - opening),
+                )
+            }
+            Family::Variant => {
+                let p = VariantParams::default();
+                let g = generate(&p, Structure::BASE, effects, bar, seconds, seed);
+                (g.trace, p.chambers(), Box::new(|s| s < 0.5), Box::new(|s| s > 0.5))
+            }
+        };
+    let spool = column(&trace, if family == Family::Model { "valve_m" } else { "spool" });
+    let reports = estimation::run(&estimation::to_codes(&trace, &config), config).expect("estimator");
+    let measured = Signals {
+        dt_s: trace.dt_s,
+        p_rear_pa: &trace.p_rear_pa,
+        p_front_pa: &trace.p_front_pa,
+        x_m: None,
+    };
+    let truth = Signals {
+        dt_s: trace.dt_s,
+        p_rear_pa: column(&trace, "p_rear_true_pa"),
+        p_front_pa: column(&trace, "p_front_true_pa"),
+        x_m: Some(column(&trace, "x_m")),
+    };
+    Compared {
+        measured: characterise_cycles(&measured, &reports, &config, &chambers),
+        truth: characterise_cycles(&truth, &reports, &config, &chambers),
+        front_port_opens_s: crossings(trace.dt_s, spool.len(), |i| front_open(spool[i])),
+        rear_port_opens_s: crossings(trace.dt_s, spool.len(), |i| rear_open(spool[i])),
+    }
+}
+
+/// One characteristic's agreement with its truth over many cycles.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Agreement {
+    pub cycles: usize,
+    /// Cycles whose expanded uncertainty covers the difference to the truth.
+    pub covered: usize,
+    /// The largest expanded uncertainty, relative where `relative`.
+    pub max_u: f64,
+    pub sum_d: f64,
+    pub sum_dd: f64,
+}
+
+impl Agreement {
+    fn add(&mut self, measured: f64, truth: f64, u: f64, scale: f64) {
+        if !(measured.is_finite() && truth.is_finite() && u.is_finite()) {
+            return;
+        }
+        let d = (measured - truth) / scale;
+        self.cycles += 1;
+        self.covered += usize::from(d.abs() <= u / scale);
+        self.max_u = self.max_u.max(u / scale);
+        self.sum_d += d;
+        self.sum_dd += d * d;
+    }
+
+    fn merge(&mut self, o: &Agreement) {
+        self.cycles += o.cycles;
+        self.covered += o.covered;
+        self.max_u = self.max_u.max(o.max_u);
+        self.sum_d += o.sum_d;
+        self.sum_dd += o.sum_dd;
+    }
+
+    pub fn coverage(&self) -> f64 {
+        self.covered as f64 / self.cycles.max(1) as f64
+    }
+
+    pub fn mean(&self) -> f64 {
+        self.sum_d / self.cycles.max(1) as f64
+    }
+
+    pub fn rms(&self) -> f64 {
+        (self.sum_dd / self.cycles.max(1) as f64).sqrt()
+    }
+}
+
+/// The six characteristics' agreements: onsets in seconds, exponents as
+/// numbers, areas relative to the truth's.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Tally {
+    pub front_onset: Agreement,
+    pub rear_onset: Agreement,
+    pub front_exponent: Agreement,
+    pub rear_exponent: Agreement,
+    pub front_area: Agreement,
+    pub rear_area: Agreement,
+    /// Cycles with a report pair, and those where a chamber gave no feed.
+    pub cycles: usize,
+    pub missing: usize,
+}
+
+impl Tally {
+    pub fn of(c: &Compared) -> Tally {
+        let mut t = Tally::default();
+        for m in &c.measured {
+            let Some(tr) = c.truth.iter().find(|x| x.seq == m.seq) else {
+                continue;
+            };
+            t.cycles += 1;
+            t.add_chamber(m.feeds.front, tr.feeds.front, true);
+            t.add_chamber(m.feeds.rear, tr.feeds.rear, false);
+        }
+        t
+    }
+
+    fn add_chamber(&mut self, m: Option<Feed>, tr: Option<Feed>, front: bool) {
+        let (Some(m), Some(tr)) = (m, tr) else {
+            self.missing += 1;
+            return;
+        };
+        let (onset, exponent, area) = if front {
+            (&mut self.front_onset, &mut self.front_exponent, &mut self.front_area)
+        } else {
+            (&mut self.rear_onset, &mut self.rear_exponent, &mut self.rear_area)
+        };
+        onset.add(m.onset_s as f64, tr.onset_s as f64, m.onset_uncertainty_s as f64, 1.0);
+        exponent.add(
+            m.closed_exponent as f64,
+            tr.closed_exponent as f64,
+            m.closed_exponent_uncertainty as f64,
+            1.0,
+        );
+        area.add(
+            m.feed_area_m2 as f64,
+            tr.feed_area_m2 as f64,
+            m.feed_area_uncertainty_m2 as f64,
+            tr.feed_area_m2 as f64,
+        );
+    }
+
+    pub fn add(&mut self, o: &Tally) {
+        for (a, b) in self.all_mut().into_iter().zip(o.all()) {
+            a.merge(&b);
+        }
+        self.cycles += o.cycles;
+        self.missing += o.missing;
+    }
+
+    pub fn all(&self) -> [Agreement; 6] {
+        [
+            self.front_onset,
+            self.rear_onset,
+            self.front_exponent,
+            self.rear_exponent,
+            self.front_area,
+            self.rear_area,
+        ]
+    }
+
+    fn all_mut(&mut self) -> [&mut Agreement; 6] {
+        [
+            &mut self.front_onset,
+            &mut self.rear_onset,
+            &mut self.front_exponent,
+            &mut self.rear_exponent,
+            &mut self.front_area,
+            &mut self.rear_area,
+        ]
+    }
+
+    /// One line: per characteristic, coverage, largest U, mean and RMS difference.
+    pub fn line(&self) -> String {
+        let a = self.all();
+        let ms = |x: f64| x * 1e3;
+        format!(
+            "cycles {:3} missing {:2} | front onset cov {:3.0}% U≤{:.3} ms d {:+.3}±{:.3} | rear onset cov {:3.0}% U≤{:.3} ms d {:+.3}±{:.3} | n_f cov {:3.0}% U≤{:.3} d {:+.3}±{:.3} | n_r cov {:3.0}% U≤{:.3} d {:+.3}±{:.3} | A_f cov {:3.0}% U≤{:.1}% d {:+.1}±{:.1}% | A_r cov {:3.0}% U≤{:.1}% d {:+.1}±{:.1}%",
+            self.cycles,
+            self.missing,
+            100.0 * a[0].coverage(), ms(a[0].max_u), ms(a[0].mean()), ms(a[0].rms()),
+            100.0 * a[1].coverage(), ms(a[1].max_u), ms(a[1].mean()), ms(a[1].rms()),
+            100.0 * a[2].coverage(), a[2].max_u, a[2].mean(), a[2].rms(),
+            100.0 * a[3].coverage(), a[3].max_u, a[3].mean(), a[3].rms(),
+            100.0 * a[4].coverage(), 100.0 * a[4].max_u, 100.0 * a[4].mean(), 100.0 * a[4].rms(),
+            100.0 * a[5].coverage(), 100.0 * a[5].max_u, 100.0 * a[5].mean(), 100.0 * a[5].rms(),
+        )
+    }
+}
+
+/// [`run`] and [`Tally::of`] in one.
+pub fn compare(family: Family, bar: f64, effects: &Effects, seconds: f64, seed: u64) -> Tally {
+    Tally::of(&run(family, bar, effects, seconds, seed))
+}
+
+/// Mean onset of a chamber over the cycles that have one.
+pub fn mean_onset_s(cycles: &[CycleFeeds], front: bool) -> Option<f64> {
+    let pick = |c: &Characteristics| if front { c.front } else { c.rear };
+    let v: Vec<f64> = cycles
+        .iter()
+        .filter_map(|c| pick(&c.feeds))
+        .map(|f| f.onset_s as f64)
+        .collect();
+    (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
+}
+
+/// Mean time from each cycle's closing impact to the nearest opening of
+/// the front port (the spool's true crossing), over the cycles measured.
+pub fn mean_front_port_opening_s(c: &Compared) -> Option<f64> {
+    let v: Vec<f64> = c
+        .measured
+        .iter()
+        .filter_map(|m| {
+            let t = m.t_impact_s;
+            c.front_port_opens_s
+                .iter()
+                .map(|&o| o - t)
+                .filter(|d| d.abs() < 10e-3)
+                .min_by(|a, b| a.abs().total_cmp(&b.abs()))
+        })
+        .collect();
+    (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
+}

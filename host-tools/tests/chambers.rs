@@ -1,0 +1,75 @@
+//! The chamber characteristics against their truth (the same calculation on
+//! the true pressures and position) on both model families, at 4 and 7 bar:
+//! what `docs/estimator.md` ("Chamber characteristics") states.
+
+use hammer_host::chambers::{mean_front_port_opening_s, mean_onset_s, run, Family, Tally};
+use hammer_sim::effects::Effects;
+
+fn effects(spec: &str) -> Effects {
+    let mut e = Effects::default();
+    if spec != "none" {
+        e.apply_spec(spec).expect("catalogue effect");
+    }
+    e
+}
+
+/// Every cycle of a sound hammer gives both feeds, and each characteristic
+/// lies near its truth: onsets within 0.2 ms RMS, closed-phase exponents
+/// within 0.01, feed areas within 10 % (measured: at most 0.12 ms, 0.004
+/// and 9 %; the force balance's position track is what separates them).
+#[test]
+fn a_sound_hammer_gives_both_feeds_near_their_truth_on_both_families() {
+    for family in [Family::Model, Family::Variant] {
+        for bar in [4.0, 7.0] {
+            let t = Tally::of(&run(family, bar, &effects("none"), 1.0, 3));
+            let what = format!("{} at {bar} bar: {}", family.name(), t.line());
+            assert!(t.cycles >= 15, "{what}");
+            assert_eq!(t.missing, 0, "{what}");
+            assert!(t.front_onset.rms() < 0.2e-3 && t.rear_onset.rms() < 0.2e-3, "{what}");
+            assert!(t.front_exponent.rms() < 0.01 && t.rear_exponent.rms() < 0.01, "{what}");
+            assert!(t.front_area.rms() < 0.10 && t.rear_area.rms() < 0.10, "{what}");
+            // The rear onset's stated uncertainty covers its truth.
+            assert!(t.rear_onset.coverage() >= 0.9, "{what}");
+            assert!(t.rear_onset.max_u < 0.3e-3 && t.front_onset.max_u < 0.3e-3, "{what}");
+        }
+    }
+}
+
+/// The evidence the structural diagnosis lacked, measured from the signals:
+/// the second family's valve feeds the front chamber before the impact, the
+/// model's after it (docs/diagnosis.md, why no valve delay was named).
+#[test]
+fn the_second_familys_front_feed_starts_before_the_impact_and_the_models_after() {
+    for bar in [4.0, 7.0] {
+        let model = mean_onset_s(&run(Family::Model, bar, &effects("none"), 1.0, 3).measured, true).unwrap();
+        let variant = mean_onset_s(&run(Family::Variant, bar, &effects("none"), 1.0, 3).measured, true).unwrap();
+        assert!(
+            model > 0.2e-3 && variant < -0.5e-3,
+            "{bar} bar: model {model:e} s, variant {variant:e} s"
+        );
+    }
+}
+
+/// A hidden valve delay moves the measured front feed by the spool's true
+/// shift within 0.25 ms on the model family (measured: 0.02–0.12 ms at
+/// τ = 0.6 and 1.5 ms). On the second family the onset moves further than
+/// the port (docs/estimator.md): asserted only as the right direction.
+#[test]
+fn a_hidden_valve_delay_moves_the_measured_switching_with_the_spool() {
+    for bar in [4.0, 7.0] {
+        for family in [Family::Model, Family::Variant] {
+            let none = run(family, bar, &effects("none"), 1.0, 5);
+            let delayed = run(family, bar, &effects("valve_delay:tau_s=0.0015"), 1.0, 5);
+            let measured = mean_onset_s(&delayed.measured, true).unwrap() - mean_onset_s(&none.measured, true).unwrap();
+            let port = mean_front_port_opening_s(&delayed).unwrap() - mean_front_port_opening_s(&none).unwrap();
+            let what = format!(
+                "{} at {bar} bar: measured {measured:e} s, port {port:e} s",
+                family.name()
+            );
+            assert!(port > 0.5e-3 && measured > 0.5e-3, "{what}");
+            if family == Family::Model {
+                assert!((measured - port).abs() < 0.25e-3, "{what}");
+            }
+        }
+    }
+}
