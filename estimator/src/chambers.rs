@@ -112,7 +112,8 @@ pub struct Feed {
     /// and adiabatic; heat exchange pulls it towards 1, a leak moves it).
     pub closed_exponent: f32,
     pub closed_exponent_uncertainty: f32,
-    /// Effective area of the feed over its first millisecond (`fill`), from the
+    /// Effective area of the feed over the millisecond after its rise is
+    /// established (`fill`), from the
     /// energy equation against the supply pressure (NaN without one).
     pub feed_area_m2: f32,
     pub feed_area_uncertainty_m2: f32,
@@ -124,6 +125,40 @@ pub struct Feed {
 pub struct Characteristics {
     pub front: Option<Feed>,
     pub rear: Option<Feed>,
+}
+
+impl Feed {
+    /// This feed's uncertainties widened by how far `other` (the same
+    /// chamber read along another position track) lies from it: the spread
+    /// between two independent tracks stands for the track's own error,
+    /// which the noise terms do not hold.
+    fn widened(self, other: &Feed) -> Feed {
+        let add = |u: f32, d: f32| if d.is_finite() { math::sqrt(u * u + d * d) } else { u };
+        Feed {
+            onset_uncertainty_s: add(self.onset_uncertainty_s, self.onset_s - other.onset_s),
+            closed_exponent_uncertainty: add(
+                self.closed_exponent_uncertainty,
+                self.closed_exponent - other.closed_exponent,
+            ),
+            feed_area_uncertainty_m2: add(self.feed_area_uncertainty_m2, self.feed_area_m2 - other.feed_area_m2),
+            ..self
+        }
+    }
+}
+
+impl Characteristics {
+    /// [`Feed::widened`] per chamber; a chamber the other track did not
+    /// read keeps its own uncertainties.
+    pub fn widened(self, other: &Characteristics) -> Characteristics {
+        let w = |a: Option<Feed>, b: Option<Feed>| match (a, b) {
+            (Some(a), Some(b)) => Some(a.widened(&b)),
+            (a, _) => a,
+        };
+        Characteristics {
+            front: w(self.front, other.front),
+            rear: w(self.rear, other.rear),
+        }
+    }
 }
 
 /// One cycle's samples and the indices of its two impacts. All slices have
@@ -194,12 +229,14 @@ fn feed(
     // Onset time from the reference impact.
     let t_ref = (reference as f32 - start as f32) * w.dt_s;
     let at = |s: &[f32]| interpolate(s, start, o.onset_s / w.dt_s);
-    let area = fill::feed_area(p, x, &volume, w.dt_s, o.onset_s, supply_abs_pa, o.noise_ln);
-    // The fill read from an onset one standard uncertainty either side: how
-    // far the onset's uncertainty moves the area.
-    let sigma_t = 0.5 * o.onset_uncertainty_s;
-    let early = fill::feed_area(p, x, &volume, w.dt_s, o.onset_s - sigma_t, supply_abs_pa, o.noise_ln);
-    let late = fill::feed_area(p, x, &volume, w.dt_s, o.onset_s + sigma_t, supply_abs_pa, o.noise_ln);
+    // The fill is read from where the rise is established (the port's first
+    // opening passes little air, and when exactly it began is the onset's
+    // uncertainty, not the fill's).
+    let area = fill::feed_area(p, x, &volume, w.dt_s, o.rise_s, supply_abs_pa, o.noise_ln);
+    // The fill read from a start one sample either side: how far the
+    // window's placement moves the area.
+    let early = fill::feed_area(p, x, &volume, w.dt_s, o.rise_s - w.dt_s, supply_abs_pa, o.noise_ln);
+    let late = fill::feed_area(p, x, &volume, w.dt_s, o.rise_s + w.dt_s, supply_abs_pa, o.noise_ln);
     let u_onset = 0.5 * math::abs(late.area_m2 - early.area_m2);
     let u_area = 2.0 * math::sqrt(area.sigma_m2 * area.sigma_m2 + u_onset * u_onset);
     Some(Feed {

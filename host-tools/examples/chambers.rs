@@ -6,7 +6,7 @@
 //!
 //! `cargo run --release -p hammer-host --example chambers [-- SECONDS]`
 
-use hammer_host::chambers::{compare, Family, Tally};
+use hammer_host::chambers::{compare, mean_front_port_opening_s, mean_onset_s, run, Family, Tally};
 use hammer_sim::effects::Effects;
 
 fn main() {
@@ -37,4 +37,31 @@ fn main() {
         }
     }
     println!("all {}", total.line());
+    // A hidden valve delay: how far the measured front feed moves, against
+    // how far the spool's opening of the front port moves.
+    for family in [Family::Model, Family::Variant] {
+        for bar in [4.0, 7.0] {
+            let none = run(family, bar, &Effects::default(), seconds, 5);
+            for tau in [0.0006, 0.0015, 0.0024] {
+                let mut e = Effects::default();
+                e.apply_spec(&format!("valve_delay:tau_s={tau}"))
+                    .expect("catalogue effect");
+                let d = run(family, bar, &e, seconds, 5);
+                let shift = |c: &hammer_host::chambers::Compared| mean_onset_s(&c.measured, true);
+                let (Some(m1), Some(m0)) = (shift(&d), shift(&none)) else {
+                    continue;
+                };
+                let (Some(p1), Some(p0)) = (mean_front_port_opening_s(&d), mean_front_port_opening_s(&none)) else {
+                    continue;
+                };
+                let (m, p) = ((m1 - m0) * 1e3, (p1 - p0) * 1e3);
+                println!(
+                    "{:8} {bar} bar valve delay {:.1} ms: front feed moved {m:+.3} ms, the port {p:+.3} ms (difference {:+.3} ms)",
+                    family.name(),
+                    tau * 1e3,
+                    m - p
+                );
+            }
+        }
+    }
 }

@@ -87,12 +87,14 @@ pub fn run(family: Family, bar: f64, effects: &Effects, seconds: f64, seed: u64)
         dt_s: trace.dt_s,
         p_rear_pa: &trace.p_rear_pa,
         p_front_pa: &trace.p_front_pa,
+        accel_mps2: &trace.accel_mps2,
         x_m: None,
     };
     let truth = Signals {
         dt_s: trace.dt_s,
         p_rear_pa: column(&trace, "p_rear_true_pa"),
         p_front_pa: column(&trace, "p_front_true_pa"),
+        accel_mps2: &trace.accel_mps2,
         x_m: Some(column(&trace, "x_m")),
     };
     Compared {

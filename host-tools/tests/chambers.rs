@@ -2,7 +2,7 @@
 //! the true pressures and position) on both model families, at 4 and 7 bar:
 //! what `docs/estimator.md` ("Chamber characteristics") states.
 
-use hammer_host::chambers::{mean_front_port_opening_s, mean_onset_s, run, Family, Tally};
+use hammer_host::chambers::{compare, mean_front_port_opening_s, mean_onset_s, run, Family, Tally};
 use hammer_sim::effects::Effects;
 
 fn effects(spec: &str) -> Effects {
@@ -14,9 +14,9 @@ fn effects(spec: &str) -> Effects {
 }
 
 /// Every cycle of a sound hammer gives both feeds, and each characteristic
-/// lies near its truth: onsets within 0.2 ms RMS, closed-phase exponents
-/// within 0.01, feed areas within 10 % (measured: at most 0.12 ms, 0.004
-/// and 9 %; the force balance's position track is what separates them).
+/// lies near its truth: onsets within 0.1 ms RMS, closed-phase exponents
+/// within 0.01, feed areas within 10 % (measured: at most 0.03 ms, 0.003
+/// and 4.4 %).
 #[test]
 fn a_sound_hammer_gives_both_feeds_near_their_truth_on_both_families() {
     for family in [Family::Model, Family::Variant] {
@@ -25,12 +25,11 @@ fn a_sound_hammer_gives_both_feeds_near_their_truth_on_both_families() {
             let what = format!("{} at {bar} bar: {}", family.name(), t.line());
             assert!(t.cycles >= 15, "{what}");
             assert_eq!(t.missing, 0, "{what}");
-            assert!(t.front_onset.rms() < 0.2e-3 && t.rear_onset.rms() < 0.2e-3, "{what}");
+            assert!(t.front_onset.rms() < 0.1e-3 && t.rear_onset.rms() < 0.1e-3, "{what}");
             assert!(t.front_exponent.rms() < 0.01 && t.rear_exponent.rms() < 0.01, "{what}");
             assert!(t.front_area.rms() < 0.10 && t.rear_area.rms() < 0.10, "{what}");
-            // The rear onset's stated uncertainty covers its truth.
-            assert!(t.rear_onset.coverage() >= 0.9, "{what}");
             assert!(t.rear_onset.max_u < 0.3e-3 && t.front_onset.max_u < 0.3e-3, "{what}");
+            assert!(t.front_exponent.max_u < 0.1 && t.rear_exponent.max_u < 0.1, "{what}");
         }
     }
 }
@@ -44,7 +43,7 @@ fn the_second_familys_front_feed_starts_before_the_impact_and_the_models_after()
         let model = mean_onset_s(&run(Family::Model, bar, &effects("none"), 1.0, 3).measured, true).unwrap();
         let variant = mean_onset_s(&run(Family::Variant, bar, &effects("none"), 1.0, 3).measured, true).unwrap();
         assert!(
-            model > 0.2e-3 && variant < -0.5e-3,
+            model > 0.0 && variant < -0.5e-3,
             "{bar} bar: model {model:e} s, variant {variant:e} s"
         );
     }
@@ -72,4 +71,42 @@ fn a_hidden_valve_delay_moves_the_measured_switching_with_the_spool() {
             }
         }
     }
+}
+
+/// The stated expanded uncertainties (k = 2, random and track terms, no
+/// calibration terms) against the truth, over both families at 4 and 7 bar
+/// with no effect and each effect but the pressure gain error (a
+/// calibration error, which the stated uncertainty leaves out by design).
+/// Measured over 1 s runs (docs/estimator.md): onsets 87 % (front) and 88 %
+/// (rear), exponents 92 % / 93 %, areas 96 % / 96 %. Here 0.5 s runs:
+/// each at least 80 %, every onset's mean difference within 0.1 ms (the
+/// slow rises of a restricted or heat-exchanging chamber lean early).
+#[test]
+fn the_stated_uncertainties_cover_the_truth_in_most_cycles() {
+    let specs = [
+        "none",
+        "coulomb_friction:f0_n=1.7,k_n_per_bar=2.14",
+        "viscous_friction",
+        "leakage",
+        "valve_delay:tau_s=0.0015",
+        "heat_transfer",
+        "supply_restriction",
+        "accel_zero_shift",
+    ];
+    let mut total = Tally::default();
+    for family in [Family::Model, Family::Variant] {
+        for bar in [4.0, 7.0] {
+            for spec in specs {
+                total.add(&compare(family, bar, &effects(spec), 0.5, 7));
+            }
+        }
+    }
+    let line = total.line();
+    for a in total.all() {
+        assert!(a.cycles >= 200 && a.coverage() >= 0.8, "{line}");
+    }
+    assert!(
+        total.front_onset.mean().abs() < 0.1e-3 && total.rear_onset.mean().abs() < 0.1e-3,
+        "{line}"
+    );
 }

@@ -37,6 +37,9 @@ pub struct Onset {
     pub exponent_uncertainty: f32,
     /// RMS of the closed fit's residual in ln p: the pressure's relative noise.
     pub noise_ln: f32,
+    /// Where the rise entered the band the onset is read from: the fill is
+    /// under way there, whatever the port's opening pace.
+    pub rise_s: f32,
 }
 
 /// `p` (gauge) and `x` start in the closed phase and run past the feed.
@@ -62,16 +65,42 @@ pub fn onset(p: &[f32], x: &[f32], volume: &impl Fn(f32) -> f32, dt_s: f32) -> O
         base_end -= 1;
     }
     let base_end = base_end.saturating_sub(hold);
+    let first = read(p, x, volume, dt_s, base_end)?;
+    // A slow rise starts well before it shows: read again with the closed
+    // phase ending where the first reading put the onset.
+    let onset_at = (first.onset_s / dt_s) as usize;
+    if onset_at < base_end + hold {
+        return read(p, x, volume, dt_s, onset_at.saturating_sub(hold)).or(Some(first));
+    }
+    Some(first)
+}
+
+/// Steps 2 and 3 of [`onset`], with the closed phase taken as `..base_end`.
+fn read(p: &[f32], x: &[f32], volume: &impl Fn(f32) -> f32, dt_s: f32, base_end: usize) -> Option<Onset> {
+    let len = p.len().min(x.len());
+    let hold = ((HOLD_S / dt_s) as usize).max(3);
+    let min_base = ((MIN_CLOSED_S / dt_s) as usize).max(8);
     if base_end < min_base {
         return None;
     }
+    let ln_p = |i: usize| math::ln(p[i] + P_ATM_PA);
+    let ln_v = |i: usize| math::ln(volume(x[i]));
 
     // 2. The closed phase's exponent: ln p = c − n·ln V.
     let line = Line::fit((0..base_end).map(|i| (ln_v(i), ln_p(i))))?;
     let fitted = -line.slope;
     let (rms, rho) = residual_noise((0..base_end).map(|i| ln_p(i) - line.at(ln_v(i))));
     let inflation = (1.0 + rho) / (1.0 - rho);
-    let exponent_sd = math::sqrt(rms * rms * inflation / line.sxx);
+    // The noise's share, and the form's: a chamber that is not exactly
+    // polytropic (heat, leaks) gives each half of its closed phase another
+    // exponent, a spread the residual's noise does not show.
+    let half = |r: core::ops::Range<usize>| Line::fit(r.map(|i| (ln_v(i), ln_p(i)))).map_or(0.0, |l| -l.slope);
+    let split = if base_end >= 2 * min_base {
+        half(0..base_end / 2) - half(base_end / 2..base_end)
+    } else {
+        0.0
+    };
+    let exponent_sd = math::sqrt(rms * rms * inflation / line.sxx + 0.25 * split * split);
     let n_used = if exponent_sd < MAX_EXPONENT_SD { fitted } else { KAPPA };
     let c = (0..base_end).map(|i| ln_p(i) + n_used * ln_v(i)).sum::<f32>() / base_end as f32;
     let r = |i: usize| ln_p(i) + n_used * ln_v(i) - c;
@@ -96,19 +125,35 @@ pub fn onset(p: &[f32], x: &[f32], volume: &impl Fn(f32) -> f32, dt_s: f32) -> O
         lo
     };
     let hi = if hi - lo < 3 { (hi + 1).min(len) } else { hi };
-    let tangent = Line::fit((lo..hi).map(|i| (i as f32, r(i))))?;
+    // A port opened by a moving spool grows in area from zero, so the
+    // rise starts as (t − t0)²: its square root is the straight line.
+    let g = |i: usize| math::sqrt(if r(i) > 0.0 { r(i) } else { 0.0 });
+    let tangent = Line::fit((lo..hi).map(|i| (i as f32, g(i))))?;
     if !(tangent.slope > 0.0) {
         return None;
     }
     let k0 = tangent.root();
     // Its uncertainty: the band's mean and slope (independent about the
-    // band's centre), the baseline's level, the sample grid.
+    // band's centre), the baseline's level, the sample grid; a noise σ in r
+    // is σ/(2√r) in √r.
     let m = (hi - lo) as f32;
-    let var_r = rms * rms * inflation;
+    let r_mid = tangent.y_mean * tangent.y_mean;
+    let var_g = rms * rms * inflation / (4.0 * r_mid);
     let b = tangent.slope;
     let d = k0 - tangent.x_mean;
-    let var_k =
-        var_r / (m * b * b) + d * d * var_r / (tangent.sxx * b * b) + var_r / (base_end as f32 * b * b) + 1.0 / 12.0;
+    // And the form's: where the rise is not (t − t0)² the band's points
+    // scatter about the line by more than the noise; the variance is scaled
+    // by that excess (the reduced χ², when above one).
+    let chi2 = if hi - lo > 2 {
+        let ss: f32 = (lo..hi).map(|i| g(i) - tangent.at(i as f32)).map(|e| e * e).sum();
+        ss / ((hi - lo - 2) as f32 * var_g)
+    } else {
+        1.0
+    };
+    let birge = if chi2 > 1.0 { chi2 } else { 1.0 };
+    let var_k = birge
+        * (var_g / (m * b * b) + d * d * var_g / (tangent.sxx * b * b) + var_g / (base_end as f32 * b * b))
+        + 1.0 / 12.0;
     let onset_s = k0 * dt_s;
     Some(Onset {
         onset_s,
@@ -116,6 +161,7 @@ pub fn onset(p: &[f32], x: &[f32], volume: &impl Fn(f32) -> f32, dt_s: f32) -> O
         exponent: fitted,
         exponent_uncertainty: 2.0 * exponent_sd,
         noise_ln: rms,
+        rise_s: lo as f32 * dt_s,
     })
 }
 
@@ -203,9 +249,9 @@ mod tests {
     use super::*;
 
     /// A sealed adiabatic chamber compressed at a steady speed, then fed
-    /// from a known sample on at a known pace: the fitted exponent is 1.4
-    /// and the onset lies on the feed's start (its tangent is the rise
-    /// itself, which is linear in ln p here).
+    /// from a known sample on through a port opening at a steady pace (the
+    /// air let in grows as (t − t0)², and so does ln p at first): the fitted
+    /// exponent is 1.4 and the onset lies on the feed's start.
     #[test]
     fn a_sealed_chamber_gives_its_exponent_and_its_feed() {
         let dt = 1e-5f32;
@@ -216,7 +262,7 @@ mod tests {
         let c = math::ln(2e5) + 1.4 * math::ln(vol(x[0]));
         let p: heapless::Vec<f32, 1000> = (0..n)
             .map(|i| {
-                let rise = 40.0 * dt * (i as f32 - feed_at as f32).max(0.0);
+                let rise = 2e4 * (dt * (i as f32 - feed_at as f32).max(0.0)).powi(2);
                 math::exp(c - 1.4 * math::ln(vol(x[i])) + rise) - P_ATM_PA
             })
             .collect();

@@ -35,8 +35,81 @@ pub struct PhaseFriction {
     pub stroke_n: f32,
 }
 
-/// Fills `x[open..=close]` with the track between two impacts:
-/// `x[open] = x[close] = impact_m`. Other samples are left as they are.
+/// Fills `x[open..=close]` with the track between two impacts from the
+/// piston's acceleration `accel(i, turn)` (`turn`: the turning point's
+/// index, which splits friction's sign): `x[open] = x[close] = impact_m`,
+/// the start velocity set by the closure. Other samples are left as they are.
+pub fn closed(dt_s: f32, impact_m: f32, open: usize, close: usize, x: &mut [f32], accel: impl Fn(usize, usize) -> f32) {
+    if !(open < close && close < x.len() && dt_s > 0.0) {
+        return;
+    }
+    // Twice: the turning point that splits the friction's sign depends on
+    // the start velocity, which depends on the friction.
+    let mut turn = close;
+    let mut v0 = 0.0f32;
+    for _ in 0..2 {
+        let split = turn;
+        // u: velocity gained from rest; its integral over the cycle.
+        let (mut u, mut du_prev, mut area) = (0.0f32, accel(open, split), 0.0f32);
+        for i in open + 1..=close {
+            let du = accel(i, split);
+            let u_next = u + 0.5 * dt_s * (du_prev + du);
+            area += 0.5 * dt_s * (u + u_next);
+            u = u_next;
+            du_prev = du;
+        }
+        v0 = -area / ((close - open) as f32 * dt_s);
+        // The turn: where the velocity first goes from backwards to forwards.
+        let (mut u, mut du_prev) = (0.0f32, accel(open, split));
+        turn = close;
+        for i in open + 1..=close {
+            let du = accel(i, split);
+            u += 0.5 * dt_s * (du_prev + du);
+            du_prev = du;
+            if v0 + u > 0.0 {
+                turn = i;
+                break;
+            }
+        }
+    }
+    let (mut v, mut du_prev) = (v0, accel(open, turn));
+    x[open] = impact_m;
+    for i in open + 1..=close {
+        let du = accel(i, turn);
+        let v_next = v + 0.5 * dt_s * (du_prev + du);
+        x[i] = x[i - 1] + 0.5 * dt_s * (v + v_next);
+        v = v_next;
+        du_prev = du;
+    }
+    // The closure puts x[close] at the impact to rounding; set it exactly.
+    x[close] = impact_m;
+}
+
+/// The force balance's acceleration: the pressure force less the cycle's
+/// friction per phase (backhaul before the turn, stroke after), over the mass.
+pub fn force_balance<'a>(
+    p_rear_pa: &'a [f32],
+    p_front_pa: &'a [f32],
+    piston: &'a Piston,
+    friction: PhaseFriction,
+) -> impl Fn(usize, usize) -> f32 + 'a {
+    let f_bh = if friction.backhaul_n.is_finite() {
+        friction.backhaul_n
+    } else {
+        0.0
+    };
+    let f_st = if friction.stroke_n.is_finite() {
+        friction.stroke_n
+    } else {
+        0.0
+    };
+    move |i, turn| {
+        let p = piston.rear_area_m2 * p_rear_pa[i] - piston.front_area_m2 * p_front_pa[i] + piston.gravity_n;
+        (p + if i < turn { f_bh } else { -f_st }) / piston.mass_kg
+    }
+}
+
+/// The track of [`force_balance`] (what the estimator's velocity integral assumes).
 #[allow(clippy::too_many_arguments)]
 pub fn position(
     p_rear_pa: &[f32],
@@ -49,66 +122,50 @@ pub fn position(
     close: usize,
     x: &mut [f32],
 ) {
-    let len = p_rear_pa.len().min(p_front_pa.len()).min(x.len());
-    if !(open < close && close < len && dt_s > 0.0 && piston.mass_kg > 0.0) {
-        return;
+    let n = p_rear_pa.len().min(p_front_pa.len());
+    if close < n && piston.mass_kg > 0.0 {
+        closed(
+            dt_s,
+            impact_m,
+            open,
+            close,
+            x,
+            force_balance(p_rear_pa, p_front_pa, piston, friction),
+        );
     }
-    let accel = |i: usize| {
-        (piston.rear_area_m2 * p_rear_pa[i] - piston.front_area_m2 * p_front_pa[i] + piston.gravity_n) / piston.mass_kg
-    };
-    let f_bh = if friction.backhaul_n.is_finite() {
-        friction.backhaul_n
+}
+
+/// The accelerometer's acceleration, less the zero shift the estimator
+/// fitted (`zero_shift_mps2`, decaying from the impact at `open` with
+/// `tau_s`); before `blank_end` (the accelerometer still rings from the
+/// shock) `fallback`'s. It sees friction of any form, which the force
+/// balance's two constants only approximate.
+pub fn accelerometer<'a>(
+    accel_mps2: &'a [f32],
+    zero_shift_mps2: f32,
+    tau_s: f32,
+    dt_s: f32,
+    open: usize,
+    blank_end: usize,
+    fallback: impl Fn(usize, usize) -> f32 + 'a,
+) -> impl Fn(usize, usize) -> f32 + 'a {
+    let q = if tau_s > 0.0 && zero_shift_mps2.is_finite() {
+        crate::math::exp(-dt_s / tau_s)
     } else {
         0.0
     };
-    let f_st = if friction.stroke_n.is_finite() {
-        friction.stroke_n
+    let zs = if zero_shift_mps2.is_finite() {
+        zero_shift_mps2
     } else {
         0.0
     };
-    // Twice: the turning point that splits the friction's sign depends on
-    // the start velocity, which depends on the friction.
-    let fric_at = |i: usize, turn: usize| if i < turn { f_bh } else { -f_st } / piston.mass_kg;
-    let mut turn = close;
-    let mut v0 = 0.0f32;
-    for _ in 0..2 {
-        let split = turn;
-        let fric = |i: usize| fric_at(i, split);
-        // u: velocity gained from rest; its integral over the cycle.
-        let (mut u, mut du_prev, mut area) = (0.0f32, accel(open) + fric(open), 0.0f32);
-        for i in open + 1..=close {
-            let du = accel(i) + fric(i);
-            let u_next = u + 0.5 * dt_s * (du_prev + du);
-            area += 0.5 * dt_s * (u + u_next);
-            u = u_next;
-            du_prev = du;
-        }
-        v0 = -area / ((close - open) as f32 * dt_s);
-        // The turn: where the velocity first goes from backwards to forwards.
-        let (mut u, mut du_prev) = (0.0f32, accel(open) + fric(open));
-        turn = close;
-        for i in open + 1..=close {
-            let du = accel(i) + fric(i);
-            u += 0.5 * dt_s * (du_prev + du);
-            du_prev = du;
-            if v0 + u > 0.0 {
-                turn = i;
-                break;
-            }
+    move |i, turn| {
+        if i < blank_end {
+            fallback(i, turn)
+        } else {
+            accel_mps2[i] - zs * crate::math::powi(q, (i - open) as u32)
         }
     }
-    let fric = |i: usize| fric_at(i, turn);
-    let (mut v, mut du_prev) = (v0, accel(open) + fric(open));
-    x[open] = impact_m;
-    for i in open + 1..=close {
-        let du = accel(i) + fric(i);
-        let v_next = v + 0.5 * dt_s * (du_prev + du);
-        x[i] = x[i - 1] + 0.5 * dt_s * (v + v_next);
-        v = v_next;
-        du_prev = du;
-    }
-    // The closure puts x[close] at the impact to rounding; set it exactly.
-    x[close] = impact_m;
 }
 
 #[cfg(test)]

@@ -2,8 +2,9 @@
 //! fills and the closed phases (`hammer_estimator::chambers`), cycle by
 //! cycle of the estimator's reports.
 //!
-//! The same calculation reads the measured pressures with the force
-//! balance's position track, or a simulator's true pressures and position:
+//! The same calculation reads the measured pressures with the position
+//! track of the measured acceleration (the force balance's in the blank after
+//! each impact), or a simulator's true pressures and position:
 //! that is a characteristic's truth (`docs/estimator.md`).
 
 use hammer_estimator::chambers::track::{self, PhaseFriction, Piston};
@@ -18,7 +19,21 @@ pub struct Signals<'a> {
     pub dt_s: f64,
     pub p_rear_pa: &'a [f64],
     pub p_front_pa: &'a [f64],
+    /// The measured acceleration: where each impact's shock ends.
+    pub accel_mps2: &'a [f64],
     pub x_m: Option<&'a [f64]>,
+}
+
+/// The longest a shock is looked for after its impact (a contact lasts
+/// tens of microseconds; the accelerometer's ringing a little longer).
+const MAX_SHOCK_S: f64 = 0.5e-3;
+
+/// The first sample after the impact at `i` where the accelerometer has
+/// left the impact region: the contact is over and the piston is back at
+/// the impact position (the tool's elastic give, tens of µm, undone).
+fn shock_end(accel: &[f64], i: usize, threshold_mps2: f64, dt_s: f64) -> usize {
+    let last = (i + (MAX_SHOCK_S / dt_s) as usize).min(accel.len().saturating_sub(1));
+    (i + 1..=last).find(|&k| accel[k].abs() < threshold_mps2).unwrap_or(i)
 }
 
 /// One cycle's characteristics, keyed by its report.
@@ -64,36 +79,56 @@ pub fn characterise_cycles(
         let end = (close + after).min(following);
         let f32s = |v: &[f64]| v[open..=following].iter().map(|&x| x as f32).collect::<Vec<f32>>();
         let (p1, p2) = (f32s(s.p_rear_pa), f32s(s.p_front_pa));
-        let x = match s.x_m {
-            Some(x) if x.len() > following => f32s(x),
+        let window = |x: &'_ [f32], p1: &'_ [f32], p2: &'_ [f32]| {
+            let w = Window {
+                dt_s: s.dt_s as f32,
+                p_rear_pa: &p1[..=end - open],
+                p_front_pa: &p2[..=end - open],
+                x_m: &x[..=end - open],
+                open: 0,
+                close: close - open,
+            };
+            characterise(&w, chambers, supply_abs)
+        };
+        let feeds = match s.x_m {
+            Some(x) if x.len() > following => window(&f32s(x), &p1, &p2),
             Some(_) => continue,
             None => {
-                let mut x = vec![f32::NAN; p1.len()];
+                // Two tracks: the accelerometer's (sees friction of any
+                // form) and the force balance's; the first is read, their
+                // spread widens its uncertainties.
+                let accel = f32s(s.accel_mps2);
                 let impact = chambers.impact_position_m as f32;
+                let threshold = config.impact_threshold_mps2 as f64;
+                let dt = s.dt_s as f32;
+                let blank = (config.blank_after_s as f64 / s.dt_s).round() as usize;
+                let mut x_acc = vec![f32::NAN; p1.len()];
+                let mut x_force = vec![f32::NAN; p1.len()];
                 for (a, b, r) in [(open, close, cur), (close, following, next)] {
                     let friction = PhaseFriction {
                         backhaul_n: r.friction_backhaul_n,
                         stroke_n: r.friction_stroke_n,
                     };
-                    let dt = s.dt_s as f32;
-                    track::position(&p1, &p2, dt, &piston, friction, impact, a - open, b - open, &mut x);
+                    // The tracks start where the contact has ended; during
+                    // it the piston is at the tool.
+                    let a_end = shock_end(s.accel_mps2, a, threshold, s.dt_s).min(b - 1);
+                    let (a, a_end, b) = (a - open, a_end - open, b - open);
+                    x_acc[a..a_end].fill(impact);
+                    x_force[a..a_end].fill(impact);
+                    let balance = || track::force_balance(&p1, &p2, &piston, friction);
+                    let tau = config.accel_zero_shift_tau_s;
+                    let zs = r.accel_zero_shift_mps2;
+                    let source = track::accelerometer(&accel, zs, tau, dt, a, a + blank, balance());
+                    track::closed(dt, impact, a_end, b, &mut x_acc, source);
+                    track::closed(dt, impact, a_end, b, &mut x_force, balance());
                 }
-                x
+                window(&x_acc, &p1, &p2).widened(&window(&x_force, &p1, &p2))
             }
-        };
-        let (p1, p2, x) = (&p1[..=end - open], &p2[..=end - open], &x[..=end - open]);
-        let w = Window {
-            dt_s: s.dt_s as f32,
-            p_rear_pa: p1,
-            p_front_pa: p2,
-            x_m: x,
-            open: 0,
-            close: close - open,
         };
         out.push(CycleFeeds {
             seq: cur.seq,
             t_impact_s: cur.t_impact_s(),
-            feeds: characterise(&w, chambers, supply_abs),
+            feeds,
         });
     }
     out
