@@ -1,27 +1,67 @@
 //! Per-cycle chamber characteristics of a trace: the valve's switching, the
-//! fills and the closed phases (`hammer_estimator::chambers`), cycle by
-//! cycle of the estimator's reports.
+//! fills and the closed phases (`hammer_estimator::chambers`).
 //!
 //! The same calculation reads the measured pressures with the position
-//! track of the measured acceleration (the force balance's in the blank after
-//! each impact), or a simulator's true pressures and position:
-//! that is a characteristic's truth (`docs/estimator.md`).
+//! track of the measured acceleration (the force balance's in the blank
+//! after each impact), or a simulator's true pressures and position: that
+//! is a characteristic's truth (`docs/estimator.md`). Cycles come either as
+//! the estimator's reports ([`characterise_cycles`]) or as spans between
+//! impacts found elsewhere, with the friction and zero shift fitted there
+//! ([`characterise_spans`]: the diagnosis' features).
 
 use hammer_estimator::chambers::track::{self, PhaseFriction, Piston};
-use hammer_estimator::chambers::{characterise, ChamberGeometry, Characteristics, Window, LOOK_AFTER_S};
+use hammer_estimator::chambers::{characterise, ChamberGeometry, Characteristics, Window, LOOK_AFTER_S, P_ATM_PA};
 use hammer_estimator::{Config, CycleReport};
 
 /// The pressures (gauge) and, for the truth, the position the
-/// characteristics are read from; without a position the force balance's
-/// track is used.
+/// characteristics are read from; without a position the tracks of the
+/// accelerometer and of the force balance are used.
 #[derive(Debug, Clone, Copy)]
 pub struct Signals<'a> {
     pub dt_s: f64,
     pub p_rear_pa: &'a [f64],
     pub p_front_pa: &'a [f64],
-    /// The measured acceleration: where each impact's shock ends.
+    /// The measured acceleration: where each impact's shock ends, and the track.
     pub accel_mps2: &'a [f64],
     pub x_m: Option<&'a [f64]>,
+}
+
+/// How the signals are read: the piston, the estimator's settings the
+/// tracks share, and the supply the fills are set against.
+#[derive(Debug, Clone, Copy)]
+pub struct Reading {
+    pub piston: Piston,
+    pub impact_threshold_mps2: f64,
+    /// The accelerometer rings this long after a shock: the force balance
+    /// stands in for it there.
+    pub blank_after_s: f64,
+    pub zero_shift_tau_s: f64,
+    /// Gauge; NaN leaves the feed areas NaN.
+    pub supply_pa: f64,
+}
+
+impl Reading {
+    /// As the estimator configured by `c` reads (its supply pressure included).
+    pub fn of(c: &Config) -> Self {
+        Self {
+            piston: Piston::of(c),
+            impact_threshold_mps2: c.impact_threshold_mps2 as f64,
+            blank_after_s: c.blank_after_s as f64,
+            zero_shift_tau_s: c.accel_zero_shift_tau_s as f64,
+            supply_pa: c.supply_pressure_pa as f64,
+        }
+    }
+}
+
+/// One impact-to-impact cycle and what its force balance fitted.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Span {
+    pub open_s: f64,
+    pub close_s: f64,
+    pub friction: PhaseFriction,
+    /// The accelerometer's zero shift at the opening impact, decaying with
+    /// [`Reading::zero_shift_tau_s`] (NaN: none fitted).
+    pub zero_shift_mps2: f32,
 }
 
 /// The longest a shock is looked for after its impact (a contact lasts
@@ -36,6 +76,90 @@ fn shock_end(accel: &[f64], i: usize, threshold_mps2: f64, dt_s: f64) -> usize {
     (i + 1..=last).find(|&k| accel[k].abs() < threshold_mps2).unwrap_or(i)
 }
 
+/// The characteristics of each span that the next span continues (its
+/// samples after the closing impact are the next cycle's, where a front
+/// feed may start); `None` for the others.
+pub fn characterise_spans(
+    s: &Signals,
+    spans: &[Span],
+    r: &Reading,
+    chambers: &ChamberGeometry,
+) -> Vec<Option<Characteristics>> {
+    let n = s.p_rear_pa.len().min(s.p_front_pa.len()).min(s.accel_mps2.len());
+    let index = |t: f64| (t / s.dt_s).round() as usize;
+    let after = (LOOK_AFTER_S as f64 / s.dt_s).ceil() as usize + 64;
+    let supply_abs = (r.supply_pa + P_ATM_PA as f64) as f32;
+    (0..spans.len())
+        .map(|k| {
+            let (cur, next) = (spans[k], *spans.get(k + 1)?);
+            let [open, close, following] = [cur.open_s, cur.close_s, next.close_s].map(index);
+            let continues = index(next.open_s) == close;
+            if !(continues && open < close && close < following && following < n) {
+                return None;
+            }
+            let end = (close + after).min(following);
+            let f32s = |v: &[f64]| v[open..=following].iter().map(|&x| x as f32).collect::<Vec<f32>>();
+            let (p1, p2) = (f32s(s.p_rear_pa), f32s(s.p_front_pa));
+            let window = |x: &[f32]| {
+                let w = Window {
+                    dt_s: s.dt_s as f32,
+                    p_rear_pa: &p1[..=end - open],
+                    p_front_pa: &p2[..=end - open],
+                    x_m: &x[..=end - open],
+                    open: 0,
+                    close: close - open,
+                };
+                characterise(&w, chambers, supply_abs)
+            };
+            match s.x_m {
+                Some(x) if x.len() > following => Some(window(&f32s(x))),
+                Some(_) => None,
+                None => {
+                    let (x_acc, x_force) = tracks(s, r, chambers, &p1, &p2, open, [(open, cur), (close, next)]);
+                    // The accelerometer's track is read; the spread to the
+                    // force balance's widens the uncertainties.
+                    Some(window(&x_acc).widened(&window(&x_force)))
+                }
+            }
+        })
+        .collect()
+}
+
+/// The accelerometer's and the force balance's tracks over two spans that
+/// follow each other, from sample `base` (where `p1`, `p2` start).
+fn tracks(
+    s: &Signals,
+    r: &Reading,
+    chambers: &ChamberGeometry,
+    p1: &[f32],
+    p2: &[f32],
+    base: usize,
+    spans: [(usize, Span); 2],
+) -> (Vec<f32>, Vec<f32>) {
+    let index = |t: f64| (t / s.dt_s).round() as usize;
+    let accel: Vec<f32> = s.accel_mps2[base..base + p1.len()].iter().map(|&x| x as f32).collect();
+    let impact = chambers.impact_position_m as f32;
+    let dt = s.dt_s as f32;
+    let blank = (r.blank_after_s / s.dt_s).round() as usize;
+    let mut x_acc = vec![f32::NAN; p1.len()];
+    let mut x_force = vec![f32::NAN; p1.len()];
+    for (a, span) in spans {
+        let b = index(span.close_s);
+        // The tracks start where the contact has ended; during it the
+        // piston is at the tool.
+        let a_end = shock_end(s.accel_mps2, a, r.impact_threshold_mps2, s.dt_s).min(b - 1);
+        let (a, a_end, b) = (a - base, a_end - base, b - base);
+        x_acc[a..a_end].fill(impact);
+        x_force[a..a_end].fill(impact);
+        let balance = || track::force_balance(p1, p2, &r.piston, span.friction);
+        let tau = r.zero_shift_tau_s as f32;
+        let source = track::accelerometer(&accel, span.zero_shift_mps2, tau, dt, a, a + blank, balance());
+        track::closed(dt, impact, a_end, b, &mut x_acc, source);
+        track::closed(dt, impact, a_end, b, &mut x_force, balance());
+    }
+    (x_acc, x_force)
+}
+
 /// One cycle's characteristics, keyed by its report.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CycleFeeds {
@@ -43,11 +167,6 @@ pub struct CycleFeeds {
     /// The impact that closes the cycle.
     pub t_impact_s: f64,
     pub feeds: Characteristics,
-}
-
-/// Sample index of a report's impact.
-fn impact_index(r: &CycleReport, dt_s: f64) -> usize {
-    (r.t_impact_s() / dt_s).round() as usize
 }
 
 /// The characteristics of every cycle between two valid reports that follow
@@ -59,77 +178,42 @@ pub fn characterise_cycles(
     config: &Config,
     chambers: &ChamberGeometry,
 ) -> Vec<CycleFeeds> {
-    let n = s.p_rear_pa.len().min(s.p_front_pa.len());
-    let after = (LOOK_AFTER_S as f64 / s.dt_s).ceil() as usize + 64;
-    let supply_abs = config.supply_pressure_pa + hammer_estimator::chambers::P_ATM_PA;
-    let piston = Piston::of(config);
+    let reading = Reading::of(config);
     let mut out = Vec::new();
-    // Each cycle with the one after it: the samples past its closing impact
-    // (where a front feed may start) are tracked as the next cycle's.
-    for trio in reports.windows(3) {
-        let [prev, cur, next] = [&trio[0], &trio[1], &trio[2]];
-        let follows = |a: &CycleReport, b: &CycleReport| b.seq == a.seq.wrapping_add(1) && a.is_valid() && b.is_valid();
-        if !follows(prev, cur) || !follows(cur, next) {
-            continue;
-        }
-        let [open, close, following] = [prev, cur, next].map(|r| impact_index(r, s.dt_s));
-        if !(open < close && close < following && following < n) {
-            continue;
-        }
-        let end = (close + after).min(following);
-        let f32s = |v: &[f64]| v[open..=following].iter().map(|&x| x as f32).collect::<Vec<f32>>();
-        let (p1, p2) = (f32s(s.p_rear_pa), f32s(s.p_front_pa));
-        let window = |x: &'_ [f32], p1: &'_ [f32], p2: &'_ [f32]| {
-            let w = Window {
-                dt_s: s.dt_s as f32,
-                p_rear_pa: &p1[..=end - open],
-                p_front_pa: &p2[..=end - open],
-                x_m: &x[..=end - open],
-                open: 0,
-                close: close - open,
-            };
-            characterise(&w, chambers, supply_abs)
-        };
-        let feeds = match s.x_m {
-            Some(x) if x.len() > following => window(&f32s(x), &p1, &p2),
-            Some(_) => continue,
-            None => {
-                // Two tracks: the accelerometer's (sees friction of any
-                // form) and the force balance's; the first is read, their
-                // spread widens its uncertainties.
-                let accel = f32s(s.accel_mps2);
-                let impact = chambers.impact_position_m as f32;
-                let threshold = config.impact_threshold_mps2 as f64;
-                let dt = s.dt_s as f32;
-                let blank = (config.blank_after_s as f64 / s.dt_s).round() as usize;
-                let mut x_acc = vec![f32::NAN; p1.len()];
-                let mut x_force = vec![f32::NAN; p1.len()];
-                for (a, b, r) in [(open, close, cur), (close, following, next)] {
-                    let friction = PhaseFriction {
-                        backhaul_n: r.friction_backhaul_n,
-                        stroke_n: r.friction_stroke_n,
-                    };
-                    // The tracks start where the contact has ended; during
-                    // it the piston is at the tool.
-                    let a_end = shock_end(s.accel_mps2, a, threshold, s.dt_s).min(b - 1);
-                    let (a, a_end, b) = (a - open, a_end - open, b - open);
-                    x_acc[a..a_end].fill(impact);
-                    x_force[a..a_end].fill(impact);
-                    let balance = || track::force_balance(&p1, &p2, &piston, friction);
-                    let tau = config.accel_zero_shift_tau_s;
-                    let zs = r.accel_zero_shift_mps2;
-                    let source = track::accelerometer(&accel, zs, tau, dt, a, a + blank, balance());
-                    track::closed(dt, impact, a_end, b, &mut x_acc, source);
-                    track::closed(dt, impact, a_end, b, &mut x_force, balance());
-                }
-                window(&x_acc, &p1, &p2).widened(&window(&x_force, &p1, &p2))
+    // Runs of reports that follow each other, valid; each report closes a span.
+    let mut run: Vec<(&CycleReport, Span)> = Vec::new();
+    let mut flush = |run: &mut Vec<(&CycleReport, Span)>| {
+        let spans: Vec<Span> = run.iter().map(|r| r.1).collect();
+        for ((r, _), c) in run.iter().zip(characterise_spans(s, &spans, &reading, chambers)) {
+            if let Some(feeds) = c {
+                out.push(CycleFeeds {
+                    seq: r.seq,
+                    t_impact_s: r.t_impact_s(),
+                    feeds,
+                });
             }
-        };
-        out.push(CycleFeeds {
-            seq: cur.seq,
-            t_impact_s: cur.t_impact_s(),
-            feeds,
-        });
+        }
+        run.clear();
+    };
+    for pair in reports.windows(2) {
+        let (prev, cur) = (&pair[0], &pair[1]);
+        if cur.seq != prev.seq.wrapping_add(1) || !prev.is_valid() || !cur.is_valid() {
+            flush(&mut run);
+            continue;
+        }
+        run.push((
+            cur,
+            Span {
+                open_s: prev.t_impact_s(),
+                close_s: cur.t_impact_s(),
+                friction: PhaseFriction {
+                    backhaul_n: cur.friction_backhaul_n,
+                    stroke_n: cur.friction_stroke_n,
+                },
+                zero_shift_mps2: cur.accel_zero_shift_mps2,
+            },
+        ));
     }
+    flush(&mut run);
     out
 }
