@@ -16,8 +16,12 @@ pub const CAPTURE_SAMPLES: usize = 5_600;
 const CAPTURE_BYTES: usize = packed::bytes_for(CAPTURE_SAMPLES);
 
 /// Samples kept after the impact that closes a capture: its shock and the
-/// few samples before it make the capture a complete cycle for the estimator.
-pub const CAPTURE_TAIL: u16 = 200;
+/// few samples before it make the capture a complete cycle for the
+/// estimator, and the 8 ms after it hold the front chamber's feed when the
+/// valve switches after the impact (the chamber characteristics,
+/// `hammer_estimator::chambers`). A 4 bar cycle (≈ 47 ms) and its tail fit
+/// in [`CAPTURE_SAMPLES`]; a longer one streams what the buffer holds.
+pub const CAPTURE_TAIL: u16 = 800;
 
 /// The firmware's own version, reported in `Hello` and `Status`.
 pub const FIRMWARE_VERSION: [u8; 3] = [0, 1, 0];

@@ -61,7 +61,11 @@ pub fn to_trace(codes: &[[u16; 3]], cfg: &Config, supply_bar: Option<f64>) -> (T
         extra: Default::default(),
         gaps: Vec::new(),
     };
-    (trace, Sidecar::new(supply_bar, "device"))
+    let sidecar = Sidecar {
+        calibration_hash: Some(cfg.calibration_hash()),
+        ..Sidecar::new(supply_bar, "device")
+    };
+    (trace, sidecar)
 }
 
 /// Records `cycles` raw cycles from a device: asks for its configuration (the

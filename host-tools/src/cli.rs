@@ -41,6 +41,10 @@ pub enum Command {
     /// Ask a device for the raw samples of the next N cycles and write them in
     /// the project's trace format (CSV + sidecar).
     Capture(CaptureArgs),
+    /// Record the hammer when it is known sound: raw cycles at each supply
+    /// pressure, with the board's calibration and firmware, into a folder
+    /// that `hammer diagnose --reference DIR` reads changes against.
+    Commission(crate::commission::CommissionArgs),
     /// Plots (PNG) and an HTML page for a trace: one cycle, the run, and for a
     /// simulated trace the estimate against the truth.
     Report(crate::report::ReportArgs),
@@ -314,6 +318,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Replay(args) => crate::monitor::replay(&args),
         Command::MqttTail(args) => crate::mqtt::tail(&args),
         Command::Capture(args) => capture_cmd(&args),
+        Command::Commission(args) => crate::commission::run(&args),
         Command::Report(args) => {
             for f in crate::report::run(&args)? {
                 outln!("wrote {}", f.display());

@@ -15,6 +15,7 @@
 //! - [`diagnose`]: the sim-to-real gap diagnosis and its benchmarks;
 //! - [`flash`], [`capture`], [`calibrate`], [`selftest`], [`demo`], [`soak`], [`monitor`]: live: raw captures, calibration, the
 //!   no-hardware demo, the full-rate soak, the dashboard, logs and replay;
+//! - [`commission`]: the hammer's reference record, from the board's raw captures;
 //! - [`cli`]: the subcommands, thin over the above.
 
 #[macro_use]
@@ -27,6 +28,7 @@ pub mod chambers;
 pub mod chart;
 pub mod cli;
 pub mod client;
+pub mod commission;
 pub mod demo;
 pub mod diagnose;
 pub mod emulator;

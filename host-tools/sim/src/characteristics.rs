@@ -76,9 +76,12 @@ fn shock_end(accel: &[f64], i: usize, threshold_mps2: f64, dt_s: f64) -> usize {
     (i + 1..=last).find(|&k| accel[k].abs() < threshold_mps2).unwrap_or(i)
 }
 
-/// The characteristics of each span that the next span continues (its
-/// samples after the closing impact are the next cycle's, where a front
-/// feed may start); `None` for the others.
+/// The characteristics of each span. The samples after a span's closing
+/// impact, where a front feed may start, are tracked as the next span's
+/// when it continues this one; without one (the last cycle of a trace, a
+/// device's one-cycle capture) the piston starts from rest at the impact
+/// there, by the force balance alone. `None` where less than half of
+/// [`LOOK_AFTER_S`] follows the closing impact.
 pub fn characterise_spans(
     s: &Signals,
     spans: &[Span],
@@ -87,14 +90,21 @@ pub fn characterise_spans(
 ) -> Vec<Option<Characteristics>> {
     let n = s.p_rear_pa.len().min(s.p_front_pa.len()).min(s.accel_mps2.len());
     let index = |t: f64| (t / s.dt_s).round() as usize;
-    let after = (LOOK_AFTER_S as f64 / s.dt_s).ceil() as usize + 64;
+    let look = (LOOK_AFTER_S as f64 / s.dt_s).ceil() as usize;
+    let after = look + 64;
     let supply_abs = (r.supply_pa + P_ATM_PA as f64) as f32;
     (0..spans.len())
         .map(|k| {
-            let (cur, next) = (spans[k], *spans.get(k + 1)?);
-            let [open, close, following] = [cur.open_s, cur.close_s, next.close_s].map(index);
-            let continues = index(next.open_s) == close;
-            if !(continues && open < close && close < following && following < n) {
+            let cur = spans[k];
+            let [open, close] = [cur.open_s, cur.close_s].map(index);
+            // The next span, if it continues this one; else the tail.
+            let next = spans
+                .get(k + 1)
+                .copied()
+                .filter(|nx| index(nx.open_s) == close && index(nx.close_s) < n);
+            let following = next.map_or((close + after).min(n.saturating_sub(1)), |nx| index(nx.close_s));
+            // Half the look-after holds any feed within a few ms of the impact.
+            if !(open < close && close + look / 2 <= following && following < n) {
                 return None;
             }
             let end = (close + after).min(following);
@@ -115,7 +125,7 @@ pub fn characterise_spans(
                 Some(x) if x.len() > following => Some(window(&f32s(x))),
                 Some(_) => None,
                 None => {
-                    let (x_acc, x_force) = tracks(s, r, chambers, &p1, &p2, open, [(open, cur), (close, next)]);
+                    let (x_acc, x_force) = tracks(s, r, chambers, &p1, &p2, open, (cur, next));
                     // The accelerometer's track is read; the spread to the
                     // force balance's widens the uncertainties.
                     Some(window(&x_acc).widened(&window(&x_force)))
@@ -125,8 +135,9 @@ pub fn characterise_spans(
         .collect()
 }
 
-/// The accelerometer's and the force balance's tracks over two spans that
-/// follow each other, from sample `base` (where `p1`, `p2` start).
+/// The accelerometer's and the force balance's tracks over a span and the
+/// one after it (or, without one, the tail from rest), from sample `base`
+/// (where `p1`, `p2` start; they run to the end of what is tracked).
 fn tracks(
     s: &Signals,
     r: &Reading,
@@ -134,7 +145,7 @@ fn tracks(
     p1: &[f32],
     p2: &[f32],
     base: usize,
-    spans: [(usize, Span); 2],
+    (cur, next): (Span, Option<Span>),
 ) -> (Vec<f32>, Vec<f32>) {
     let index = |t: f64| (t / s.dt_s).round() as usize;
     let accel: Vec<f32> = s.accel_mps2[base..base + p1.len()].iter().map(|&x| x as f32).collect();
@@ -143,8 +154,14 @@ fn tracks(
     let blank = (r.blank_after_s / s.dt_s).round() as usize;
     let mut x_acc = vec![f32::NAN; p1.len()];
     let mut x_force = vec![f32::NAN; p1.len()];
-    for (a, span) in spans {
-        let b = index(span.close_s);
+    let close = index(cur.close_s) - base;
+    if next.is_none() {
+        let a_end = shock_end(s.accel_mps2, close + base, r.impact_threshold_mps2, s.dt_s) - base;
+        tail(&accel, p2, dt, chambers, close, a_end, &mut x_acc);
+        x_force[close..].copy_from_slice(&x_acc[close..]);
+    }
+    for span in [Some(cur), next].into_iter().flatten() {
+        let (a, b) = (index(span.open_s), index(span.close_s));
         // The tracks start where the contact has ended; during it the
         // piston is at the tool.
         let a_end = shock_end(s.accel_mps2, a, r.impact_threshold_mps2, s.dt_s).min(b - 1);
@@ -158,6 +175,52 @@ fn tracks(
         track::closed(dt, impact, a_end, b, &mut x_force, balance());
     }
     (x_acc, x_force)
+}
+
+/// How long after a shock the front chamber is taken as closed, to fit the
+/// rebound of a tail's track.
+const REBOUND_FIT_S: f64 = 0.5e-3;
+
+/// The track after an impact that no later impact closes (a device's
+/// one-cycle capture, a trace's last cycle): the accelerometer integrated
+/// from the end of the shock, its start velocity (the rebound) fitted to the
+/// front chamber's first half millisecond, when it is still closed on the
+/// model's valve timing and its p·V^1.4 gives the position by itself. On a
+/// hammer whose valve feeds the front chamber before the impact the fit is
+/// off, and so is the tail; its feed's onset lies before the impact there.
+fn tail(accel: &[f32], p2: &[f32], dt: f32, chambers: &ChamberGeometry, close: usize, a_end: usize, x: &mut [f32]) {
+    let n = accel.len().min(p2.len()).min(x.len());
+    let impact = chambers.impact_position_m as f32;
+    let (v_dead, a2) = (chambers.front_dead_m3 as f32, chambers.front_area_m2 as f32);
+    let a_end = a_end.clamp(close, n);
+    x[close..a_end].fill(impact);
+    if a_end + 2 >= n {
+        return;
+    }
+    // u: the displacement the accelerometer gives from rest at the shock's end.
+    let mut u = vec![0.0f32; n - a_end];
+    let mut v = 0.0f32;
+    for k in 1..u.len() {
+        let i = a_end + k;
+        let v_next = v + 0.5 * dt * (accel[i - 1] + accel[i]);
+        u[k] = u[k - 1] + 0.5 * dt * (v + v_next);
+        v = v_next;
+    }
+    // The closed chamber's position: V = V_dead·(p0/p)^(1/1.4).
+    let p_abs = |i: usize| p2[i] + P_ATM_PA;
+    let fit = ((REBOUND_FIT_S as f32 / dt) as usize).clamp(2, u.len() - 1);
+    let (mut num, mut den) = (0.0f32, 0.0f32);
+    for (k, uk) in u.iter().enumerate().take(fit + 1).skip(1) {
+        let ratio = p_abs(a_end) / p_abs(a_end + k);
+        let x_closed = impact - v_dead * (ratio.powf(1.0 / 1.4) - 1.0) / a2;
+        let tk = k as f32 * dt;
+        num += (x_closed - impact - uk) * tk;
+        den += tk * tk;
+    }
+    let v0 = if den > 0.0 { (num / den).min(0.0) } else { 0.0 };
+    for (k, uk) in u.iter().enumerate() {
+        x[a_end + k] = (impact + v0 * k as f32 * dt + uk).min(impact);
+    }
 }
 
 /// One cycle's characteristics, keyed by its report.

@@ -10,6 +10,7 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use super::bench::{render, run_case, summarize, BenchOptions};
 use super::engine::{diagnose_against, MeasuredInput, Options};
 use super::output::{summary, write_all};
+use crate::commission;
 use hammer_sim::estimation::sensors_for;
 use hammer_sim::simulate::{read_simulated_sidecar, Sidecar};
 use hammer_sim::SimConfig;
@@ -18,20 +19,27 @@ use hammer_trace::trace::read_csv;
 
 #[derive(Args, Debug)]
 pub struct DiagnoseArgs {
-    /// A measured trace (project trace format, CSV + optional sidecar);
-    /// repeatable. Its supply pressure comes from the sidecar or from a
-    /// `--supply-bar` given right after it.
+    /// A measured trace (project trace format, CSV + optional sidecar), or a
+    /// folder `hammer commission` wrote (every trace in it, all fitted
+    /// unless `--fit-on` names some); repeatable. A trace's supply pressure
+    /// comes from the sidecar or from a `--supply-bar` given right after it.
     #[arg(long, value_name = "TRACE", required = true)]
     pub measured: Vec<PathBuf>,
     /// Gauge supply pressure of the preceding `--measured`, bar.
     #[arg(long, value_name = "BAR")]
     pub supply_bar: Vec<f64>,
-    /// A record of the same hammer when it was known sound (repeatable; its
-    /// supply pressure like `--measured`'s): the measured traces are then
-    /// diagnosed as a change from it, which cancels the model's form error.
-    /// Every operating point of the measured traces needs one.
-    #[arg(long, value_name = "TRACE")]
+    /// A record of the same hammer when it was known sound: a trace
+    /// (repeatable; its supply pressure like `--measured`'s) or the folder
+    /// `hammer commission` wrote. The measured traces are then diagnosed as
+    /// a change from it, which cancels the model's form error. Every
+    /// operating point of the measured traces needs one.
+    #[arg(long, value_name = "TRACE|DIR")]
     pub reference: Vec<PathBuf>,
+    /// Diagnose against a commissioning record although the board was
+    /// recalibrated since (its calibration differs from the measured
+    /// traces'): the change then includes the recalibration's.
+    #[arg(long)]
+    pub allow_stale_reference: bool,
     /// Fit on these traces (repeatable; default: the first); the other
     /// operating points, and the later half of the fitted traces' cycles, are held out.
     #[arg(long, value_name = "TRACE")]
@@ -151,22 +159,54 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
     base.validate()?;
     let same = |a: &Path, b: &Path| a == b || a.canonicalize().ok().is_some_and(|x| b.canonicalize().ok() == Some(x));
     let mut inputs = Vec::new();
+    // The calibrations the measured traces were made with (device captures).
+    let mut measured_hashes = Vec::new();
     for (k, path) in args.measured.iter().enumerate() {
-        let (input, sidecar) = read_input(path, bars[k])?;
-        if k == 0 && args.config.is_none() {
-            base.sensors = sensors_for(sidecar.as_ref(), &base.sensors);
+        let folder = commission::is_record(path)
+            .then(|| commission::Record::load(path))
+            .transpose()?;
+        let traces = match &folder {
+            Some(r) => r.traces(path).into_iter().map(|(p, b)| (p, Some(b))).collect(),
+            None => vec![(path.clone(), bars[k])],
+        };
+        // A folder's traces are one cycle each: all fitted unless told.
+        let fit_folder = folder.is_some() && (args.fit_on.is_empty() || args.fit_on.iter().any(|f| same(f, path)));
+        for (trace, bar) in traces {
+            let (input, sidecar) = read_input(&trace, bar)?;
+            if inputs.is_empty() && args.config.is_none() {
+                base.sensors = sensors_for(sidecar.as_ref(), &base.sensors);
+            }
+            measured_hashes.extend(sidecar.as_ref().and_then(|s| s.calibration_hash));
+            inputs.push(MeasuredInput {
+                fit: fit_folder || args.fit_on.iter().any(|f| same(f, &trace)),
+                ..input
+            });
         }
-        inputs.push(MeasuredInput {
-            fit: args.fit_on.iter().any(|f| same(f, path)),
-            ..input
-        });
     }
     let mut references = Vec::new();
     for (k, path) in args.reference.iter().enumerate() {
-        references.push(read_input(path, ref_bars[k])?.0);
+        if commission::is_record(path) {
+            let record = commission::Record::load(path)?;
+            if let Some(h) = measured_hashes.iter().find(|&&h| h != record.calibration_hash) {
+                let what = format!(
+                    "{} was commissioned with calibration {:08x}; the measured traces were recorded with {h:08x}: the board was recalibrated since, so the record is stale",
+                    path.display(),
+                    record.calibration_hash
+                );
+                if !args.allow_stale_reference {
+                    bail!("{what}. Commission again, or pass --allow-stale-reference to read the change against it anyway");
+                }
+                eprintln!("warning: {what}; the change read includes the recalibration's (--allow-stale-reference)");
+            }
+            for (trace, bar) in record.traces(path) {
+                references.push(read_input(&trace, Some(bar))?.0);
+            }
+        } else {
+            references.push(read_input(path, ref_bars[k])?.0);
+        }
     }
     for f in &args.fit_on {
-        if !args.measured.iter().any(|m| same(f, m)) {
+        if !args.measured.iter().any(|m| same(f, m)) && !inputs.iter().any(|i| same(f, Path::new(&i.label))) {
             bail!("--fit-on {}: not among the --measured traces", f.display());
         }
     }

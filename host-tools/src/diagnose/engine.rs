@@ -54,6 +54,26 @@ pub struct Floors {
     pub zero_shift_sq_m2ps4: f64,
     /// Relative to each waveform's RMS over the cycle.
     pub wave_rel: f64,
+    /// The chamber characteristics: feed onsets, closed-phase exponents,
+    /// feed areas (relative).
+    #[serde(default = "default_feed_onset_floor_s")]
+    pub feed_onset_s: f64,
+    #[serde(default = "default_closed_exponent_floor")]
+    pub closed_exponent: f64,
+    #[serde(default = "default_feed_area_floor_rel")]
+    pub feed_area_rel: f64,
+}
+
+fn default_feed_onset_floor_s() -> f64 {
+    Floors::default().feed_onset_s
+}
+
+fn default_closed_exponent_floor() -> f64 {
+    Floors::default().closed_exponent
+}
+
+fn default_feed_area_floor_rel() -> f64 {
+    Floors::default().feed_area_rel
 }
 
 impl Default for Floors {
@@ -66,6 +86,12 @@ impl Default for Floors {
             gain: 0.002,
             zero_shift_sq_m2ps4: 9.0,
             wave_rel: 0.005,
+            // How far the measured onset falls from its truth on a sound
+            // hammer, RMS (docs/estimator.md): the same calculation on the
+            // model's noise-free solution and on a measurement differs by it.
+            feed_onset_s: 50e-6,
+            closed_exponent: 0.002,
+            feed_area_rel: 0.01,
         }
     }
 }
@@ -198,6 +224,7 @@ pub fn extractor_for(base: &SimConfig) -> Extractor {
         clip,
     );
     ex.zero_shift_tau_s = base.estimator.accel_zero_shift_tau_s;
+    ex.chambers = Some(base.hammer.chambers());
     ex
 }
 
@@ -283,6 +310,7 @@ pub fn diagnose_against(
             remainder: located.remainder,
             model_form,
             model_free: fs.model_free_stats(),
+            chambers: fs.chamber_stats(),
             detection_floors,
             shrink,
             chi2_nominal: ranking.chi2_nominal,

@@ -14,9 +14,18 @@
 //! - **waveforms**: the cycle stretched to unit length and averaged in
 //!   [`BINS`] bins per signal (rear and front pressure, acceleration corrected
 //!   for the fitted zero shift, and the velocity integrated from it), plus the
-//!   period and the impact energy.
+//!   period and the impact energy;
+//! - **chamber characteristics** (`hammer_estimator::chambers`): when each
+//!   chamber's feed starts from the impact, the closed phase's polytropic
+//!   exponent and the feed's effective area, read from the pressures and
+//!   the piston's track with no model of the valve or the ports. Against a
+//!   model they carry its form error like the waveforms; against the
+//!   hammer's own reference record they are what changed.
 
+use hammer_estimator::chambers::track::{PhaseFriction, Piston};
+use hammer_estimator::chambers::ChamberGeometry;
 use hammer_estimator::Geometry;
+use hammer_sim::characteristics::{characterise_spans, Reading, Span};
 
 use super::gap::velocity_from_accel;
 
@@ -34,7 +43,25 @@ pub const GAIN_REAR: usize = 5;
 pub const GAIN_FRONT: usize = 6;
 /// Z² − var(Z): an unbiased square of the zero shift, because its sign is random.
 pub const ZERO_SHIFT_SQ: usize = 7;
-pub const SCALARS: usize = 8;
+/// The chamber characteristics: feed onsets (s; the front's from the impact
+/// that closes the cycle, the rear's from the one that opens it), closed
+/// phases' exponents, feed areas (m²).
+pub const FRONT_FEED: usize = 8;
+pub const REAR_FEED: usize = 9;
+pub const FRONT_EXPONENT: usize = 10;
+pub const REAR_EXPONENT: usize = 11;
+pub const FRONT_AREA: usize = 12;
+pub const REAR_AREA: usize = 13;
+/// The chamber characteristics' features, in order.
+pub const CHAMBER_FEATURES: [usize; 6] = [
+    FRONT_FEED,
+    REAR_FEED,
+    FRONT_EXPONENT,
+    REAR_EXPONENT,
+    FRONT_AREA,
+    REAR_AREA,
+];
+pub const SCALARS: usize = 14;
 pub const N_FEATURES: usize = SCALARS + WAVE_SIGNALS.len() * BINS;
 
 const SCALAR_NAMES: [&str; SCALARS] = [
@@ -46,6 +73,12 @@ const SCALAR_NAMES: [&str; SCALARS] = [
     "rear_pressure_gain",
     "front_pressure_gain",
     "zero_shift_sq_m2ps4",
+    "front_feed_s",
+    "rear_feed_s",
+    "front_closed_exponent",
+    "rear_closed_exponent",
+    "front_feed_area_m2",
+    "rear_feed_area_m2",
 ];
 
 pub fn wave_index(signal: usize, bin: usize) -> usize {
@@ -71,6 +104,9 @@ pub struct Signals<'a> {
     pub p_rear_pa: &'a [f64],
     pub p_front_pa: &'a [f64],
     pub accel_mps2: &'a [f64],
+    /// Gauge supply pressure the feeds are set against (NaN: unknown, no
+    /// feed areas).
+    pub supply_pa: f64,
 }
 
 impl Signals<'_> {
@@ -107,6 +143,9 @@ pub struct Extractor {
     /// model is read through the same floor. −∞ when the readings show none
     /// ([`pressure_floor`]).
     pub pressure_floor_pa: [f64; 2],
+    /// Where the chambers' volumes and outlets are, for their
+    /// characteristics (`None`: not read).
+    pub chambers: Option<ChamberGeometry>,
 }
 
 /// A channel's clipping floor, if its readings show one: the lowest reading
@@ -142,6 +181,7 @@ impl Extractor {
             blank_before_s: 50e-6,
             min_speed_mps: 0.05,
             pressure_floor_pa: [f64::NEG_INFINITY; 2],
+            chambers: None,
         }
     }
 
@@ -171,7 +211,73 @@ impl Extractor {
     /// Features of every complete cycle (impact to impact) of `s`.
     pub fn cycles(&self, s: &Signals) -> Vec<CycleFeatures> {
         let imp = self.impacts(s);
-        imp.windows(2).filter_map(|w| self.cycle(s, w[0], w[1])).collect()
+        let mut cycles: Vec<CycleFeatures> = imp.windows(2).filter_map(|w| self.cycle(s, w[0], w[1])).collect();
+        if let Some(chambers) = &self.chambers {
+            self.characterise(s, &imp, &mut cycles, chambers);
+        }
+        cycles
+    }
+
+    /// The chamber characteristics of `cycles` (found between the impacts
+    /// `imp`), each cycle's track from its own force balance's friction and
+    /// zero shift; a cycle whose next is missing keeps NaN.
+    fn characterise(&self, s: &Signals, imp: &[f64], cycles: &mut [CycleFeatures], chambers: &ChamberGeometry) {
+        let g = &self.geometry;
+        let reading = Reading {
+            piston: Piston {
+                mass_kg: g.piston_mass_kg as f32,
+                rear_area_m2: g.rear_area_m2() as f32,
+                front_area_m2: g.front_area_m2() as f32,
+                gravity_n: (g.piston_mass_kg * self.gravity_along_mps2) as f32,
+            },
+            impact_threshold_mps2: self.impact_threshold_mps2,
+            blank_after_s: self.blank_after_s,
+            zero_shift_tau_s: self.zero_shift_tau_s,
+            supply_pa: s.supply_pa,
+        };
+        let spans: Vec<Span> = imp
+            .windows(2)
+            .map(|w| {
+                let c = cycles.iter().find(|c| c.t_impact_s == w[0]);
+                let at = |j: usize| c.map_or(f32::NAN, |c| c.values[j] as f32);
+                Span {
+                    open_s: w[0],
+                    close_s: w[1],
+                    friction: PhaseFriction {
+                        backhaul_n: at(F_BACKHAUL),
+                        stroke_n: at(F_STROKE),
+                    },
+                    zero_shift_mps2: c.map_or(f32::NAN, |c| c.zero_shift_mps2 as f32),
+                }
+            })
+            .collect();
+        let read = characterise_spans(
+            &hammer_sim::characteristics::Signals {
+                dt_s: s.dt_s,
+                p_rear_pa: s.p_rear_pa,
+                p_front_pa: s.p_front_pa,
+                accel_mps2: s.accel_mps2,
+                x_m: None,
+            },
+            &spans,
+            &reading,
+            chambers,
+        );
+        for (w, ch) in imp.windows(2).zip(read) {
+            let (Some(ch), Some(c)) = (ch, cycles.iter_mut().find(|c| c.t_impact_s == w[0])) else {
+                continue;
+            };
+            if let Some(f) = ch.front {
+                c.values[FRONT_FEED] = f.onset_s as f64;
+                c.values[FRONT_EXPONENT] = f.closed_exponent as f64;
+                c.values[FRONT_AREA] = f.feed_area_m2 as f64;
+            }
+            if let Some(r) = ch.rear {
+                c.values[REAR_FEED] = r.onset_s as f64;
+                c.values[REAR_EXPONENT] = r.closed_exponent as f64;
+                c.values[REAR_AREA] = r.feed_area_m2 as f64;
+            }
+        }
     }
 
     /// One cycle from the impact at `t0` to the next at `t1`.
@@ -261,6 +367,7 @@ impl Extractor {
         Some(CycleFeatures {
             t_impact_s: t0,
             values: f,
+            zero_shift_mps2: z,
         })
     }
     /// Least-squares fit of the force balance over the flight samples of one
@@ -338,6 +445,8 @@ struct ForceBalance {
 pub struct CycleFeatures {
     pub t_impact_s: f64,
     pub values: [f64; N_FEATURES],
+    /// The accelerometer's zero shift the force balance fitted (at the impact).
+    pub zero_shift_mps2: f64,
 }
 
 /// Inverse of a small symmetric matrix by Gauss–Jordan with partial pivoting;
@@ -485,6 +594,7 @@ mod tests {
             p_rear_pa: &p1,
             p_front_pa: &p2,
             accel_mps2: &truth.accel_mps2,
+            supply_pa: 5e5,
         };
         let mean = |ex: &Extractor| summarize(&ex.cycles(&s)[2..]).mean;
         let blind = mean(&runner.extractor);

@@ -113,7 +113,7 @@ impl ModelRunner {
                 &owned
             }
         };
-        self.features_of_truth(truth, &cand.effects)
+        self.features_of_truth(truth, &cand.effects, supply_bar)
     }
 
     /// Whether the measurement's transducers read the model's pressures as
@@ -133,8 +133,9 @@ impl ModelRunner {
         p_front_pa.iter_mut().for_each(|p| *p = (*p * f2).max(floor2));
     }
 
-    /// Features of a simulated solution seen through the candidate's sensor effects.
-    pub fn features_of_truth(&self, truth: &TruthTrace, effects: &Effects) -> Option<Vec<f64>> {
+    /// Features of a simulated solution at `supply_bar` seen through the
+    /// candidate's sensor effects.
+    pub fn features_of_truth(&self, truth: &TruthTrace, effects: &Effects, supply_bar: f64) -> Option<Vec<f64>> {
         let mut read;
         let (p1, p2): (&[f64], &[f64]) = if self.reads_as_is(effects) {
             (&truth.p_rear_pa, &truth.p_front_pa)
@@ -148,6 +149,7 @@ impl ModelRunner {
             p_rear_pa: p1,
             p_front_pa: p2,
             accel_mps2: &truth.accel_mps2,
+            supply_pa: supply_bar * 1e5,
         };
         let cycles: Vec<_> = self
             .extractor

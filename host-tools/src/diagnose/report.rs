@@ -257,6 +257,10 @@ pub struct Report {
     /// The force balance's model-free quantities, measured against nominal.
     #[serde(default)]
     pub model_free: Vec<ModelFreeStat>,
+    /// The chamber characteristics (valve switching, fills, closed phases),
+    /// measured against nominal; with references, their change since them.
+    #[serde(default)]
+    pub chambers: Vec<ModelFreeStat>,
     /// How large each effect would have to be to be named here (for an
     /// effect the verdict names: a further one, against what it leaves).
     #[serde(default)]

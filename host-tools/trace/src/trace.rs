@@ -240,6 +240,10 @@ pub struct Sidecar<S = serde_json::Value> {
     pub source: String,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub simulation: Option<S>,
+    /// CRC-32 of the board's channel calibrations, for a device's capture:
+    /// a record made before a recalibration is told from one made after.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub calibration_hash: Option<u32>,
 }
 
 fn default_format() -> String {
@@ -262,6 +266,7 @@ impl<S> Sidecar<S> {
             supply_pressure_bar,
             source: source.into(),
             simulation: None,
+            calibration_hash: None,
         }
     }
 }

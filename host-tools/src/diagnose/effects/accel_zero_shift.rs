@@ -29,7 +29,8 @@ impl Diagnosed for AccelZeroShift {
         let nominal_zs = fs
             .nominal_truth
             .first()
-            .and_then(|t| fs.runner.features_of_truth(t, &Effects::default()))
+            .zip(fs.points.first())
+            .and_then(|(t, p)| fs.runner.features_of_truth(t, &Effects::default(), p.0))
             .map_or(0.0, |f| f[ZERO_SHIFT_SQ]);
         vec![((fs.avg(ZERO_SHIFT_SQ) - nominal_zs).max(0.0) / ZERO_SHIFT_SQ_FACTOR).sqrt()]
     }

@@ -245,6 +245,7 @@ fn verdict_md(s: &mut String, report: &Report) {
     line!(s, "```");
     line!(s);
     model_free_md(s, report);
+    chambers_md(s, report);
     recalibration_md(s, report);
     remainder_md(s, report);
     floors_md(s, report);
@@ -263,6 +264,39 @@ fn model_free_md(s: &mut String, report: &Report) {
     line!(s, "| quantity | measured | nominal model | ± | z |");
     line!(s, "|---|---:|---:|---:|---:|");
     for m in &report.model_free {
+        line!(
+            s,
+            "| {} | {} | {} | {} | {} |",
+            m.feature,
+            num(m.measured),
+            num(m.nominal),
+            num(m.se),
+            num(m.z)
+        );
+    }
+    line!(s);
+}
+
+/// The chamber characteristics against the nominal model, or their change
+/// since the reference: where the gap lies in physical terms, true also
+/// when no effect can be named.
+fn chambers_md(s: &mut String, report: &Report) {
+    if report.chambers.is_empty() {
+        return;
+    }
+    line!(s, "### Chamber characteristics (valve switching, fills, closed phases)");
+    line!(s);
+    if report.references.is_empty() {
+        line!(s, "Fit points' mean, read from the pressures and the piston's track with no valve or port model (docs/estimator.md). Against the model alone a difference includes the model's form error.");
+        line!(s);
+        line!(s, "| quantity | measured | nominal model | ± | z |");
+    } else {
+        line!(s, "Fit points' mean; the change since the reference record, set on the nominal model's value (the form error cancels).");
+        line!(s);
+        line!(s, "| quantity | nominal + change | nominal model | ± | z |");
+    }
+    line!(s, "|---|---:|---:|---:|---:|");
+    for m in &report.chambers {
         line!(
             s,
             "| {} | {} | {} | {} | {} |",

@@ -134,6 +134,7 @@ mod tests {
             remainder: vec![],
             model_form: vec![],
             model_free: vec![],
+            chambers: vec![],
             detection_floors: vec![
                 DetectionFloor {
                     effect: "leakage".into(),

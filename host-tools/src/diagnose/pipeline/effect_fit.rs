@@ -129,8 +129,8 @@ fn evidence(fs: &FitSet, names: &[&str], cand: &Candidate) -> Vec<String> {
             continue;
         };
         for j in 0..N_FEATURES {
-            let r0 = residual(m0[j], s.mean[j], sigma[j]);
-            let r1 = residual(m1[j], s.mean[j], sigma[j]);
+            let r0 = residual(j, m0[j], s.mean[j], sigma[j]);
+            let r1 = residual(j, m1[j], s.mean[j], sigma[j]);
             let label = match (wave_of(j), &stages_of_bins) {
                 (Some((si, b)), Some(st)) => format!("{} in {}", WAVE_SIGNALS[si], st[b].name()),
                 _ => feature_name(j),
@@ -164,6 +164,7 @@ fn bin_stages(truth: &TruthTrace, hammer: &hammer_sim::params::HammerParams, ext
         p_rear_pa: &truth.p_rear_pa,
         p_front_pa: &truth.p_front_pa,
         accel_mps2: &truth.accel_mps2,
+        supply_pa: f64::NAN,
     };
     let imps: Vec<usize> = extractor
         .impacts(&signals)

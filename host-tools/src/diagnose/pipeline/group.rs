@@ -85,6 +85,7 @@ fn split(inp: &MeasuredInput, is_fit: bool, extractor: &Extractor) -> Result<Spl
         p_rear_pa: &inp.trace.p_rear_pa,
         p_front_pa: &inp.trace.p_front_pa,
         accel_mps2: &inp.trace.accel_mps2,
+        supply_pa: inp.supply_bar * 1e5,
     };
     let all = extractor.cycles(&s);
     let st = steady_from(&all);

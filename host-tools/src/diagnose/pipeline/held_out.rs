@@ -142,16 +142,24 @@ fn point_shrink(i: usize, p: &Point, nom: &[f64], models: &Models) -> Option<Poi
     }
     let nominal = Candidate::default();
     let fitted = match (&models.fitted_cand, &models.fitted_runs[i]) {
-        (Some(c), Some(run)) => models.fitted_runner.features_of_truth(&run.truth, &c.effects),
+        (Some(c), Some(run)) => models
+            .fitted_runner
+            .features_of_truth(&run.truth, &c.effects, p.supply_bar),
         _ => None,
     };
     let recal = models.recal_runs[i]
         .as_ref()
-        .and_then(|run| models.recal_runner.features_of_truth(&run.truth, &nominal.effects))
+        .and_then(|run| {
+            models
+                .recal_runner
+                .features_of_truth(&run.truth, &nominal.effects, p.supply_bar)
+        })
         .unwrap_or_else(|| nom.to_vec());
     // Any runner reads a solution alike (one extractor, one settling time).
     let effects_only = match (&models.fitted_cand, &models.effects_only_runs[i]) {
-        (Some(c), Some(run)) => models.recal_runner.features_of_truth(&run.truth, &c.effects),
+        (Some(c), Some(run)) => models
+            .recal_runner
+            .features_of_truth(&run.truth, &c.effects, p.supply_bar),
         _ => None,
     }
     .unwrap_or_else(|| nom.to_vec());

@@ -11,7 +11,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use super::group::Point;
 use crate::diagnose::engine::{DiagnoseError, Options};
 use crate::diagnose::features::{summarize, N_FEATURES};
-use crate::diagnose::fitset::{model_form_group_name, sigmas, FitSet};
+use crate::diagnose::fitset::{in_fit, model_form_group_name, sigmas, FitSet};
 use crate::diagnose::model::{Candidate, ModelRunner, NUISANCE};
 use crate::diagnose::parallel::parallel;
 use crate::diagnose::report::ModelForm;
@@ -47,7 +47,7 @@ pub(crate) fn nominal(
     for (bar, run) in bars.iter().zip(&runs) {
         features.push(
             runner
-                .features_of_truth(&run.truth, &nominal.effects)
+                .features_of_truth(&run.truth, &nominal.effects, *bar)
                 .ok_or_else(|| DiagnoseError::Model(*bar, "no steady impact cycle".into()))?,
         );
     }
@@ -86,6 +86,7 @@ pub(crate) fn fit_set<'a>(
         distinct: fit_bars.len(),
         sims: AtomicUsize::new(points.len()),
         nuisance: Vec::new(),
+        against_reference: points.iter().any(|p| !p.reference_var.is_empty()),
     };
     if opts.nominal_uncertainty > 0.0 {
         let fit_features: Vec<&[f64]> = fit_idx.iter().map(|&i| nominal.features[i].as_slice()).collect();
@@ -123,7 +124,7 @@ fn nuisance_sensitivities(fs: &FitSet, nominal_features: &[&[f64]], opts: &Optio
         *(NUISANCE[k].1)(&mut c) *= 1.0 + h;
         simulate_truth(&c)
             .ok()
-            .and_then(|run| runner.features_of_truth(&run.truth, &Effects::default()))
+            .and_then(|run| runner.features_of_truth(&run.truth, &Effects::default(), fs.points[p].0))
     });
     let mut nuisance = vec![Vec::with_capacity(fs.points.len() * N_FEATURES); NUISANCE.len()];
     for ((p, k), col) in jobs.into_iter().zip(cols) {
@@ -132,6 +133,7 @@ fn nuisance_sensitivities(fs: &FitSet, nominal_features: &[&[f64]], opts: &Optio
         for j in 0..N_FEATURES {
             // One prior standard deviation's change of the feature, whitened.
             let d = col.as_ref().map_or(f64::NAN, |f| (f[j] - nom[j]) / sigma[j]);
+            let d = if in_fit(j) { d } else { 0.0 };
             nuisance[k].push(if d.is_finite() { d } else { 0.0 });
         }
     }

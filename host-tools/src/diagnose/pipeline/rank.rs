@@ -225,7 +225,7 @@ fn fit_pairs(
 fn evidence_phrase(e: &EffectResult, opts: &Options) -> String {
     match e.model_free_z {
         Some(z) => format!(
-            "its force-balance signature stands {z:.1} standard errors off nominal (needs {:.0})",
+            "its model-free signature (force balance; against a reference, the chamber characteristics) stands {z:.1} standard errors off nominal (needs {:.0})",
             opts.min_model_free_z
         ),
         None => format!(

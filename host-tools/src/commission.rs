@@ -1,0 +1,259 @@
+//! Commissioning: the hammer's own reference record, made when it is known
+//! sound, that later diagnoses read a change against (`hammer diagnose
+//! --reference DIR`; docs/diagnosis.md, "Against the hammer's own record").
+//!
+//! At each operating point the board's raw captures (one cycle each, with
+//! the milliseconds after its closing impact) are written as traces in
+//! `DIR/<bar>bar/`, and `DIR/commission.json` records what they were made
+//! with: the firmware version, the board, the calibration hash (a later
+//! recalibration makes the record stale) and the supply pressure.
+
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use serde::{Deserialize, Serialize};
+
+use crate::client::Client;
+use hammer_trace::trace::{write_csv, write_sidecar};
+
+/// The record's file in a commissioning folder.
+pub const RECORD_FILE: &str = "commission.json";
+const RECORD_FORMAT: &str = "hammer-commission";
+const RECORD_VERSION: u32 = 1;
+
+#[derive(Args, Debug)]
+pub struct CommissionArgs {
+    /// Device: a serial port path, `auto`, or `tcp:HOST:PORT` (the emulated board).
+    #[arg(long, default_value = "auto")]
+    pub port: String,
+    /// Commission a demo board instead of a device: the firmware (QEMU, or
+    /// natively without it) fed with the simulated hammer.
+    #[arg(long, conflicts_with = "port")]
+    pub demo: bool,
+    /// Effects of the demo's simulated hammer (`name:key=value,...`), for
+    /// trying a diagnosis against a record of the sound one.
+    #[arg(long = "effect", value_name = "SPEC", requires = "demo")]
+    pub effects: Vec<String>,
+    /// Gauge supply pressure of an operating point, bar (repeatable). On a
+    /// device with a terminal you are asked to set each in turn; without
+    /// one, give one per run (each run adds its point to the folder).
+    #[arg(long = "supply-bar", value_name = "BAR", required = true)]
+    pub supply_bar: Vec<f64>,
+    /// Raw cycles to capture at each operating point.
+    #[arg(long, default_value_t = 30)]
+    pub cycles: usize,
+    /// The commissioning folder (created; an existing one of the same board
+    /// and calibration gets the points added or replaced).
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+/// What `commission.json` holds.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Record {
+    pub format: String,
+    pub version: u32,
+    /// `major.minor.patch` as the board reports it.
+    pub firmware_version: String,
+    pub board: String,
+    /// CRC-32 of the channel calibrations the captures were read with.
+    pub calibration_hash: u32,
+    pub points: Vec<PointRecord>,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PointRecord {
+    pub supply_bar: f64,
+    /// Trace files, relative to the folder.
+    pub traces: Vec<String>,
+}
+
+impl Record {
+    /// The record of `dir`, if it is a commissioning folder.
+    pub fn load(dir: &Path) -> Result<Record> {
+        let path = dir.join(RECORD_FILE);
+        let text = std::fs::read_to_string(&path).with_context(|| {
+            format!(
+                "{}: not a commissioning folder (no readable {RECORD_FILE})",
+                dir.display()
+            )
+        })?;
+        let r: Record =
+            serde_json::from_str(&text).with_context(|| format!("{}: not a commissioning record", path.display()))?;
+        if r.format != RECORD_FORMAT || r.version > RECORD_VERSION {
+            bail!(
+                "{}: format {} version {}, this tool reads {RECORD_FORMAT} up to version {RECORD_VERSION}",
+                path.display(),
+                r.format,
+                r.version
+            );
+        }
+        Ok(r)
+    }
+
+    /// Every trace of the record with its supply pressure.
+    pub fn traces(&self, dir: &Path) -> Vec<(PathBuf, f64)> {
+        self.points
+            .iter()
+            .flat_map(|p| p.traces.iter().map(|t| (dir.join(t), p.supply_bar)))
+            .collect()
+    }
+}
+
+/// Whether `path` is a commissioning folder.
+pub fn is_record(path: &Path) -> bool {
+    path.is_dir() && path.join(RECORD_FILE).is_file()
+}
+
+/// The folder name of an operating point.
+fn point_dir(bar: f64) -> String {
+    format!("{bar:.1}bar")
+}
+
+/// A board to capture from, kept open across captures (with a demo
+/// board, the board itself and its hammer's feeder, running on).
+struct Session {
+    link: Client<Box<dyn crate::monitor::Port>>,
+    info: hammer_wire::DeviceInfo,
+    _demo: Option<(crate::demo::Board, std::thread::JoinHandle<()>)>,
+}
+
+pub fn run(args: &CommissionArgs) -> Result<()> {
+    if args.cycles == 0 || args.cycles > 1000 {
+        bail!("--cycles {}: between 1 and 1000", args.cycles);
+    }
+    if let Some(b) = args
+        .supply_bar
+        .iter()
+        .find(|b| !(b.is_finite() && **b > 0.0 && **b <= 20.0))
+    {
+        bail!("--supply-bar {b}: a gauge supply pressure between 0 and 20 bar");
+    }
+    let interactive = std::io::stdin().is_terminal();
+    if !args.demo && args.supply_bar.len() > 1 && !interactive {
+        bail!("without a terminal to confirm each supply pressure, give one --supply-bar per run (each run adds its point to {})", args.out.display());
+    }
+    let existing = is_record(&args.out).then(|| Record::load(&args.out)).transpose()?;
+    std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+    let timeout = Duration::from_secs(120);
+    let mut record: Option<Record> = existing;
+    for (k, &bar) in args.supply_bar.iter().enumerate() {
+        let mut session = open(args, bar)?;
+        if !args.demo && interactive && (k > 0 || args.supply_bar.len() > 1) {
+            eprintln!("commission: set the supply to {bar} bar, let the hammer run steadily, then press Enter");
+            let mut line = String::new();
+            std::io::stdin().read_line(&mut line)?;
+        }
+        let dir = args.out.join(point_dir(bar));
+        std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+        let mut traces = Vec::new();
+        let mut hash = None;
+        for n in 0..args.cycles {
+            let (codes, cfg) = capture_one(&mut session, timeout)?;
+            let h = cfg.calibration_hash();
+            if hash.is_some_and(|x| x != h) {
+                bail!(
+                    "the board's calibration changed during commissioning ({:08x} → {h:08x}): start again",
+                    hash.unwrap_or(0)
+                );
+            }
+            hash = Some(h);
+            let (trace, sidecar) = crate::capture::to_trace(&codes, &cfg, Some(bar));
+            let name = format!("cycle-{n:03}.csv");
+            let path = dir.join(&name);
+            write_csv(&path, &trace)?;
+            write_sidecar(&path, &sidecar)?;
+            traces.push(format!("{}/{name}", point_dir(bar)));
+        }
+        let hash = hash.unwrap_or_default();
+        let info = &session.info;
+        let firmware = format!(
+            "{}.{}.{}",
+            info.firmware_version[0], info.firmware_version[1], info.firmware_version[2]
+        );
+        let board = String::from_utf8_lossy(&info.board).into_owned();
+        let r = record.get_or_insert_with(|| Record {
+            format: RECORD_FORMAT.into(),
+            version: RECORD_VERSION,
+            firmware_version: firmware.clone(),
+            board: board.clone(),
+            calibration_hash: hash,
+            points: Vec::new(),
+        });
+        if r.calibration_hash != hash || r.board != board {
+            bail!(
+                "{} was commissioned on {} with calibration {:08x}; this board is {board} with {hash:08x}: use a new folder",
+                args.out.display(),
+                r.board,
+                r.calibration_hash
+            );
+        }
+        r.firmware_version = firmware;
+        r.points.retain(|p| (p.supply_bar - bar).abs() > 0.005);
+        r.points.push(PointRecord {
+            supply_bar: bar,
+            traces,
+        });
+        r.points.sort_by(|a, b| a.supply_bar.total_cmp(&b.supply_bar));
+        // Written after every point: an interrupted run keeps what it made.
+        let text = serde_json::to_string_pretty(r)?;
+        let path = args.out.join(RECORD_FILE);
+        std::fs::write(&path, text + "\n").with_context(|| format!("writing {}", path.display()))?;
+        outln!(
+            "commission: {} cycles at {bar} bar into {} (calibration {hash:08x}, firmware {})",
+            args.cycles,
+            dir.display(),
+            r.firmware_version
+        );
+    }
+    Ok(())
+}
+
+/// Seconds of simulated hammer a demo board is fed per capture: an
+/// impact to start on, a full cycle and its tail, the streaming of the
+/// capture at the hammer's pace, with margin.
+const DEMO_PER_CAPTURE_S: f64 = 0.4;
+const DEMO_SETTLE_S: f64 = 0.5;
+
+/// Opens the board: a device, or a demo board whose simulated hammer runs
+/// at `bar`, fed at its own pace for as long as the captures need.
+fn open(args: &CommissionArgs, bar: f64) -> Result<Session> {
+    let handshake = Duration::from_secs(20);
+    if args.demo {
+        let mut demo = crate::demo::DemoArgs::for_capture(bar);
+        demo.effects = args.effects.clone();
+        let codes = crate::demo::hammer_codes(&demo, DEMO_SETTLE_S + DEMO_PER_CAPTURE_S * args.cycles as f64)?;
+        let (board, read, write) = crate::demo::start_board(false, None, false)?;
+        let writer = Arc::new(Mutex::new(write));
+        let port: Box<dyn crate::monitor::Port> = Box::new(crate::demo::SharedPort::new(read, writer.clone()));
+        let mut link = Client::new(port);
+        let (info, _) = link.handshake(handshake)?;
+        let rate = hammer_estimator::Config::default().sample_rate_hz as f64;
+        let feeder = std::thread::spawn(move || crate::demo::feed(codes, writer, true, rate));
+        return Ok(Session {
+            link,
+            info,
+            _demo: Some((board, feeder)),
+        });
+    }
+    let mut connector = crate::monitor::connector_for(&args.port)?;
+    let port = connector
+        .connect()
+        .with_context(|| format!("opening {}", connector.describe()))?;
+    let mut link = Client::new(port);
+    let (info, _) = link.handshake(handshake)?;
+    Ok(Session {
+        link,
+        info,
+        _demo: None,
+    })
+}
+
+/// One capture of the next whole cycle.
+fn capture_one(s: &mut Session, timeout: Duration) -> Result<(Vec<[u16; 3]>, hammer_estimator::Config)> {
+    crate::capture::record(&mut s.link, 1, timeout)
+}

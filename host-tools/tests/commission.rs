@@ -1,0 +1,131 @@
+//! Commissioning and the diagnosis against it, as a bench engineer runs
+//! them: `hammer commission --demo` records the emulated board (QEMU when
+//! the firmware is built, else the app natively) at 4 and 7 bar, the same
+//! board is recorded again with a hidden valve delay, and `hammer diagnose
+//! --reference DIR` names it from the front chamber's feed.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn hammer(args: &[&str]) -> (i32, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_hammer"))
+        .args(args)
+        .output()
+        .expect("runs");
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+fn tmp_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("hammer-commission-test-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    dir
+}
+
+fn commission(out: &Path, effect: Option<&str>) {
+    let mut args = vec![
+        "commission",
+        "--demo",
+        "--supply-bar",
+        "4",
+        "--supply-bar",
+        "7",
+        "--cycles",
+        "30",
+    ];
+    if let Some(e) = effect {
+        args.extend(["--effect", e]);
+    }
+    args.extend(["--out", out.to_str().unwrap()]);
+    let (code, stdout, stderr) = hammer(&args);
+    assert_eq!(code, 0, "{stdout}\n{stderr}");
+    assert!(
+        stdout.contains("30 cycles at 4 bar") && stdout.contains("30 cycles at 7 bar"),
+        "{stdout}"
+    );
+}
+
+/// The record says what it was made with, and a later recalibration makes
+/// it stale: refused unless told.
+#[test]
+fn a_valve_delay_is_named_against_the_commissioning_record_and_a_stale_one_is_refused() {
+    let reference = tmp_dir("ref");
+    let measured = tmp_dir("meas");
+    commission(&reference, None);
+    commission(&measured, Some("valve_delay:tau_s=0.0015"));
+
+    let record: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(reference.join("commission.json")).unwrap()).unwrap();
+    assert_eq!(record["format"], "hammer-commission");
+    assert!(
+        record["firmware_version"]
+            .as_str()
+            .is_some_and(|v| v.split('.').count() == 3),
+        "{record}"
+    );
+    let points = record["points"].as_array().unwrap();
+    assert_eq!(points.len(), 2);
+    assert_eq!(points[1]["supply_bar"], 7.0);
+    assert_eq!(points[0]["traces"].as_array().unwrap().len(), 30);
+    let side: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(reference.join("4.0bar/cycle-000.json")).unwrap()).unwrap();
+    assert_eq!(side["calibration_hash"], record["calibration_hash"]);
+    assert_eq!(side["supply_pressure_bar"], 4.0);
+
+    let out = tmp_dir("diag");
+    let (code, stdout, stderr) = hammer(&[
+        "diagnose",
+        "--measured",
+        measured.to_str().unwrap(),
+        "--reference",
+        reference.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{stdout}\n{stderr}");
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    assert_eq!(report["verdict"]["effects"][0], "valve_delay", "{stdout}");
+    let tau = report["verdict"]["params"]["tau_s"].as_f64().unwrap();
+    assert!((1.2e-3..=1.8e-3).contains(&tau), "tau {tau} s\n{stdout}");
+    // The evidence is the front chamber's feed, later than in the record.
+    let front = report["chambers"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|c| c["feature"] == "front_feed_s")
+        .unwrap();
+    assert!(front["z"].as_f64().unwrap() >= 3.0, "{front}");
+
+    // A recalibration since: the measured captures carry another hash.
+    let side_path = measured.join("4.0bar/cycle-000.json");
+    let mut side: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&side_path).unwrap()).unwrap();
+    side["calibration_hash"] = serde_json::json!(12345);
+    std::fs::write(&side_path, side.to_string()).unwrap();
+    let args = [
+        "diagnose",
+        "--measured",
+        measured.to_str().unwrap(),
+        "--reference",
+        reference.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    let (code, _, stderr) = hammer(&args);
+    assert_ne!(code, 0);
+    assert!(
+        stderr.contains("stale") && stderr.contains("--allow-stale-reference"),
+        "{stderr}"
+    );
+    let mut told = args.to_vec();
+    told.push("--allow-stale-reference");
+    let (code, stdout, stderr) = hammer(&told);
+    assert_eq!(code, 0, "{stdout}\n{stderr}");
+    assert!(stderr.contains("stale"), "{stderr}");
+    for d in [reference, measured, out] {
+        let _ = std::fs::remove_dir_all(d);
+    }
+}
