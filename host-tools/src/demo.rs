@@ -547,8 +547,7 @@ fn headless_loop(port: SharedPort, args: &DemoArgs, stimulus: Option<&Stimulus>)
         println!("{}", adc_line(&stimulus.counters()));
     }
     drop(export);
-    crate::monitor::close_exports(exports);
-    Ok(())
+    crate::monitor::close_exports(exports)
 }
 
 /// Hands the dashboard the demo board's one link; there is nothing to
