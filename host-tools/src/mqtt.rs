@@ -249,10 +249,10 @@ impl Endpoint {
         if let ConnectionError::ConnectionRefused(code) = e {
             let text = match code {
                 ConnectReturnCode::BadUserNamePassword => format!(
-                    "{at}: the broker refused the user name or password; check --mqtt-user and {PASSWORD_ENV} or --mqtt-password-file"
+                    "{at}: the broker refused the user name or password: check --mqtt-user and its password ({PASSWORD_ENV} or --mqtt-password-file)"
                 ),
                 ConnectReturnCode::NotAuthorized => format!(
-                    "{at}: the broker refused the connection as not authorised; it wants a login (--mqtt-user with {PASSWORD_ENV} or --mqtt-password-file) or a client certificate (--mqtt-cert, --mqtt-key) it accepts"
+                    "{at}: the broker refused the login as not authorised: check --mqtt-user and its password ({PASSWORD_ENV} or --mqtt-password-file), or the client certificate (--mqtt-cert, --mqtt-key)"
                 ),
                 ConnectReturnCode::BadClientId => format!("{at}: the broker refused the client id (another client with it?)"),
                 other => format!("{at}: the broker refused the connection ({other:?})"),

@@ -46,23 +46,29 @@ fn broker(dir: &Path, port: u16) -> Child {
 }
 
 /// A broker on 127.0.0.1:`port` with `settings` for its listener (TLS,
-/// logins), keeping sessions across a restart; its log in `dir/mosquitto.log`.
+/// logins), keeping sessions across a restart; its log appended to
+/// `dir/mosquitto.log`. Started as root, Mosquitto drops to its own user:
+/// what it reads must be readable by others (test keys only).
 fn broker_with(dir: &Path, port: u16, settings: &str) -> Child {
     let conf = dir.join("mosquitto.conf");
     std::fs::write(
         &conf,
         format!(
-            "listener {port} 127.0.0.1\n{settings}persistence true\npersistence_location {}/\nlog_dest file {}/mosquitto.log\nlog_type all\n",
+            "listener {port} 127.0.0.1\n{settings}persistence true\npersistence_location {}/\nlog_dest stderr\nlog_type all\n",
             dir.display(),
-            dir.display()
         ),
     )
     .unwrap();
+    let log = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(dir.join("mosquitto.log"))
+        .unwrap();
     let child = Command::new("mosquitto")
         .arg("-c")
         .arg(&conf)
         .stdout(Stdio::null())
-        .stderr(Stdio::null())
+        .stderr(log)
         .spawn()
         .unwrap();
     let deadline = Instant::now() + Duration::from_secs(10);
@@ -425,6 +431,8 @@ fn tls_settings_with(dir: &Path, cert: &Path, key: &Path, extra: &str) -> String
             .status()
             .expect("mosquitto_passwd (Debian: mosquitto)");
         assert!(ok.success());
+        use std::os::unix::fs::PermissionsExt;
+        std::fs::set_permissions(&passwd, std::fs::Permissions::from_mode(0o644)).unwrap();
     }
     format!(
         "certfile {}\nkeyfile {}\nallow_anonymous false\npassword_file {}\n{extra}",

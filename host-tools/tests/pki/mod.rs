@@ -137,6 +137,11 @@ pub fn make(dir: &Path) -> Pki {
         "ca",
         "basicConstraints=CA:FALSE\nkeyUsage=critical,digitalSignature\nextendedKeyUsage=clientAuth\n",
     );
+    // Mosquitto, started as root, reads them as its own user: test keys only.
+    for key in ["server.key", "wrong-name.key", "client.key"] {
+        use std::os::unix::fs::PermissionsExt;
+        std::fs::set_permissions(dir.join(key), std::fs::Permissions::from_mode(0o644)).unwrap();
+    }
     let p = |n: &str| dir.join(n);
     Pki {
         ca: p("ca.pem"),
