@@ -265,24 +265,38 @@ impl Endpoint {
                 refused: true,
             };
         }
-        let io_kind = match e {
-            ConnectionError::Io(io) => Some(io.kind()),
-            ConnectionError::Tls(rumqttc::TlsError::Io(io)) => Some(io.kind()),
-            ConnectionError::MqttState(rumqttc::StateError::Io(io)) => Some(io.kind()),
-            _ => None,
-        };
+        if let ConnectionError::Tls(rumqttc::TlsError::Io(io)) = e {
+            // Closed mid-handshake without a TLS alert: a plain listener
+            // reading the ClientHello as a broken MQTT packet.
+            return Failure {
+                text: format!(
+                    "{hostport} does not answer in TLS (the connection closed during the handshake: {io}): is it a plain listener? Use mqtt:// for it, or the broker's TLS port"
+                ),
+                refused: true,
+            };
+        }
+        // The I/O error under the client's wrappers, if any.
+        let mut io_kind = None;
+        let mut cur: Option<&(dyn std::error::Error + 'static)> = Some(e);
+        while let Some(err) = cur {
+            if let Some(io) = err.downcast_ref::<std::io::Error>() {
+                io_kind = Some(io.kind());
+                break;
+            }
+            cur = err.source();
+        }
         match io_kind {
             Some(std::io::ErrorKind::ConnectionRefused) => Failure {
                 text: format!("{at}: nothing listens there (connection refused): is the broker running?"),
                 refused: false,
             },
-            Some(_) if !acked && self.tls.is_none() => Failure {
+            _ if !acked && self.tls.is_none() && !matches!(e, ConnectionError::NetworkTimeout) => Failure {
                 text: format!(
                     "{at}: the connection closed before the broker answered: if that port is a TLS listener, use mqtts:// ({e})"
                 ),
                 refused: true,
             },
-            Some(std::io::ErrorKind::UnexpectedEof) if !acked => Failure {
+            Some(std::io::ErrorKind::UnexpectedEof | std::io::ErrorKind::ConnectionReset) if !acked => Failure {
                 text: format!(
                     "{at}: the broker closed the TLS connection before answering: it may want a client certificate (--mqtt-cert, --mqtt-key) or refuse this one"
                 ),
