@@ -92,17 +92,11 @@ pub fn read_image(path: &Path) -> Result<Vec<Segment>> {
             path.display()
         );
     }
+    // The header first: what the file is, whatever its size.
+    let mut file = std::fs::File::open(path).with_context(|| format!("reading {}", path.display()))?;
     let mut bytes = Vec::new();
-    std::fs::File::open(path)
-        .and_then(|f| std::io::Read::read_to_end(&mut std::io::Read::take(f, MAX_IMAGE_BYTES + 1), &mut bytes))
+    std::io::Read::read_to_end(&mut std::io::Read::take(&mut file, 64), &mut bytes)
         .with_context(|| format!("reading {}", path.display()))?;
-    if bytes.len() as u64 > MAX_IMAGE_BYTES {
-        bail!(
-            "{} is larger than {} MiB: not a firmware image",
-            path.display(),
-            MAX_IMAGE_BYTES >> 20
-        );
-    }
     let what = |text: String| {
         anyhow::anyhow!(
             "{}: {text}; the firmware is the reference board's build (cargo xtask firmware)",
@@ -138,6 +132,15 @@ pub fn read_image(path: &Path) -> Result<Vec<Segment>> {
     if data == 2 {
         return Err(what("a big-endian ARM ELF; the board runs little-endian".into()));
     }
+    if meta.len() > MAX_IMAGE_BYTES {
+        bail!(
+            "{} is larger than {} MiB: not a firmware image",
+            path.display(),
+            MAX_IMAGE_BYTES >> 20
+        );
+    }
+    std::io::Read::read_to_end(&mut std::io::Read::take(file, MAX_IMAGE_BYTES), &mut bytes)
+        .with_context(|| format!("reading {}", path.display()))?;
     let elf = ElfFile32::<object::Endianness>::parse(&*bytes)
         .map_err(|e| what(format!("a truncated or damaged ARM ELF ({e})")))?;
     let e = elf.endian();

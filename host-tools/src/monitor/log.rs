@@ -89,6 +89,8 @@ pub struct Logger {
     frames: BufWriter<File>,
     last_flush: Instant,
     frame_errors: Limiter,
+    /// Sequence gaps and restarts: a stream running backwards makes one per report.
+    seq_events: Limiter,
     max_bytes: u64,
     /// What the three files hold, counting what they held before.
     size_bytes: u64,
@@ -128,6 +130,7 @@ impl Logger {
             frames: BufWriter::with_capacity(64 * 1024, frames),
             last_flush: Instant::now(),
             frame_errors: Limiter::new(20),
+            seq_events: Limiter::new(20),
             max_bytes,
             size_bytes: cycles_len + frames_len + link_len,
             capped: false,
@@ -236,6 +239,18 @@ impl Logger {
                 Some(held) => {
                     if held > 0 {
                         self.line(ev.t_us, &format!("({held} more frame errors not listed)"))?;
+                    }
+                    match describe(&ev.event) {
+                        Some((_, text)) => self.line(ev.t_us, &text),
+                        None => Ok(()),
+                    }
+                }
+                None => Ok(()),
+            },
+            Event::SeqGap { .. } => match self.seq_events.allow(ev.t_us) {
+                Some(held) => {
+                    if held > 0 {
+                        self.line(ev.t_us, &format!("({held} more sequence gaps or restarts not listed)"))?;
                     }
                     match describe(&ev.event) {
                         Some((_, text)) => self.line(ev.t_us, &text),
