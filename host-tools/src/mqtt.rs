@@ -24,7 +24,15 @@
 //! counts as delivered at the broker's PUBACK; what was in flight when the
 //! link dropped goes back to the buffer, so delivery is at least once (a
 //! duplicate shows as a repeated `publish_seq`). A buffer left by an earlier
-//! run is replayed too.
+//! run is replayed too. The buffer lives in a directory private to the user
+//! ([`buffer_dir`], [`crate::private_files`]), one checksummed record a line,
+//! so damage costs only the damaged records.
+//!
+//! `mqtts://` connects over TLS ([`crate::tls`]: system roots or
+//! `--mqtt-ca`, optional client certificate); a login's password comes from
+//! [`PASSWORD_ENV`] or a file, never the command line. A broker that refuses
+//! is said in words ([`Endpoint`]'s failure reading), shown as a note, asked
+//! again with a doubling pause, and makes the run end non-zero.
 
 use std::collections::VecDeque;
 use std::fs::File;
@@ -896,7 +904,17 @@ impl Session {
             if self.online() {
                 self.feed(&client);
             }
-            match conn.recv_timeout(Duration::from_millis(20)) {
+            // Until the broker has answered, the client is connecting (TCP,
+            // TLS, CONNECT): a timeout here would drop that half-made
+            // connection and start over, so a handshake slower than the
+            // poll (a remote broker) would never finish. It has its own
+            // timeout (5 s); new messages wait in the channel meanwhile.
+            let wait = if acked {
+                Duration::from_millis(20)
+            } else {
+                Duration::from_secs(30)
+            };
+            match conn.recv_timeout(wait) {
                 Ok(Ok(Event::Incoming(Packet::ConnAck(_)))) => {
                     acked = true;
                     self.counters.online.store(true, Ordering::Relaxed);
