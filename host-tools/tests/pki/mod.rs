@@ -4,6 +4,9 @@
 //! `.ci/run` installs openssl; without it the tests say so and pass only
 //! outside CI.
 
+// Each test file uses a part of it.
+#![allow(dead_code)]
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 
