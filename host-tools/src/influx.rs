@@ -178,6 +178,13 @@ impl Destination {
             if host.is_empty() {
                 bail!("--influx {s}: no host");
             }
+            let secret_param = path.split_once('?').is_some_and(|(_, q)| {
+                q.split('&')
+                    .any(|kv| matches!(kv.split('=').next(), Some("p" | "token")))
+            });
+            if secret_param {
+                bail!("--influx: no password or token in the URL (they would show in `ps` and in messages); the token comes from {TOKEN_ENV} or --influx-token-file (v1 with a login: `user:password` as the token)");
+            }
             if host.contains('@') {
                 bail!("--influx {s}: no credentials in the URL (they would show in `ps`); the token comes from {TOKEN_ENV} or --influx-token-file");
             }
@@ -575,6 +582,8 @@ mod tests {
             }
         );
         assert!(Destination::parse("https://user:token@x/write").is_err());
+        let e = Destination::parse("http://x:8086/write?db=h&u=me&p=s3cret").unwrap_err();
+        assert!(!format!("{e:#}").contains("s3cret"), "{e:#}");
         assert_eq!(
             Destination::parse("cycles.lp").unwrap(),
             Destination::File("cycles.lp".into())

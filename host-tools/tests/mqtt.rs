@@ -944,3 +944,37 @@ fn a_second_user_gets_their_own_buffer() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `--mqtt-insecure-skip-verify` connects to a broker whose CA it was not
+/// given, and warns at the connection.
+#[test]
+fn skipping_verification_is_named_and_warned_about() {
+    if !(mosquitto_present() && pki::openssl_present()) {
+        return;
+    }
+    let dir = scratch("insecure");
+    let p = pki::make(&dir.join("pki"));
+    let port = free_port();
+    let b = broker_with(&dir, port, &tls_settings(&dir, &p, ""));
+    let args: Vec<String> = [
+        "--cycles",
+        "10",
+        "--mqtt",
+        &format!("mqtts://127.0.0.1:{port}"),
+        "--mqtt-insecure-skip-verify",
+        "--mqtt-user",
+        USER,
+    ]
+    .map(String::from)
+    .into();
+    let (out, stdout, stderr) = demo(&args, &dir.join("buffer"), Some(PASSWORD));
+    stop(b);
+    assert!(out.status.success(), "{stdout}\n{stderr}");
+    let warnings = stderr.matches("WARNING").count();
+    assert!(
+        warnings >= 1 && stderr.contains("--mqtt-insecure-skip-verify"),
+        "{stderr}"
+    );
+    assert!(stderr.contains("0 still buffered"), "{stderr}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
