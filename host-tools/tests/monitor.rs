@@ -1268,12 +1268,15 @@ fn a_sequence_running_backwards_is_reported_a_few_times_not_per_report() {
         .stdout(Stdio::piped())
         .stderr(Stdio::piped()),
     );
-    let mut lines = Lines::of(&mut child);
+    let lines = Lines::of(&mut child);
     let mut peer = Peer::accept(&listener);
     peer.handshake(PROTOCOL_VERSION);
     let backwards = |seq: u32| CycleReport { seq, ..f.reports[0] };
-    let first: Vec<CycleReport> = (0..200).map(|k| backwards(1000 - k)).collect();
-    peer.reports(&first);
+    // 200 reports in one burst, each a step back.
+    let burst: Vec<u8> = (0..200)
+        .flat_map(|k| frame(&DeviceMsg::Report(backwards(1000 - k))))
+        .collect();
+    peer.raw(&burst);
     // A second later, one more: its line says how many were not listed.
     std::thread::sleep(Duration::from_millis(1100));
     peer.reports(&[backwards(800)]);
@@ -1284,7 +1287,13 @@ fn a_sequence_running_backwards_is_reported_a_few_times_not_per_report() {
     assert!((2..=11).contains(&restarts), "{restarts} lines:\n{out}");
     let held: u64 = out
         .lines()
-        .filter_map(|l| l.split(" [").nth(1)?.strip_suffix(" more not listed]")?.parse().ok())
+        .filter_map(|l| {
+            l.split(" [")
+                .nth(1)?
+                .strip_suffix(" more not listed]")?
+                .parse::<u64>()
+                .ok()
+        })
         .sum();
     assert_eq!(held + restarts as u64, 200, "every restart listed or counted:\n{out}");
     let log = read(&dir.join("link.log"));
