@@ -375,10 +375,14 @@ impl Counters {
         self.refusal.lock().unwrap_or_else(|e| e.into_inner()).clone()
     }
 
-    /// Data this publisher lost, or could not deliver because the broker
-    /// refused it: what makes a run end non-zero.
-    pub fn lost_or_refused(&self) -> bool {
-        self.dropped.load(Ordering::Relaxed) > 0 || self.damaged.load(Ordering::Relaxed) > 0 || self.refused().is_some()
+    /// Data this publisher lost, or did not deliver (the broker refused or
+    /// stayed away; what waits in the buffer goes out with the next run):
+    /// what makes a run end non-zero.
+    pub fn undelivered(&self) -> bool {
+        self.dropped.load(Ordering::Relaxed) > 0
+            || self.damaged.load(Ordering::Relaxed) > 0
+            || self.buffered.load(Ordering::Relaxed) > 0
+            || self.refused().is_some()
     }
 }
 

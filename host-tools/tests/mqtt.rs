@@ -791,7 +791,11 @@ fn a_damaged_buffer_replays_the_intact_records_and_publishing_goes_on() {
         .map(String::from)
         .into();
     let (out, stdout, stderr) = demo(&args, &buffer, None);
-    assert!(out.status.success(), "{stdout}\n{stderr}");
+    assert!(!out.status.success(), "undelivered: non-zero\n{stdout}\n{stderr}");
+    assert!(
+        stderr.contains(" still buffered") && stderr.contains("next run"),
+        "{stderr}"
+    );
     let first = printed_seqs(&stdout);
     assert_eq!(buffered_seqs(&file), first);
     // Damage: a digit of the 6th cycle record flipped (still valid JSON),
@@ -931,7 +935,8 @@ fn a_second_user_gets_their_own_buffer() {
             String::from_utf8_lossy(&out.stdout).into_owned(),
             String::from_utf8_lossy(&out.stderr).into_owned(),
         );
-        assert!(out.status.success(), "{user}: {stdout}\n{stderr}");
+        assert!(!out.status.success(), "{user}: no broker, non-zero\n{stdout}\n{stderr}");
+        assert!(!stderr.contains("Permission denied"), "{user}: {stderr}");
         runs.push((user, uid, home, printed_seqs(&stdout)));
     }
     for (user, uid, home, printed) in runs {

@@ -92,7 +92,7 @@ pub struct Exports {
     mqtt: Option<mqtt::Options>,
     /// The devices' MQTT summaries, as their publishers stop.
     mqtt_summaries: Vec<String>,
-    /// A publisher lost messages or was refused by its broker.
+    /// A publisher lost messages or could not deliver them all.
     mqtt_lost: bool,
 }
 
@@ -175,7 +175,10 @@ impl Exports {
             }
         }
         if self.mqtt_lost {
-            lost.push("MQTT messages dropped or refused by the broker".to_string());
+            lost.push(
+                "MQTT messages dropped, damaged or not delivered (those in the outage buffer go out with the next run)"
+                    .to_string(),
+            );
         }
         (!lost.is_empty()).then(|| lost.join(", "))
     }
@@ -327,7 +330,7 @@ impl Drop for DeviceExport {
                 eprintln!("{n}");
             }
             x.mqtt_summaries.push(publisher_summary);
-            x.mqtt_lost |= counters.lost_or_refused();
+            x.mqtt_lost |= counters.undelivered();
         }
     }
 }
