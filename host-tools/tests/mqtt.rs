@@ -892,6 +892,13 @@ fn a_buffer_directory_planted_by_another_user_is_refused() {
     stop(b);
     assert!(out.status.success(), "{stdout}\n{stderr}");
     assert!(stderr.contains("belongs to another user"), "{stderr}");
+    // The private directory it took instead, named in the note.
+    let taken = stderr
+        .split("buffering in ")
+        .nth(1)
+        .and_then(|r| r.split(" instead").next())
+        .expect("the directory taken is named");
+    let _ = std::fs::remove_dir_all(taken);
     assert!(!seen.contains("forged"), "{seen}");
     assert_eq!(std::fs::read_to_string(&victim).unwrap(), "the victim's file\n");
     let delivered = seen.lines().filter(|l| l.contains("/cycle ")).count();
