@@ -373,11 +373,10 @@ fn capture_cmd(args: &CaptureArgs) -> Result<()> {
     let (trace, sidecar) = crate::capture::to_trace(&codes, &cfg, args.supply_bar.or(supply));
     let ms = codes.len() as f64 / cfg.sample_rate_hz as f64 * 1e3;
     if args.out.extension().is_some_and(|e| e == "parquet") {
-        let file = std::fs::File::create(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
-        let mut out = std::io::BufWriter::new(file);
-        crate::parquet_files::write_trace(&mut out, &trace, &codes, &serde_json::to_string(&sidecar)?)?;
-        use std::io::Write as _;
-        out.flush().with_context(|| format!("writing {}", args.out.display()))?;
+        let sidecar = serde_json::to_string(&sidecar)?;
+        crate::private_files::write_complete(&args.out, 0o644, |out| {
+            crate::parquet_files::write_trace(out, &trace, &codes, &sidecar)
+        })?;
         outln!(
             "captured {} sample-sets ({ms:.1} ms) into {}",
             codes.len(),
@@ -461,14 +460,11 @@ fn estimate_cmd(args: &EstimateArgs) -> Result<()> {
         return Err(no_cycle_error());
     }
     use std::io::{IsTerminal as _, Write as _};
-    let sink: Box<dyn std::io::Write + Send> = match &args.out {
-        Some(path) => Box::new(std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?),
-        None if args.format == Format::Parquet && std::io::stdout().is_terminal() => {
-            anyhow::bail!("Parquet is binary: give --out FILE or redirect standard output")
-        }
-        None => Box::new(std::io::stdout()),
-    };
-    let mut out = std::io::BufWriter::new(sink);
+    if args.out.is_none() && args.format == Format::Parquet && std::io::stdout().is_terminal() {
+        anyhow::bail!("Parquet is binary: give --out FILE or redirect standard output")
+    }
+    // Rendered whole first: an --out file is then written complete or not at all.
+    let mut out: Vec<u8> = Vec::new();
     match args.format {
         Format::Jsonl => {
             for r in &reports {
@@ -499,10 +495,16 @@ fn estimate_cmd(args: &EstimateArgs) -> Result<()> {
         }
     }
     // A full disk or a closed pipe must not pass for success.
-    out.flush().with_context(|| match &args.out {
-        Some(p) => format!("writing {}", p.display()),
-        None => "writing to standard output".into(),
-    })?;
+    match &args.out {
+        Some(path) => crate::private_files::write_complete(path, 0o644, |w| Ok(w.write_all(&out)?))?,
+        None => {
+            let mut stdout = std::io::stdout().lock();
+            stdout
+                .write_all(&out)
+                .and_then(|()| stdout.flush())
+                .context("writing to standard output")?;
+        }
+    }
     if no_cycle {
         return Err(no_cycle_error());
     }

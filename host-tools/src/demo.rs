@@ -231,6 +231,16 @@ impl FullRate {
             let (args, stimulus, stop) = (args.clone(), stimulus.clone(), stop.clone());
             move || stream_hammer(&args, seconds, &stimulus, &stop, tap)
         });
+        // The file's name goes once QEMU has it mapped (a killed run leaves
+        // no 16 MiB behind in /dev/shm).
+        std::thread::spawn({
+            let (stimulus, stop) = (stimulus.clone(), stop.clone());
+            move || {
+                while !stop.load(Ordering::Relaxed) && !stimulus.unlink_once_mapped() {
+                    std::thread::sleep(Duration::from_millis(50));
+                }
+            }
+        });
         let deadline = Instant::now() + Duration::from_secs(20);
         while stimulus.counters().written_sets < PREFILL_SETS && !producer.is_finished() {
             if Instant::now() > deadline {
@@ -547,8 +557,7 @@ fn headless_loop(port: SharedPort, args: &DemoArgs, stimulus: Option<&Stimulus>)
         println!("{}", adc_line(&stimulus.counters()));
     }
     drop(export);
-    crate::monitor::close_exports(exports);
-    Ok(())
+    crate::monitor::close_exports(exports)
 }
 
 /// Hands the dashboard the demo board's one link; there is nothing to

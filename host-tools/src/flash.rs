@@ -18,7 +18,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use object::elf;
-use object::read::elf::{ElfFile32, FileHeader, ProgramHeader};
+use object::read::elf::{ElfFile32, ProgramHeader};
 
 /// Bytes at the end of main flash that hold the persisted state: four 2 KiB
 /// pages (`firmware/src/persist.rs`, `AREA_OFFSET`).
@@ -64,25 +64,86 @@ pub struct Segment {
     pub data: Vec<u8>,
 }
 
-/// The image's loadable segments, from an ARM ELF only.
+/// An image file larger than this is not a firmware for a part with at
+/// most a few MiB of flash (and /dev/zero is not read without end).
+const MAX_IMAGE_BYTES: u64 = 64 << 20;
+
+/// An ELF machine number's name, for messages.
+fn machine_name(m: u16) -> &'static str {
+    match m {
+        elf::EM_386 => "x86",
+        elf::EM_X86_64 => "x86-64",
+        elf::EM_AARCH64 => "64-bit ARM",
+        elf::EM_ARM => "ARM",
+        elf::EM_RISCV => "RISC-V",
+        elf::EM_XTENSA => "Xtensa",
+        elf::EM_AVR => "AVR",
+        _ => "another architecture",
+    }
+}
+
+/// The image's loadable segments, from a little-endian 32-bit ARM ELF
+/// only; each refusal names what is actually wrong with the file.
 pub fn read_image(path: &Path) -> Result<Vec<Segment>> {
-    let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
-    let elf = ElfFile32::<object::Endianness>::parse(&*bytes).map_err(|_| {
-        anyhow::anyhow!(
-            "{} is not a 32-bit ELF: the firmware is the reference board's build \
-             (cargo xtask firmware), not a host binary or another format",
-            path.display()
-        )
-    })?;
-    let header = elf.elf_header();
-    let e = elf.endian();
-    if header.e_machine(e) != elf::EM_ARM || e != object::Endianness::Little {
+    let meta = std::fs::metadata(path).with_context(|| format!("reading {}", path.display()))?;
+    if !meta.is_file() {
         bail!(
-            "{} is an ELF for another architecture (machine {}), not a little-endian ARM one",
-            path.display(),
-            header.e_machine(e)
+            "{} is not a regular file (a device or a directory): give the firmware's ELF",
+            path.display()
         );
     }
+    // The header first: what the file is, whatever its size.
+    let mut file = std::fs::File::open(path).with_context(|| format!("reading {}", path.display()))?;
+    let mut bytes = Vec::new();
+    std::io::Read::read_to_end(&mut std::io::Read::take(&mut file, 64), &mut bytes)
+        .with_context(|| format!("reading {}", path.display()))?;
+    let what = |text: String| {
+        anyhow::anyhow!(
+            "{}: {text}; the firmware is the reference board's build (cargo xtask firmware)",
+            path.display()
+        )
+    };
+    if bytes.len() < 4 || &bytes[..4] != b"\x7fELF" {
+        return Err(what("not an ELF file (no ELF signature at its start)".into()));
+    }
+    if bytes.len() < 20 {
+        return Err(what(format!(
+            "a truncated ELF ({} bytes, not even a header)",
+            bytes.len()
+        )));
+    }
+    let (class, data) = (bytes[4], bytes[5]);
+    let machine = match data {
+        2 => u16::from_be_bytes([bytes[18], bytes[19]]),
+        _ => u16::from_le_bytes([bytes[18], bytes[19]]),
+    };
+    if class == elf::ELFCLASS64 {
+        return Err(what(format!(
+            "a 64-bit ELF for {} (machine {machine}), not the board's 32-bit ARM one",
+            machine_name(machine)
+        )));
+    }
+    if machine != elf::EM_ARM {
+        return Err(what(format!(
+            "an ELF for {} (machine {machine}), not for ARM",
+            machine_name(machine)
+        )));
+    }
+    if data == 2 {
+        return Err(what("a big-endian ARM ELF; the board runs little-endian".into()));
+    }
+    if meta.len() > MAX_IMAGE_BYTES {
+        bail!(
+            "{} is larger than {} MiB: not a firmware image",
+            path.display(),
+            MAX_IMAGE_BYTES >> 20
+        );
+    }
+    std::io::Read::read_to_end(&mut std::io::Read::take(file, MAX_IMAGE_BYTES), &mut bytes)
+        .with_context(|| format!("reading {}", path.display()))?;
+    let elf = ElfFile32::<object::Endianness>::parse(&*bytes)
+        .map_err(|e| what(format!("a truncated or damaged ARM ELF ({e})")))?;
+    let e = elf.endian();
     let mut out = vec![];
     for ph in elf.elf_program_headers() {
         if ph.p_type(e) != elf::PT_LOAD || ph.p_filesz(e) == 0 {
@@ -98,6 +159,21 @@ pub fn read_image(path: &Path) -> Result<Vec<Segment>> {
     }
     if out.is_empty() {
         bail!("{} has nothing to load", path.display());
+    }
+    let mut spans: Vec<(u64, u64)> = out
+        .iter()
+        .map(|s| (s.address, s.address + s.data.len() as u64))
+        .collect();
+    spans.sort_unstable();
+    if let Some(w) = spans.windows(2).find(|w| w[1].0 < w[0].1) {
+        bail!(
+            "{}: two loadable segments overlap (0x{:08x}..0x{:08x} and 0x{:08x}..0x{:08x}): a damaged or hand-made ELF",
+            path.display(),
+            w[0].0,
+            w[0].1,
+            w[1].0,
+            w[1].1
+        );
     }
     Ok(out)
 }
@@ -343,6 +419,80 @@ mod tests {
             address,
             data: vec![0x5A; len],
         }
+    }
+
+    /// A minimal ELF32 header and program headers, little-endian, for ARM
+    /// unless changed: one PT_LOAD of 16 bytes at each of `at`.
+    fn elf(at: &[u32]) -> Vec<u8> {
+        let mut b = vec![0x7f, b'E', b'L', b'F', 1, 1, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0];
+        let phoff = 52u32;
+        let data = phoff + 32 * at.len() as u32;
+        b.extend(2u16.to_le_bytes()); // executable
+        b.extend(40u16.to_le_bytes()); // ARM
+        b.extend(1u32.to_le_bytes());
+        b.extend(0u32.to_le_bytes());
+        b.extend(phoff.to_le_bytes());
+        b.extend(0u32.to_le_bytes());
+        b.extend(0u32.to_le_bytes());
+        b.extend(52u16.to_le_bytes());
+        b.extend(32u16.to_le_bytes());
+        b.extend((at.len() as u16).to_le_bytes());
+        b.extend([40, 0, 0, 0, 0, 0]);
+        for &a in at {
+            for v in [1, data, a, a, 16, 16, 5, 4] {
+                b.extend(v.to_le_bytes());
+            }
+        }
+        b.extend([0xAB; 16]);
+        b
+    }
+
+    #[test]
+    fn each_refused_image_is_named_for_what_is_wrong_with_it() {
+        let dir = std::env::temp_dir().join(format!("hammer-flash-elf-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let says = |name: &str, bytes: &[u8], expected: &str| {
+            let p = dir.join(name);
+            std::fs::write(&p, bytes).unwrap();
+            let e = format!("{:#}", read_image(&p).unwrap_err());
+            assert!(e.contains(expected), "{name}: {e}");
+        };
+        let good = elf(&[0x0800_0000, 0x0800_0010]);
+        assert_eq!(
+            read_image(&{
+                let p = dir.join("good.elf");
+                std::fs::write(&p, &good).unwrap();
+                p
+            })
+            .unwrap()
+            .len(),
+            2
+        );
+        says("text.elf", b"#!/bin/sh\necho hi\n", "not an ELF file");
+        says("short.elf", &good[..12], "a truncated ELF");
+        says("cut.elf", &good[..60], "a truncated or damaged ARM ELF");
+        let mut be = good.clone();
+        be[5] = 2;
+        be[18..20].copy_from_slice(&40u16.to_be_bytes());
+        says("be.elf", &be, "a big-endian ARM ELF");
+        let mut x64 = good.clone();
+        x64[4] = 2;
+        x64[18..20].copy_from_slice(&62u16.to_le_bytes());
+        says("x64.elf", &x64, "a 64-bit ELF for x86-64");
+        let mut riscv = good.clone();
+        riscv[18..20].copy_from_slice(&243u16.to_le_bytes());
+        says("rv.elf", &riscv, "an ELF for RISC-V (machine 243)");
+        says(
+            "overlap.elf",
+            &elf(&[0x0800_0000, 0x0800_0008]),
+            "two loadable segments overlap",
+        );
+        // A device is refused at once, never read without end.
+        let t = std::time::Instant::now();
+        let e = format!("{:#}", read_image(Path::new("/dev/zero")).unwrap_err());
+        assert!(e.contains("not a regular file"), "{e}");
+        println!("/dev/zero refused in {:?}", t.elapsed());
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]

@@ -20,14 +20,16 @@
 //! Destinations ([`Destination::parse`]): a file (appended), `udp://HOST:PORT`
 //! (one datagram per batch, kept under 1 400 bytes), or `http(s)://…` (the
 //! URL of a write endpoint, e.g. `http://localhost:8086/api/v2/write?org=o&bucket=b`
-//! or `…/write?db=hammer`; the body gzip-compressed; `INFLUX_TOKEN` in the
-//! environment becomes an `Authorization: Token` header). HTTPS is not
-//! built in: point it at a local proxy or Telegraf.
+//! or `…/write?db=hammer`; the body gzip-compressed). The token, from
+//! `INFLUX_TOKEN` or `--influx-token-file`, becomes an `Authorization:
+//! Token` header. HTTPS checks the server's certificate against the system's
+//! roots or `--influx-ca`, with the rules of every TLS link ([`crate::tls`]).
 
-use std::fs::{File, OpenOptions};
+use std::fs::File;
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::{TcpStream, ToSocketAddrs, UdpSocket};
 use std::path::PathBuf;
+use std::sync::Arc;
 use std::time::Duration;
 
 use anyhow::{bail, Context, Result};
@@ -117,12 +119,42 @@ impl Anchor {
 pub enum Destination {
     File(PathBuf),
     Udp(String),
-    /// host:port, path with query, the URL as given.
+    /// host:port, path with query, the URL as given, over TLS or not.
     Http {
         host: String,
         path: String,
         url: String,
+        tls: bool,
     },
+}
+
+/// The token environment variable of every InfluxDB tool.
+pub const TOKEN_ENV: &str = "INFLUX_TOKEN";
+
+/// How to reach an HTTP(S) write endpoint: TLS files and the token's file.
+#[derive(clap::Args, Debug, Clone, Default)]
+pub struct HttpArgs {
+    /// https://: the CA certificate(s), PEM, that signed the server's
+    /// certificate (default: the system's roots).
+    #[arg(long, value_name = "FILE")]
+    pub influx_ca: Option<PathBuf>,
+    /// A file holding the InfluxDB token (its first line); default: the
+    /// environment variable INFLUX_TOKEN. Never a command-line value.
+    #[arg(long, value_name = "FILE")]
+    pub influx_token_file: Option<PathBuf>,
+    /// https:// WITHOUT checking the server's certificate: anyone on the
+    /// path can read the token and change the data. For a test server
+    /// only; every connection warns.
+    #[arg(long)]
+    pub influx_insecure_skip_verify: bool,
+}
+
+/// An HTTP(S) endpoint's TLS configuration and token, resolved once.
+#[derive(Debug, Clone, Default)]
+struct HttpAccess {
+    tls: Option<Arc<rustls::ClientConfig>>,
+    insecure: bool,
+    token: Option<crate::tls::Secret>,
 }
 
 impl Destination {
@@ -133,10 +165,12 @@ impl Destination {
             }
             return Ok(Self::Udp(rest.to_string()));
         }
-        if s.starts_with("https://") {
-            bail!("--influx {s}: HTTPS is not built in; use http:// to a local InfluxDB, Telegraf or a TLS proxy");
-        }
-        if let Some(rest) = s.strip_prefix("http://") {
+        let (rest, tls) = match (s.strip_prefix("https://"), s.strip_prefix("http://")) {
+            (Some(r), _) => (Some(r), true),
+            (None, Some(r)) => (Some(r), false),
+            _ => (None, false),
+        };
+        if let Some(rest) = rest {
             let (host, path) = match rest.find('/') {
                 Some(i) => (&rest[..i], &rest[i..]),
                 None => (rest, "/write"),
@@ -144,19 +178,30 @@ impl Destination {
             if host.is_empty() {
                 bail!("--influx {s}: no host");
             }
+            let secret_param = path.split_once('?').is_some_and(|(_, q)| {
+                q.split('&')
+                    .any(|kv| matches!(kv.split('=').next(), Some("p" | "token")))
+            });
+            if secret_param {
+                bail!("--influx: no password or token in the URL (they would show in `ps` and in messages); the token comes from {TOKEN_ENV} or --influx-token-file (v1 with a login: `user:password` as the token)");
+            }
+            if host.contains('@') {
+                bail!("--influx {s}: no credentials in the URL (they would show in `ps`); the token comes from {TOKEN_ENV} or --influx-token-file");
+            }
             let host = if host.contains(':') {
                 host.to_string()
             } else {
-                format!("{host}:80")
+                format!("{host}:{}", if tls { 443 } else { 80 })
             };
             return Ok(Self::Http {
                 host,
                 path: path.to_string(),
                 url: s.to_string(),
+                tls,
             });
         }
         if s.contains("://") {
-            bail!("--influx {s}: a FILE, udp://HOST:PORT or http://HOST:PORT/PATH");
+            bail!("--influx {s}: a FILE, udp://HOST:PORT or http(s)://HOST:PORT/PATH");
         }
         Ok(Self::File(PathBuf::from(s)))
     }
@@ -165,6 +210,7 @@ impl Destination {
 /// Batches lines and sends them to a [`Destination`].
 pub struct Writer {
     dest: Destination,
+    http: HttpAccess,
     file: Option<File>,
     udp: Option<UdpSocket>,
     pending: Vec<String>,
@@ -174,9 +220,11 @@ pub struct Writer {
 }
 
 impl Writer {
-    pub fn open(dest: Destination) -> Result<Self> {
+    /// Opens `dest`; `http` says how to reach an HTTP(S) endpoint.
+    pub fn open(dest: Destination, http: &HttpArgs) -> Result<Self> {
         let mut w = Self {
             dest,
+            http: HttpAccess::default(),
             file: None,
             udp: None,
             pending: vec![],
@@ -185,20 +233,46 @@ impl Writer {
         };
         match &w.dest {
             Destination::File(p) => {
-                w.file = Some(
-                    OpenOptions::new()
-                        .create(true)
-                        .append(true)
-                        .open(p)
-                        .with_context(|| format!("opening {}", p.display()))?,
-                )
+                // A line torn by an earlier run (a full disk, a crash) is cut
+                // back, so this run's first point starts on its own line.
+                let (f, _, torn) = crate::private_files::open_append_whole_lines(p)
+                    .with_context(|| format!("opening {}", p.display()))?;
+                if torn > 0 {
+                    eprintln!("influx: {}: cut back a torn last line ({torn} bytes)", p.display());
+                }
+                w.file = Some(f)
             }
             Destination::Udp(addr) => {
                 let sock = UdpSocket::bind("0.0.0.0:0").context("binding a UDP socket")?;
                 sock.connect(addr).with_context(|| format!("udp://{addr}"))?;
                 w.udp = Some(sock);
             }
-            Destination::Http { .. } => {}
+            Destination::Http { host, tls, .. } => {
+                let name = host.rsplit_once(':').map_or(host.as_str(), |(h, _)| h);
+                w.http = HttpAccess {
+                    tls: tls
+                        .then(|| {
+                            crate::tls::server_name(name)?;
+                            crate::tls::client_config(
+                                &crate::tls::TlsFiles {
+                                    ca: http.influx_ca.clone(),
+                                    insecure: http.influx_insecure_skip_verify,
+                                    ..Default::default()
+                                },
+                                "--influx",
+                            )
+                        })
+                        .transpose()?,
+                    insecure: http.influx_insecure_skip_verify,
+                    token: match &http.influx_token_file {
+                        Some(f) => Some(crate::tls::Secret::from_file(f, "--influx-token-file")?),
+                        None => crate::tls::Secret::from_env(TOKEN_ENV),
+                    },
+                };
+                if !tls && (http.influx_ca.is_some() || http.influx_insecure_skip_verify) {
+                    bail!("--influx-ca and --influx-insecure-skip-verify are for https://");
+                }
+            }
         }
         Ok(w)
     }
@@ -233,8 +307,19 @@ impl Writer {
                 let mut body = batch.join("\n");
                 body.push('\n');
                 let f = self.file.as_mut().expect("opened");
-                f.write_all(body.as_bytes())
-                    .with_context(|| format!("writing {}", p.display()))
+                // The batch whole or not at all: a short write (a full disk)
+                // is cut back, so the count of lines written stays exact.
+                let len = f.metadata().with_context(|| format!("{}", p.display()))?.len();
+                f.write_all(body.as_bytes()).map_err(|e| {
+                    let cut = f.set_len(len);
+                    anyhow::Error::new(e).context(match cut {
+                        Ok(()) => format!("writing {} (the batch is not in it)", p.display()),
+                        Err(c) => format!(
+                            "writing {} (and cutting back the partial batch failed: {c})",
+                            p.display()
+                        ),
+                    })
+                })
             }
             Destination::Udp(addr) => {
                 let sock = self.udp.as_ref().expect("opened");
@@ -252,7 +337,9 @@ impl Writer {
                     .with_context(|| format!("udp://{addr}"))?;
                 Ok(())
             }
-            Destination::Http { host, path, url } => post(host, path, batch).with_context(|| format!("POST {url}")),
+            Destination::Http { host, path, url, .. } => {
+                post(host, path, batch, &self.http).with_context(|| format!("POST {url}"))
+            }
         }
     }
 }
@@ -265,8 +352,9 @@ impl Drop for Writer {
     }
 }
 
-/// One HTTP/1.1 POST of the batch, gzip-compressed; any 2xx is success.
-fn post(host: &str, path: &str, batch: &[String]) -> Result<()> {
+/// One HTTP/1.1 POST of the batch, gzip-compressed, over TLS when asked;
+/// any 2xx is success. A TLS failure says what to check.
+fn post(host: &str, path: &str, batch: &[String], access: &HttpAccess) -> Result<()> {
     let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
     for l in batch {
         gz.write_all(l.as_bytes())?;
@@ -278,21 +366,49 @@ fn post(host: &str, path: &str, batch: &[String]) -> Result<()> {
         .with_context(|| format!("resolving {host}"))?
         .next()
         .with_context(|| format!("{host} has no address"))?;
-    let mut s = TcpStream::connect_timeout(&addr, Duration::from_secs(5))?;
+    let s = TcpStream::connect_timeout(&addr, Duration::from_secs(5))?;
     s.set_read_timeout(Some(Duration::from_secs(10)))?;
     s.set_write_timeout(Some(Duration::from_secs(10)))?;
-    let auth = std::env::var("INFLUX_TOKEN")
-        .map(|t| format!("Authorization: Token {t}\r\n"))
-        .unwrap_or_default();
-    write!(
-        s,
-        "POST {path} HTTP/1.1\r\nHost: {host}\r\nContent-Type: text/plain; charset=utf-8\r\nContent-Encoding: gzip\r\n{auth}Content-Length: {}\r\nConnection: close\r\n\r\n",
+    let mut head = format!(
+        "POST {path} HTTP/1.1\r\nHost: {host}\r\nContent-Type: text/plain; charset=utf-8\r\nContent-Encoding: gzip\r\nContent-Length: {}\r\nConnection: close\r\n",
         body.len()
-    )?;
-    s.write_all(&body)?;
+    );
+    if let Some(t) = &access.token {
+        head += &format!("Authorization: Token {}\r\n", t.expose());
+    }
+    head += "\r\n";
+    match &access.tls {
+        None => exchange(s, head.as_bytes(), &body),
+        Some(cfg) => {
+            let name = host.rsplit_once(':').map_or(host, |(h, _)| h);
+            if access.insecure {
+                eprintln!(
+                    "{}",
+                    crate::tls::insecure_warning(&format!("https://{host}"), "--influx")
+                );
+            }
+            let conn = rustls::ClientConnection::new(cfg.clone(), crate::tls::server_name(name)?)?;
+            exchange(rustls::StreamOwned::new(conn, s), head.as_bytes(), &body).map_err(|e| {
+                match crate::tls::rustls_error(e.as_ref()) {
+                    Some(r) => anyhow::anyhow!(crate::tls::explain(r, host, name, "--influx", "http://")),
+                    None => e,
+                }
+            })
+        }
+    }
+}
+
+/// Sends the request, reads the status: an error unless 2xx.
+fn exchange(mut s: impl Read + Write, head: &[u8], body: &[u8]) -> Result<()> {
+    s.write_all(head)?;
+    s.write_all(body)?;
+    s.flush()?;
     let mut reader = BufReader::new(s);
     let mut status = String::new();
     reader.read_line(&mut status)?;
+    if status.is_empty() {
+        bail!("the server closed the connection without an answer");
+    }
     let code: u16 = status
         .split_whitespace()
         .nth(1)
@@ -452,15 +568,27 @@ mod tests {
             Destination::Http {
                 host: "db:8086".into(),
                 path: "/api/v2/write?bucket=b".into(),
-                url: "http://db:8086/api/v2/write?bucket=b".into()
+                url: "http://db:8086/api/v2/write?bucket=b".into(),
+                tls: false,
             }
         );
+        assert_eq!(
+            Destination::parse("https://cloud.example/api/v2/write?bucket=b").unwrap(),
+            Destination::Http {
+                host: "cloud.example:443".into(),
+                path: "/api/v2/write?bucket=b".into(),
+                url: "https://cloud.example/api/v2/write?bucket=b".into(),
+                tls: true,
+            }
+        );
+        assert!(Destination::parse("https://user:token@x/write").is_err());
+        let e = Destination::parse("http://x:8086/write?db=h&u=me&p=s3cret").unwrap_err();
+        assert!(!format!("{e:#}").contains("s3cret"), "{e:#}");
         assert_eq!(
             Destination::parse("cycles.lp").unwrap(),
             Destination::File("cycles.lp".into())
         );
         assert!(Destination::parse("udp://nohost").is_err());
-        assert!(format!("{:#}", Destination::parse("https://x/write").unwrap_err()).contains("HTTPS"));
         assert!(Destination::parse("mqtt://x").is_err());
     }
 
@@ -469,7 +597,11 @@ mod tests {
         let server = UdpSocket::bind("127.0.0.1:0").unwrap();
         server.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
         let addr = server.local_addr().unwrap();
-        let mut w = Writer::open(Destination::parse(&format!("udp://{addr}")).unwrap()).unwrap();
+        let mut w = Writer::open(
+            Destination::parse(&format!("udp://{addr}")).unwrap(),
+            &HttpArgs::default(),
+        )
+        .unwrap();
         for k in 0..20 {
             w.push(line("rig", None, None, &report(k), 1_000 + i64::from(k)))
                 .unwrap();
@@ -526,7 +658,11 @@ mod tests {
             }
             bodies
         });
-        let mut w = Writer::open(Destination::parse(&format!("http://{addr}/api/v2/write?bucket=b")).unwrap()).unwrap();
+        let mut w = Writer::open(
+            Destination::parse(&format!("http://{addr}/api/v2/write?bucket=b")).unwrap(),
+            &HttpArgs::default(),
+        )
+        .unwrap();
         w.push(line("rig", None, None, &report(1), 5)).unwrap();
         w.flush().unwrap();
         w.push(line("rig", None, None, &report(2), 6)).unwrap();

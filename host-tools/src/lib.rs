@@ -6,6 +6,10 @@
 //! - [`numfmt`], [`chart`]: numbers for people, the one chart model and renderer;
 //! - [`records`], [`parquet_files`], [`influx`]: every rendering of a cycle
 //!   report, from `hammer_types::fields::FIELDS`: text, Parquet, line protocol;
+//! - [`private_files`]: owner-only directories and files that do not follow
+//!   symlinks (the outage buffer, the logs);
+//! - [`tls`]: the one TLS client configuration (MQTT over TLS, InfluxDB over
+//!   HTTPS) and handshake failures in words;
 //! - [`client`]: the one protocol client (its sans-IO decoding core, the blocking client);
 //! - [`board`], [`stimulus`], [`emulator`]: the firmware's app natively, the
 //!   emulated board's ADC ring, and the board on QEMU's mps2-an386;
@@ -40,8 +44,10 @@ pub mod mqtt;
 pub mod numfmt;
 pub mod parquet_files;
 pub mod plot;
+pub mod private_files;
 pub mod records;
 pub mod report;
 pub mod selftest;
 pub mod soak;
 pub mod stimulus;
+pub mod tls;

@@ -24,22 +24,35 @@
 //! counts as delivered at the broker's PUBACK; what was in flight when the
 //! link dropped goes back to the buffer, so delivery is at least once (a
 //! duplicate shows as a repeated `publish_seq`). A buffer left by an earlier
-//! run is replayed too.
+//! run is replayed too. The buffer lives in a directory private to the user
+//! ([`buffer_dir`], [`crate::private_files`]), one checksummed record a line,
+//! so damage costs only the damaged records.
+//!
+//! `mqtts://` connects over TLS ([`crate::tls`]: system roots or
+//! `--mqtt-ca`, optional client certificate); a login's password comes from
+//! [`PASSWORD_ENV`] or a file, never the command line. A broker that refuses
+//! is said in words ([`Endpoint`]'s failure reading), shown as a note, asked
+//! again with a doubling pause, and makes the run end non-zero.
 
 use std::collections::VecDeque;
-use std::fs::{File, OpenOptions};
-use std::io::{BufRead, BufReader, Write};
+use std::fs::File;
+use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::mpsc::{self, Receiver, Sender, TryRecvError};
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
 use anyhow::{bail, Context, Result};
-use rumqttc::{Client, Connection, Event, LastWill, MqttOptions, Outgoing, Packet, QoS, RecvTimeoutError};
+use rumqttc::{
+    Client, ConnectReturnCode, Connection, ConnectionError, Event, LastWill, MqttOptions, Outgoing, Packet, QoS,
+    RecvTimeoutError, TlsConfiguration, Transport,
+};
 use serde::{Deserialize, Serialize};
 use serde_json::{json, Value};
+
+use crate::tls::Secret;
 
 /// The outage buffer's default cap.
 pub const DEFAULT_BUFFER_MB: f64 = 256.0;
@@ -49,6 +62,9 @@ const MAX_INFLIGHT: usize = 64;
 const MAX_LIVE: usize = 1024;
 /// Pause before connecting again after a failure.
 const RETRY: Duration = Duration::from_secs(1);
+/// A broker that refuses (login, certificate) is asked again after a pause
+/// that doubles from [`RETRY`] up to this: it will not change its mind soon.
+const MAX_BACKOFF: Duration = Duration::from_secs(60);
 
 /// What a message is, which sets its topic, QoS and retention.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -89,20 +105,225 @@ pub fn topic(site: &str, device: &str, kind: Kind) -> String {
     format!("hammer/{site}/{device}/{}", kind.name())
 }
 
-/// `mqtt://HOST[:PORT]` → (host, port).
-pub fn parse_url(url: &str) -> Result<(String, u16)> {
-    let Some(rest) = url.strip_prefix("mqtt://") else {
-        bail!("--mqtt {url}: an MQTT broker is mqtt://HOST[:PORT] (TLS is not built in)");
+/// `mqtt://HOST[:PORT]` (1883) or `mqtts://HOST[:PORT]` (TLS, 8883) →
+/// (host, port, tls).
+pub fn parse_url(url: &str) -> Result<(String, u16, bool)> {
+    let (rest, tls) = if let Some(r) = url.strip_prefix("mqtts://") {
+        (r, true)
+    } else if let Some(r) = url.strip_prefix("mqtt://") {
+        (r, false)
+    } else {
+        bail!("--mqtt {url}: an MQTT broker is mqtt://HOST[:PORT] or, over TLS, mqtts://HOST[:PORT]");
     };
     let rest = rest.trim_end_matches('/');
+    if rest.contains('@') {
+        bail!("--mqtt {url}: no user or password in the URL (they would show in `ps`); use --mqtt-user and HAMMER_MQTT_PASSWORD or --mqtt-password-file");
+    }
     let (host, port) = match rest.rsplit_once(':') {
         Some((h, p)) => (h, p.parse().with_context(|| format!("--mqtt {url}: port {p:?}"))?),
-        None => (rest, 1883),
+        None => (rest, if tls { 8883 } else { 1883 }),
     };
     if host.is_empty() {
         bail!("--mqtt {url}: no host");
     }
-    Ok((host.to_string(), port))
+    Ok((host.to_string(), port, tls))
+}
+
+/// How to reach and log in to a broker, besides its URL: for `monitor`,
+/// `demo` and `mqtt-tail` alike.
+#[derive(clap::Args, Debug, Clone, Default)]
+pub struct BrokerArgs {
+    /// mqtts://: the CA certificate(s), PEM, that signed the broker's
+    /// certificate (default: the system's roots).
+    #[arg(long, value_name = "FILE")]
+    pub mqtt_ca: Option<PathBuf>,
+    /// mqtts://: a client certificate, PEM, for a broker that asks for one
+    /// (with --mqtt-key).
+    #[arg(long, value_name = "FILE")]
+    pub mqtt_cert: Option<PathBuf>,
+    /// The client certificate's private key, PEM.
+    #[arg(long, value_name = "FILE")]
+    pub mqtt_key: Option<PathBuf>,
+    /// User name on the broker. Its password comes from the environment
+    /// variable HAMMER_MQTT_PASSWORD or --mqtt-password-file, never from
+    /// the command line (where `ps` shows it).
+    #[arg(long, value_name = "NAME")]
+    pub mqtt_user: Option<String>,
+    /// A file holding the --mqtt-user's password (its first line).
+    #[arg(long, value_name = "FILE")]
+    pub mqtt_password_file: Option<PathBuf>,
+    /// mqtts:// WITHOUT checking the broker's certificate: anyone on the
+    /// path can read and change the traffic. For a test broker only; every
+    /// connection warns.
+    #[arg(long)]
+    pub mqtt_insecure_skip_verify: bool,
+}
+
+/// The environment variable holding the broker password.
+pub const PASSWORD_ENV: &str = "HAMMER_MQTT_PASSWORD";
+
+/// A broker resolved from its URL and [`BrokerArgs`]: address, TLS
+/// configuration, login.
+#[derive(Clone, Debug)]
+pub struct Endpoint {
+    pub host: String,
+    pub port: u16,
+    tls: Option<Arc<rustls::ClientConfig>>,
+    insecure: bool,
+    user: Option<String>,
+    password: Option<Secret>,
+}
+
+impl Endpoint {
+    pub fn resolve(url: &str, a: &BrokerArgs) -> Result<Self> {
+        let (host, port, tls) = parse_url(url)?;
+        let uses_tls_files =
+            a.mqtt_ca.is_some() || a.mqtt_cert.is_some() || a.mqtt_key.is_some() || a.mqtt_insecure_skip_verify;
+        if !tls && uses_tls_files {
+            bail!("--mqtt {url}: --mqtt-ca, --mqtt-cert, --mqtt-key and --mqtt-insecure-skip-verify are for TLS: use mqtts://");
+        }
+        let tls = tls
+            .then(|| {
+                crate::tls::client_config(
+                    &crate::tls::TlsFiles {
+                        ca: a.mqtt_ca.clone(),
+                        cert: a.mqtt_cert.clone(),
+                        key: a.mqtt_key.clone(),
+                        insecure: a.mqtt_insecure_skip_verify,
+                    },
+                    "--mqtt",
+                )
+            })
+            .transpose()?;
+        if tls.is_some() {
+            crate::tls::server_name(&host)?;
+        }
+        let password = match (&a.mqtt_user, &a.mqtt_password_file) {
+            (None, Some(_)) => bail!("--mqtt-password-file without --mqtt-user"),
+            (None, None) => None,
+            (Some(_), Some(f)) => Some(Secret::from_file(f, "--mqtt-password-file")?),
+            (Some(_), None) => Secret::from_env(PASSWORD_ENV),
+        };
+        if a.mqtt_user.is_some() && password.is_some() && tls.is_none() {
+            eprintln!("mqtt: the password goes to {host}:{port} unencrypted (mqtt://); use mqtts:// to a TLS listener");
+        }
+        Ok(Self {
+            host,
+            port,
+            tls,
+            insecure: a.mqtt_insecure_skip_verify,
+            user: a.mqtt_user.clone(),
+            password,
+        })
+    }
+
+    /// `mqtt[s]://host:port`, for messages.
+    pub fn describe(&self) -> String {
+        format!(
+            "{}://{}:{}",
+            if self.tls.is_some() { "mqtts" } else { "mqtt" },
+            self.host,
+            self.port
+        )
+    }
+
+    /// The client's options: address, transport, login.
+    fn options(&self, client_id: String) -> MqttOptions {
+        let mut opts = MqttOptions::new(client_id, self.host.clone(), self.port);
+        if let Some(cfg) = &self.tls {
+            opts.set_transport(Transport::tls_with_config(TlsConfiguration::Rustls(cfg.clone())));
+        }
+        if let Some(user) = &self.user {
+            let password = self
+                .password
+                .as_ref()
+                .map(|p| p.expose().to_string())
+                .unwrap_or_default();
+            opts.set_credentials(user.clone(), password);
+        }
+        opts
+    }
+
+    /// The warning due at every connection, if verification is off.
+    fn connection_warning(&self) -> Option<String> {
+        (self.tls.is_some() && self.insecure).then(|| crate::tls::insecure_warning(&self.describe(), "--mqtt"))
+    }
+
+    /// What a connection's failure means; `acked`: the broker had accepted
+    /// the connection before it failed.
+    fn failure(&self, e: &ConnectionError, acked: bool) -> Failure {
+        let at = self.describe();
+        let hostport = format!("{}:{}", self.host, self.port);
+        if let ConnectionError::ConnectionRefused(code) = e {
+            let text = match code {
+                ConnectReturnCode::BadUserNamePassword => format!(
+                    "{at}: the broker refused the user name or password: check --mqtt-user and its password ({PASSWORD_ENV} or --mqtt-password-file)"
+                ),
+                ConnectReturnCode::NotAuthorized => format!(
+                    "{at}: the broker refused the login as not authorised: check --mqtt-user and its password ({PASSWORD_ENV} or --mqtt-password-file), or the client certificate (--mqtt-cert, --mqtt-key)"
+                ),
+                ConnectReturnCode::BadClientId => format!("{at}: the broker refused the client id (another client with it?)"),
+                other => format!("{at}: the broker refused the connection ({other:?})"),
+            };
+            return Failure { text, refused: true };
+        }
+        if let Some(r) = crate::tls::rustls_error(e) {
+            return Failure {
+                text: crate::tls::explain(r, &hostport, &self.host, "--mqtt", "mqtt://"),
+                refused: true,
+            };
+        }
+        if let ConnectionError::Tls(rumqttc::TlsError::Io(io)) = e {
+            // Closed mid-handshake without a TLS alert: a plain listener
+            // reading the ClientHello as a broken MQTT packet.
+            return Failure {
+                text: format!(
+                    "{hostport} does not answer in TLS (the connection closed during the handshake: {io}): is it a plain listener? Use mqtt:// for it, or the broker's TLS port"
+                ),
+                refused: true,
+            };
+        }
+        // The I/O error under the client's wrappers, if any.
+        let mut io_kind = None;
+        let mut cur: Option<&(dyn std::error::Error + 'static)> = Some(e);
+        while let Some(err) = cur {
+            if let Some(io) = err.downcast_ref::<std::io::Error>() {
+                io_kind = Some(io.kind());
+                break;
+            }
+            cur = err.source();
+        }
+        match io_kind {
+            Some(std::io::ErrorKind::ConnectionRefused) => Failure {
+                text: format!("{at}: nothing listens there (connection refused): is the broker running?"),
+                refused: false,
+            },
+            _ if !acked && self.tls.is_none() && !matches!(e, ConnectionError::NetworkTimeout) => Failure {
+                text: format!(
+                    "{at}: the connection closed before the broker answered: if that port is a TLS listener, use mqtts:// ({e})"
+                ),
+                refused: true,
+            },
+            Some(std::io::ErrorKind::UnexpectedEof | std::io::ErrorKind::ConnectionReset) if !acked => Failure {
+                text: format!(
+                    "{at}: the broker closed the TLS connection before answering: it may want a client certificate (--mqtt-cert, --mqtt-key) or refuse this one"
+                ),
+                refused: true,
+            },
+            _ => Failure {
+                text: format!("{at}: {e}"),
+                refused: false,
+            },
+        }
+    }
+}
+
+/// Why a connection ended, for the user: `refused` when the broker (or
+/// its TLS) said no, which retrying soon will not change.
+#[derive(Debug, Clone)]
+struct Failure {
+    text: String,
+    refused: bool,
 }
 
 /// One message, as queued and as buffered on disk.
@@ -130,13 +351,52 @@ pub struct Counters {
     pub replayed: AtomicU64,
     pub buffered: AtomicU64,
     pub dropped: AtomicU64,
+    /// Damaged records found in the outage buffer and skipped.
+    pub damaged: AtomicU64,
     pub online: AtomicBool,
+    /// The broker's latest refusal, until a connection succeeds.
+    pub refusal: Mutex<Option<String>>,
+    /// Things to show the user (refusals, TLS warnings), taken by the monitor.
+    pub notes: Mutex<Vec<String>>,
 }
 
-/// The outage buffer: a queue in memory, mirrored line by line on disk.
+impl Counters {
+    fn note(&self, text: String) {
+        self.notes.lock().unwrap_or_else(|e| e.into_inner()).push(text);
+    }
+
+    /// The notes since the last call.
+    pub fn take_notes(&self) -> Vec<String> {
+        std::mem::take(&mut *self.notes.lock().unwrap_or_else(|e| e.into_inner()))
+    }
+
+    /// The broker's refusal, if the latest connection was refused.
+    pub fn refused(&self) -> Option<String> {
+        self.refusal.lock().unwrap_or_else(|e| e.into_inner()).clone()
+    }
+
+    /// Data this publisher lost, or did not deliver (the broker refused or
+    /// stayed away; what waits in the buffer goes out with the next run):
+    /// what makes a run end non-zero.
+    pub fn undelivered(&self) -> bool {
+        self.dropped.load(Ordering::Relaxed) > 0
+            || self.damaged.load(Ordering::Relaxed) > 0
+            || self.buffered.load(Ordering::Relaxed) > 0
+            || self.refused().is_some()
+    }
+}
+
+/// The outage buffer: a queue in memory, mirrored record by record on disk.
+///
+/// A record is a line `<crc32 of the JSON, 8 hex digits> <JSON>`: a record
+/// damaged on disk (a flipped digit, garbage, a line cut by a crash or a
+/// full disk) fails its checksum and is skipped and counted, never sent as
+/// data; the intact ones around it are replayed. A file that cannot be read
+/// at all is renamed aside and a new one started. Without a usable file the
+/// buffer keeps to memory, and says so.
 struct Buffer {
     path: PathBuf,
-    file: File,
+    file: Option<File>,
     queue: VecDeque<(Message, usize)>,
     bytes: usize,
     cap: usize,
@@ -144,45 +404,132 @@ struct Buffer {
     stale: bool,
 }
 
+/// What opening a buffer found wrong: damaged records skipped, a file set aside.
+#[derive(Debug, Default)]
+struct Damage {
+    records: u64,
+    notes: Vec<String>,
+}
+
+/// One record's line, newline included.
+fn record(m: &Message) -> Result<String> {
+    let json = serde_json::to_string(m)?;
+    Ok(format!("{:08x} {json}\n", crc32fast::hash(json.as_bytes())))
+}
+
+/// A record's message, if the line is whole and its checksum holds.
+fn parse_record(line: &[u8]) -> Option<Message> {
+    let (crc, json) = (line.get(..8)?, line.get(9..)?);
+    if line[8] != b' ' {
+        return None;
+    }
+    let crc = u32::from_str_radix(std::str::from_utf8(crc).ok()?, 16).ok()?;
+    (crc32fast::hash(json) == crc)
+        .then(|| serde_json::from_slice(json).ok())
+        .flatten()
+}
+
 impl Buffer {
-    fn open(path: &Path, cap: usize) -> Result<Self> {
-        if let Some(dir) = path.parent() {
-            std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-        }
+    fn open(path: &Path, cap: usize) -> (Self, Damage) {
+        let mut damage = Damage::default();
         let mut queue = VecDeque::new();
         let mut bytes = 0;
-        if let Ok(f) = File::open(path) {
-            for line in BufReader::new(f).lines() {
-                let line = line.with_context(|| format!("reading {}", path.display()))?;
-                // A line cut by a crash is skipped: it never was a message.
-                if let Ok(m) = serde_json::from_str::<Message>(&line) {
-                    bytes += line.len() + 1;
-                    queue.push_back((m, line.len() + 1));
+        let mut read = Vec::new();
+        let readable = match crate::private_files::open_read(path) {
+            Ok(mut f) => f.read_to_end(&mut read).map(|_| true),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(false),
+            Err(e) => Err(e),
+        };
+        match readable {
+            Ok(_) => {
+                let mut lines: Vec<&[u8]> = read.split(|&b| b == b'\n').collect();
+                // What follows the last newline: nothing, or a record cut short.
+                let tail = lines.pop().unwrap_or_default();
+                for line in lines.into_iter().chain((!tail.is_empty()).then_some(tail)) {
+                    match parse_record(line) {
+                        Some(m) => {
+                            bytes += line.len() + 1;
+                            queue.push_back((m, line.len() + 1));
+                        }
+                        None if line.is_empty() => {}
+                        None => damage.records += 1,
+                    }
+                }
+            }
+            Err(e) => {
+                let aside = path.with_extension(format!(
+                    "jsonl.unreadable-{}",
+                    std::time::SystemTime::now()
+                        .duration_since(std::time::UNIX_EPOCH)
+                        .map_or(0, |d| d.as_secs())
+                ));
+                match std::fs::rename(path, &aside) {
+                    Ok(()) => damage.notes.push(format!(
+                        "the outage buffer {} could not be read ({e}): set aside as {}; a new one is started",
+                        path.display(),
+                        aside.display()
+                    )),
+                    Err(e2) => damage.notes.push(format!(
+                        "the outage buffer {} could not be read ({e}) nor set aside ({e2})",
+                        path.display()
+                    )),
                 }
             }
         }
-        let file = OpenOptions::new()
-            .create(true)
-            .append(true)
-            .open(path)
-            .with_context(|| format!("opening {}", path.display()))?;
-        Ok(Self {
+        if damage.records > 0 {
+            damage.notes.push(format!(
+                "{} damaged records in the outage buffer {} skipped; {} intact ones kept for replay",
+                damage.records,
+                path.display(),
+                queue.len()
+            ));
+        }
+        let mut b = Self {
             path: path.to_path_buf(),
-            file,
+            file: None,
             queue,
             bytes,
             cap,
             stale: false,
-        })
+        };
+        // The file from now on holds exactly the intact records.
+        let reopened = if damage.records > 0 {
+            b.rewrite()
+        } else {
+            crate::private_files::open_append(path)
+                .map(|f| b.file = Some(f))
+                .with_context(|| format!("opening {}", path.display()))
+        };
+        if let Err(e) = reopened {
+            damage.notes.push(format!(
+                "the outage buffer {} cannot be written ({e:#}): buffering in memory only",
+                path.display()
+            ));
+        }
+        (b, damage)
     }
 
-    /// Appends; beyond the cap drops the oldest and returns how many.
-    fn push_back(&mut self, m: Message) -> Result<u64> {
-        let line = serde_json::to_string(&m)?;
-        self.file.write_all(line.as_bytes())?;
-        self.file.write_all(b"\n")?;
-        self.bytes += line.len() + 1;
-        self.queue.push_back((m, line.len() + 1));
+    /// Appends; beyond the cap drops the oldest and returns how many. A
+    /// failed write (a full disk) cuts the file back to its last whole
+    /// record and keeps the message in memory: the error says so.
+    fn push_back(&mut self, m: Message) -> (u64, Option<anyhow::Error>) {
+        let line = match record(&m) {
+            Ok(l) => l,
+            Err(e) => return (1, Some(e)),
+        };
+        let mut failed = None;
+        if let Some(f) = self.file.as_mut() {
+            let len = f.metadata().map(|m| m.len());
+            if let Err(e) = f.write_all(line.as_bytes()) {
+                if let Ok(len) = len {
+                    let _ = f.set_len(len);
+                }
+                self.file = None;
+                failed = Some(anyhow::Error::new(e).context(format!("writing {}", self.path.display())));
+            }
+        }
+        self.bytes += line.len();
+        self.queue.push_back((m, line.len()));
         let mut dropped = 0;
         while self.bytes > self.cap && self.queue.len() > 1 {
             let (_, n) = self.queue.pop_front().expect("non-empty");
@@ -190,15 +537,17 @@ impl Buffer {
             dropped += 1;
         }
         if dropped > 0 {
-            self.rewrite()?;
+            if let Err(e) = self.rewrite() {
+                failed.get_or_insert(e);
+            }
         }
-        Ok(dropped)
+        (dropped, failed)
     }
 
     /// Puts messages that were in flight back at the front, in order.
     fn push_front_all(&mut self, ms: Vec<Message>) -> Result<()> {
         for m in ms.into_iter().rev() {
-            let n = serde_json::to_string(&m)?.len() + 1;
+            let n = record(&m)?.len();
             self.bytes += n;
             self.queue.push_front((m, n));
         }
@@ -212,26 +561,68 @@ impl Buffer {
         Some(m)
     }
 
-    /// The file holds exactly the queue.
+    /// The file holds exactly the queue: written to a fresh temporary file
+    /// (created exclusively, removed on failure), then renamed over it.
     fn rewrite(&mut self) -> Result<()> {
-        let tmp = self.path.with_extension("jsonl.tmp");
-        let mut f = File::create(&tmp)?;
-        for (m, _) in &self.queue {
-            serde_json::to_writer(&mut f, m)?;
-            f.write_all(b"\n")?;
+        let (tmp, mut f) = crate::private_files::create_temp(&self.path)
+            .with_context(|| format!("a temporary file beside {}", self.path.display()))?;
+        let written = (|| -> Result<()> {
+            let mut w = std::io::BufWriter::new(&mut f);
+            for (m, _) in &self.queue {
+                w.write_all(record(m)?.as_bytes())?;
+            }
+            w.flush()?;
+            drop(w);
+            f.sync_all()?;
+            std::fs::rename(&tmp, &self.path)?;
+            Ok(())
+        })();
+        if let Err(e) = written {
+            let _ = std::fs::remove_file(&tmp);
+            // The old file no longer matches the queue: memory only, until
+            // a rewrite succeeds.
+            self.file = None;
+            return Err(e).with_context(|| format!("rewriting {}", self.path.display()));
         }
-        f.sync_all()?;
-        std::fs::rename(&tmp, &self.path)?;
-        self.file = OpenOptions::new().append(true).open(&self.path)?;
+        self.file = Some(
+            crate::private_files::open_append(&self.path)
+                .with_context(|| format!("opening {}", self.path.display()))?,
+        );
         self.stale = false;
         Ok(())
+    }
+}
+
+/// The outage buffer's directory: `requested`, or by default the user's
+/// own (`$XDG_STATE_HOME/hammer/mqtt-buffer`, `~/.local/state/…`), used
+/// only if private to this user. Otherwise a fresh private one, and a note
+/// saying why.
+pub fn buffer_dir(requested: Option<&Path>) -> Result<(PathBuf, Option<String>)> {
+    let wanted = match requested {
+        Some(d) => d.to_path_buf(),
+        None => match crate::private_files::state_dir() {
+            Some(s) => s.join("hammer").join("mqtt-buffer"),
+            None => std::env::temp_dir().join(format!("hammer-mqtt-buffer-{}", crate::private_files::euid())),
+        },
+    };
+    match crate::private_files::ensure_private_dir(&wanted) {
+        Ok(()) => Ok((wanted, None)),
+        Err(e) => {
+            let fresh = crate::private_files::fresh_private_dir("hammer-mqtt-buffer")?;
+            let note = format!(
+                "mqtt: the outage buffer directory is not used: {e:#} (another user could read or plant records there); \
+                 buffering in {} instead",
+                fresh.display()
+            );
+            Ok((fresh, Some(note)))
+        }
     }
 }
 
 /// Where and how a device publishes.
 #[derive(Debug, Clone)]
 pub struct Options {
-    pub url: String,
+    pub endpoint: Endpoint,
     pub site: String,
     pub device: String,
     pub buffer_dir: PathBuf,
@@ -250,13 +641,16 @@ pub struct Publisher {
 
 impl Publisher {
     pub fn start(o: Options) -> Result<Self> {
-        let (host, port) = parse_url(&o.url)?;
-        let buffer = Buffer::open(&o.buffer_dir.join(format!("{}.jsonl", o.device)), o.buffer_bytes)?;
+        let (buffer, damage) = Buffer::open(&o.buffer_dir.join(format!("{}.jsonl", o.device)), o.buffer_bytes);
         let counters = Arc::new(Counters::default());
+        counters.damaged.store(damage.records, Ordering::Relaxed);
+        for n in damage.notes {
+            counters.note(format!("mqtt {}: {n}", o.device));
+        }
         counters.buffered.store(buffer.queue.len() as u64, Ordering::Relaxed);
         let (tx, rx) = mpsc::channel();
         let state = topic(&o.site, &o.device, Kind::State);
-        let mut opts = MqttOptions::new(format!("hammer-{}-{}", o.site, o.device), host, port);
+        let mut opts = o.endpoint.options(format!("hammer-{}-{}", o.site, o.device));
         opts.set_keep_alive(Duration::from_secs(5));
         opts.set_clean_session(true);
         opts.set_last_will(LastWill::new(
@@ -267,6 +661,7 @@ impl Publisher {
         ));
         let mut session = Session {
             opts,
+            endpoint: o.endpoint.clone(),
             site: o.site.clone(),
             device: o.device.clone(),
             rx,
@@ -314,14 +709,22 @@ impl Publisher {
 
     /// [`Publisher::summary`] from the counters (also after the publisher stopped).
     pub fn describe(device: &str, c: &Counters) -> String {
-        format!(
+        let mut s = format!(
             "mqtt {}: {} published ({} replayed from the outage buffer), {} still buffered, {} dropped at the buffer's cap",
             device,
             c.published.load(Ordering::Relaxed),
             c.replayed.load(Ordering::Relaxed),
             c.buffered.load(Ordering::Relaxed),
             c.dropped.load(Ordering::Relaxed)
-        )
+        );
+        let damaged = c.damaged.load(Ordering::Relaxed);
+        if damaged > 0 {
+            s += &format!(", {damaged} damaged records in the buffer skipped");
+        }
+        if let Some(r) = c.refused() {
+            s += &format!("; NOT DELIVERED, refused: {r}");
+        }
+        s
     }
 }
 
@@ -338,6 +741,7 @@ impl Drop for Publisher {
 
 struct Session {
     opts: MqttOptions,
+    endpoint: Endpoint,
     site: String,
     device: String,
     rx: Receiver<Message>,
@@ -360,16 +764,15 @@ impl Session {
     }
 
     fn to_buffer(&mut self, m: Message) {
-        match self.buffer.push_back(m) {
-            Ok(dropped) => {
-                self.counters.dropped.fetch_add(dropped, Ordering::Relaxed);
-            }
-            Err(e) => {
-                eprintln!(
-                    "mqtt {}: the outage buffer failed ({e:#}); a message is lost",
+        let had_file = self.buffer.file.is_some();
+        let (dropped, failed) = self.buffer.push_back(m);
+        self.counters.dropped.fetch_add(dropped, Ordering::Relaxed);
+        if let Some(e) = failed {
+            if had_file {
+                self.counters.note(format!(
+                    "mqtt {}: the outage buffer failed ({e:#}); buffering in memory until it can be written",
                     self.device
-                );
-                self.counters.dropped.fetch_add(1, Ordering::Relaxed);
+                ));
             }
         }
         self.counters
@@ -443,18 +846,29 @@ impl Session {
         back.extend(self.unassigned.drain(..).map(|(m, _)| m));
         back.extend(self.live.drain(..));
         back.retain(|m| m.kind != Kind::State);
+        let had_file = self.buffer.file.is_some();
         if let Err(e) = self.buffer.push_front_all(back) {
-            eprintln!("mqtt {}: the outage buffer failed ({e:#})", self.device);
+            if had_file {
+                self.counters.note(format!(
+                    "mqtt {}: the outage buffer failed ({e:#}); buffering in memory until it can be written",
+                    self.device
+                ));
+            }
         }
         self.counters
             .buffered
             .store(self.buffer.queue.len() as u64, Ordering::Relaxed);
     }
 
-    /// One connection, until it fails or the monitor stops and all is sent.
-    fn connection(&mut self) {
+    /// One connection, until it fails (said how) or the monitor stops and
+    /// all is sent.
+    fn connection(&mut self) -> Option<Failure> {
+        if let Some(w) = self.endpoint.connection_warning() {
+            self.counters.note(w);
+        }
         let (client, mut conn): (Client, Connection) = Client::new(self.opts.clone(), MAX_INFLIGHT * 2);
         let mut drain_deadline = None;
+        let mut acked = false;
         loop {
             if !self.closing && !self.take_new() {
                 self.closing = true;
@@ -488,15 +902,40 @@ impl Session {
                         }
                     }
                     self.lost();
-                    return;
+                    return None;
                 }
             }
             if self.online() {
                 self.feed(&client);
             }
-            match conn.recv_timeout(Duration::from_millis(20)) {
+            // Until the broker has answered, the client is connecting (TCP,
+            // TLS, CONNECT): a timeout here would drop that half-made
+            // connection and start over, so a handshake slower than the
+            // poll (a remote broker) would never finish. It has its own
+            // timeout (5 s); new messages wait in the channel meanwhile.
+            let wait = if acked {
+                Duration::from_millis(20)
+            } else {
+                Duration::from_secs(30)
+            };
+            match conn.recv_timeout(wait) {
                 Ok(Ok(Event::Incoming(Packet::ConnAck(_)))) => {
+                    acked = true;
                     self.counters.online.store(true, Ordering::Relaxed);
+                    if self
+                        .counters
+                        .refusal
+                        .lock()
+                        .unwrap_or_else(|e| e.into_inner())
+                        .take()
+                        .is_some()
+                    {
+                        self.counters.note(format!(
+                            "mqtt {}: connected to {}",
+                            self.device,
+                            self.endpoint.describe()
+                        ));
+                    }
                     // Birth first, ahead of the replay.
                     if let Some(b) = self.birth.clone() {
                         let t = topic(&self.site, &self.device, Kind::State);
@@ -529,23 +968,75 @@ impl Session {
                     }
                 }
                 Ok(Ok(_)) => {}
-                Ok(Err(_)) | Err(RecvTimeoutError::Disconnected) => {
+                Ok(Err(e)) => {
                     self.lost();
-                    return;
+                    return Some(self.endpoint.failure(&e, acked));
+                }
+                Err(RecvTimeoutError::Disconnected) => {
+                    self.lost();
+                    return Some(Failure {
+                        text: format!("{}: the MQTT client stopped", self.endpoint.describe()),
+                        refused: false,
+                    });
                 }
                 Err(RecvTimeoutError::Timeout) => {}
             }
         }
     }
 
+    /// Says a failure once (not at every retry) and keeps a refusal for the
+    /// dashboard and the closing line.
+    fn report(&mut self, f: &Failure, last: &mut Option<String>) {
+        if last.as_deref() != Some(f.text.as_str()) {
+            self.counters.note(format!("mqtt {}: {}", self.device, f.text));
+            *last = Some(f.text.clone());
+        }
+        *self.counters.refusal.lock().unwrap_or_else(|e| e.into_inner()) = f.refused.then(|| f.text.clone());
+    }
+
     fn run(&mut self) {
+        self.run_connections();
+        if self.buffer.file.is_none() && !self.buffer.queue.is_empty() {
+            // One more try to keep them for the next run.
+            if self.buffer.rewrite().is_err() {
+                let n = self.buffer.queue.len() as u64;
+                self.counters.dropped.fetch_add(n, Ordering::Relaxed);
+                self.counters.note(format!(
+                    "mqtt {}: {n} undelivered messages could not be written to the outage buffer {} and are lost",
+                    self.device,
+                    self.buffer.path.display()
+                ));
+                self.counters.buffered.store(0, Ordering::Relaxed);
+            }
+        }
+    }
+
+    fn run_connections(&mut self) {
+        let mut backoff = RETRY;
+        let mut last = None;
         loop {
-            self.connection();
+            let failure = self.connection();
+            if let Some(f) = &failure {
+                self.report(f, &mut last);
+            }
             if self.closing {
                 return;
             }
+            // A refusal waits longer each time; anything else (the broker
+            // away) is asked again every RETRY.
+            let pause = match &failure {
+                Some(f) if f.refused => {
+                    let p = backoff;
+                    backoff = (backoff * 2).min(MAX_BACKOFF);
+                    p
+                }
+                _ => {
+                    backoff = RETRY;
+                    RETRY
+                }
+            };
             // Offline: keep buffering while waiting to retry.
-            let until = std::time::Instant::now() + RETRY;
+            let until = std::time::Instant::now() + pause;
             while std::time::Instant::now() < until {
                 if !self.take_new() {
                     self.closing = true;
@@ -555,7 +1046,9 @@ impl Session {
             }
             if self.closing {
                 // One last try to deliver, then keep the rest on disk.
-                self.connection();
+                if let Some(f) = self.connection() {
+                    self.report(&f, &mut last);
+                }
                 return;
             }
         }
@@ -568,53 +1061,198 @@ mod tests {
 
     #[test]
     fn urls_parse_or_say_what_is_wrong() {
-        assert_eq!(parse_url("mqtt://127.0.0.1:1884").unwrap(), ("127.0.0.1".into(), 1884));
-        assert_eq!(parse_url("mqtt://broker").unwrap(), ("broker".into(), 1883));
-        assert!(parse_url("mqtts://b").is_err());
+        assert_eq!(
+            parse_url("mqtt://127.0.0.1:1884").unwrap(),
+            ("127.0.0.1".into(), 1884, false)
+        );
+        assert_eq!(parse_url("mqtt://broker").unwrap(), ("broker".into(), 1883, false));
+        assert_eq!(parse_url("mqtts://b").unwrap(), ("b".into(), 8883, true));
+        assert!(parse_url("mqtts://u:secret@b").is_err(), "no credentials in a URL");
+        assert!(parse_url("ssl://b").is_err());
         assert!(parse_url("mqtt://:1883").is_err());
         assert!(parse_url("mqtt://b:x").is_err());
     }
 
-    #[test]
-    fn the_buffer_keeps_order_survives_a_restart_and_drops_the_oldest_at_its_cap() {
-        let dir = std::env::temp_dir().join(format!("hammer-mqtt-buf-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        let path = dir.join("d.jsonl");
-        let msg = |k: u64| Message {
+    fn msg(k: u64) -> Message {
+        Message {
             kind: Kind::Cycle,
             body: json!({"publish_seq": k, "friction_n": 10.27}),
-        };
-        let mut b = Buffer::open(&path, 10_000).unwrap();
+        }
+    }
+
+    fn scratch(name: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("hammer-mqtt-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        crate::private_files::ensure_private_dir(&dir).unwrap();
+        dir
+    }
+
+    fn seqs(b: &Buffer) -> Vec<u64> {
+        b.queue
+            .iter()
+            .map(|(m, _)| m.body["publish_seq"].as_u64().unwrap())
+            .collect()
+    }
+
+    #[test]
+    fn the_buffer_keeps_order_survives_a_restart_and_drops_the_oldest_at_its_cap() {
+        let dir = scratch("buf");
+        let path = dir.join("d.jsonl");
+        let (mut b, damage) = Buffer::open(&path, 10_000);
+        assert_eq!(damage.records, 0);
         for k in 0..10 {
-            assert_eq!(b.push_back(msg(k)).unwrap(), 0);
+            assert_eq!(b.push_back(msg(k)).0, 0);
         }
         assert_eq!(b.pop_front().unwrap().body["publish_seq"], 0);
         b.push_front_all(vec![msg(0)]).unwrap();
         drop(b);
-        let mut b = Buffer::open(&path, 10_000).unwrap();
-        let seqs: Vec<u64> = b
-            .queue
-            .iter()
-            .map(|(m, _)| m.body["publish_seq"].as_u64().unwrap())
-            .collect();
-        assert_eq!(seqs, (0..10).collect::<Vec<_>>());
+        use std::os::unix::fs::PermissionsExt;
+        assert_eq!(std::fs::metadata(&path).unwrap().permissions().mode() & 0o777, 0o600);
+        let (mut b, _) = Buffer::open(&path, 10_000);
+        assert_eq!(seqs(&b), (0..10).collect::<Vec<_>>());
         // A cap of about 5 messages: the oldest go, counted, the newest stay.
         let one = b.queue[0].1;
         b.cap = 5 * one + 2;
-        let dropped = b.push_back(msg(10)).unwrap();
+        let (dropped, failed) = b.push_back(msg(10));
+        assert!(failed.is_none());
         assert!(b.bytes <= b.cap, "{} bytes over a cap of {}", b.bytes, b.cap);
         assert_eq!(b.queue.len() as u64, 11 - dropped);
         assert!((6..=7).contains(&dropped), "{dropped}");
         assert_eq!(b.queue.front().unwrap().0.body["publish_seq"], dropped);
         assert_eq!(b.queue.back().unwrap().0.body["publish_seq"], 10);
         drop(b);
-        let b = Buffer::open(&path, usize::MAX).unwrap();
+        let (b, _) = Buffer::open(&path, usize::MAX);
         assert_eq!(
             b.queue.len() as u64,
             11 - dropped,
             "the file holds what the queue holds"
         );
+        let leftovers: Vec<_> = std::fs::read_dir(&dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        assert_eq!(leftovers, ["d.jsonl"], "no temporary file left");
         let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// Ten good records, one of them damaged the way `damage` does it (which
+    /// may add damaged lines): the other nine come back in order, the
+    /// `damaged` lines are counted, and the file is clean after.
+    fn damaged_buffer_keeps_the_intact(name: &str, damaged: u64, damage: impl Fn(&mut Vec<u8>)) {
+        let dir = scratch(name);
+        let path = dir.join("d.jsonl");
+        let (mut b, _) = Buffer::open(&path, usize::MAX);
+        for k in 0..10 {
+            b.push_back(msg(k));
+        }
+        drop(b);
+        let mut bytes = std::fs::read(&path).unwrap();
+        damage(&mut bytes);
+        std::fs::write(&path, &bytes).unwrap();
+        let (b, d) = Buffer::open(&path, usize::MAX);
+        assert_eq!(d.records, damaged, "{name}: the damaged records counted");
+        assert!(
+            d.notes[0].contains(&format!("{damaged} damaged records")),
+            "{:?}",
+            d.notes
+        );
+        let kept = seqs(&b);
+        assert_eq!(kept.len(), 9, "{name}: {kept:?}");
+        assert!(kept.windows(2).all(|w| w[0] < w[1]), "{name}: in order");
+        assert!(
+            b.queue.iter().all(|(m, _)| m.body["friction_n"] == 10.27),
+            "{name}: no damaged value passes"
+        );
+        drop(b);
+        let (b, d) = Buffer::open(&path, usize::MAX);
+        assert_eq!((d.records, b.queue.len()), (0, 9), "{name}: counted once");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn a_flipped_digit_fails_its_checksum() {
+        damaged_buffer_keeps_the_intact("flip", 1, |b| {
+            let text = String::from_utf8(b.clone()).unwrap();
+            let third = text.match_indices("10.27").nth(3).unwrap().0;
+            b[third + 1] = b'1'; // 10.27 -> 11.27, still JSON
+        });
+    }
+
+    #[test]
+    fn an_invalid_utf8_byte_costs_its_record_only() {
+        damaged_buffer_keeps_the_intact("utf8", 1, |b| {
+            let second_line = b.iter().position(|&c| c == b'\n').unwrap() + 20;
+            b[second_line] = 0xff;
+        });
+    }
+
+    #[test]
+    fn appended_garbage_or_a_torn_record_is_skipped() {
+        damaged_buffer_keeps_the_intact("garbage", 3, |b| {
+            // The first record replaced by binary garbage of the same length.
+            let end = b.iter().position(|&c| c == b'\n').unwrap();
+            for (i, c) in b[..end].iter_mut().enumerate() {
+                *c = (i as u8).wrapping_mul(37) | 0x80;
+            }
+            // and a byte of garbage appended after the last record, then a
+            // record cut short by a crash.
+            b.extend_from_slice(b"\xff\n");
+            b.extend_from_slice(b"0badc0de {\"kind\":\"cy");
+        });
+    }
+
+    #[test]
+    fn an_unreadable_buffer_is_set_aside_and_a_new_one_started() {
+        let dir = scratch("unreadable");
+        let path = dir.join("d.jsonl");
+        // A directory where the file should be: opens, cannot be read.
+        std::fs::create_dir(&path).unwrap();
+        let (mut b, d) = Buffer::open(&path, usize::MAX);
+        assert!(d.notes.iter().any(|n| n.contains("set aside")), "{:?}", d.notes);
+        assert!(b.file.is_some());
+        assert!(b.push_back(msg(1)).1.is_none(), "publishing goes on with a new file");
+        drop(b);
+        let (b, _) = Buffer::open(&path, usize::MAX);
+        assert_eq!(seqs(&b), [1]);
+        let names: Vec<String> = std::fs::read_dir(&dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        assert!(names.iter().any(|n| n.starts_with("d.jsonl.unreadable-")), "{names:?}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn a_planted_symlink_is_never_followed() {
+        let dir = scratch("plant");
+        let victim = dir.join("victim.txt");
+        std::fs::write(&victim, "the victim's data\n").unwrap();
+        let path = dir.join("d.jsonl");
+        std::os::unix::fs::symlink(&victim, &path).unwrap();
+        let (mut b, d) = Buffer::open(&path, usize::MAX);
+        assert!(d.notes.iter().any(|n| n.contains("set aside")), "{:?}", d.notes);
+        b.push_back(msg(1));
+        b.push_front_all(vec![msg(0)]).unwrap();
+        drop(b);
+        assert_eq!(std::fs::read_to_string(&victim).unwrap(), "the victim's data\n");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn a_shared_buffer_directory_is_refused_for_a_private_one() {
+        use std::os::unix::fs::PermissionsExt;
+        let dir = scratch("shared");
+        std::fs::set_permissions(&dir, std::fs::Permissions::from_mode(0o1777)).unwrap();
+        let (used, note) = buffer_dir(Some(&dir)).unwrap();
+        assert_ne!(used, dir);
+        let note = note.expect("says so");
+        assert!(
+            note.contains("writable by other users") && note.contains(&used.display().to_string()),
+            "{note}"
+        );
+        assert_eq!(std::fs::metadata(&used).unwrap().permissions().mode() & 0o777, 0o700);
+        let _ = std::fs::remove_dir_all(&dir);
+        let _ = std::fs::remove_dir_all(&used);
     }
 
     #[test]
@@ -633,9 +1271,11 @@ mod tests {
 /// `hammer mqtt-tail`.
 #[derive(clap::Args, Debug, Clone)]
 pub struct TailArgs {
-    /// The broker, mqtt://HOST[:PORT].
+    /// The broker, mqtt://HOST[:PORT] or mqtts://HOST[:PORT].
     #[arg(long, value_name = "URL")]
     pub mqtt: String,
+    #[command(flatten)]
+    pub broker: BrokerArgs,
     /// The site whose devices to show.
     #[arg(long, default_value = "lab")]
     pub site: String,
@@ -676,18 +1316,25 @@ pub fn tail_line(topic: &str, payload: &[u8]) -> Option<String> {
 }
 
 pub fn tail(args: &TailArgs) -> Result<()> {
-    let (host, port) = parse_url(&args.mqtt)?;
-    let mut opts = MqttOptions::new(format!("hammer-tail-{}", std::process::id()), host, port);
+    let endpoint = Endpoint::resolve(&args.mqtt, &args.broker)?;
+    let mut opts = endpoint.options(format!("hammer-tail-{}", std::process::id()));
     opts.set_keep_alive(Duration::from_secs(5));
     let (client, mut conn) = Client::new(opts, 16);
     let filter = format!("hammer/{}/#", args.site);
     let mut cycles = 0u64;
     let mut out = std::io::stdout().lock();
-    let mut errors = 0u32;
+    let mut last: Option<String> = None;
+    let mut backoff = RETRY;
+    let mut acked = false;
+    if let Some(w) = endpoint.connection_warning() {
+        eprintln!("{w}");
+    }
     loop {
         match conn.recv() {
             Ok(Ok(Event::Incoming(Packet::ConnAck(_)))) => {
-                errors = 0;
+                acked = true;
+                last = None;
+                backoff = RETRY;
                 client.subscribe(filter.clone(), QoS::AtLeastOnce)?;
             }
             Ok(Ok(Event::Incoming(Packet::Publish(p)))) => {
@@ -705,11 +1352,23 @@ pub fn tail(args: &TailArgs) -> Result<()> {
             }
             Ok(Ok(_)) => {}
             Ok(Err(e)) => {
-                errors += 1;
-                if errors == 1 {
-                    eprintln!("mqtt-tail: {e}; retrying every second");
+                let f = endpoint.failure(&e, acked);
+                acked = false;
+                let pause = if f.refused {
+                    let p = backoff;
+                    backoff = (backoff * 2).min(MAX_BACKOFF);
+                    p
+                } else {
+                    RETRY
+                };
+                if last.as_deref() != Some(f.text.as_str()) {
+                    eprintln!("mqtt-tail: {}; trying again in {} s", f.text, pause.as_secs());
+                    last = Some(f.text);
                 }
-                std::thread::sleep(RETRY);
+                std::thread::sleep(pause);
+                if let Some(w) = endpoint.connection_warning() {
+                    eprintln!("{w}");
+                }
             }
             Err(_) => bail!("the MQTT connection ended"),
         }

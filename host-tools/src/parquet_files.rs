@@ -437,17 +437,10 @@ impl Drop for PartitionedWriter {
     }
 }
 
-/// A reader never sees a half-written file: write beside it, then rename.
+/// A reader never sees a half-written file, and a failed one leaves no
+/// temporary file behind ([`crate::private_files::write_complete`]).
 fn write_atomically(path: &Path, rows: &[Row]) -> Result<()> {
-    let tmp = path.with_extension("parquet.tmp");
-    let file = File::create(&tmp).with_context(|| format!("creating {}", tmp.display()))?;
-    let mut out = std::io::BufWriter::new(file);
-    write(&mut out, rows).with_context(|| format!("writing {}", tmp.display()))?;
-    out.into_inner()
-        .map_err(|e| e.into_error())
-        .and_then(|f| f.sync_all())
-        .with_context(|| format!("writing {}", tmp.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| format!("renaming {} to {}", tmp.display(), path.display()))
+    crate::private_files::write_complete(path, 0o644, |out| write(out, rows))
 }
 
 #[cfg(test)]

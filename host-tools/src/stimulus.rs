@@ -207,6 +207,27 @@ impl Stimulus {
     }
 }
 
+impl Stimulus {
+    /// Removes the file's name once the board runs on it (its ADC has
+    /// written its uptime, so QEMU has the file mapped; the mapping
+    /// outlives the name): a run killed with SIGKILL then leaves nothing in
+    /// /dev/shm. True once done.
+    pub fn unlink_once_mapped(&self) -> bool {
+        if self.header().uptime_us.load(Ordering::Relaxed) == 0 {
+            return false;
+        }
+        match std::fs::remove_file(&self.path) {
+            Ok(()) => true,
+            Err(e) => e.kind() == io::ErrorKind::NotFound,
+        }
+    }
+
+    /// The backing file's path (gone once [`Stimulus::unlink_once_mapped`] succeeded).
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+}
+
 impl Drop for Stimulus {
     fn drop(&mut self) {
         let _ = std::fs::remove_file(&self.path);

@@ -1017,11 +1017,56 @@ fn flash_dry_run_plans_the_reference_image_and_refuses_other_images() {
     assert!(err.contains("outside STM32G474RETx's flash"), "{err}");
     let (code, _, err) = hammer(&["flash", "--dry-run", env!("CARGO_BIN_EXE_hammer")]);
     assert_eq!(code, 2, "{err}");
-    assert!(
-        err.contains("not a 32-bit ELF") || err.contains("another architecture"),
-        "{err}"
+    assert!(err.contains("a 64-bit ELF for x86-64"), "{err}");
+    // A device is refused at once, not read without end.
+    let t = std::time::Instant::now();
+    let (code, _, err) = hammer(&["flash", "--dry-run", "/dev/zero"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("not a regular file"), "{err}");
+    println!(
+        "flash --dry-run /dev/zero: refused in {:.2} s",
+        t.elapsed().as_secs_f64()
     );
     let (code, _, err) = hammer(&["flash", "--dry-run", "--chip", "NoSuchChip"]);
     assert_eq!(code, 2);
     assert!(err.contains("unknown chip"), "{err}");
+}
+
+/// A demo killed with SIGKILL leaves no 16 MiB stimulus file in /dev/shm:
+/// its name goes as soon as the emulated board runs on it.
+#[test]
+fn a_killed_demo_leaves_no_stimulus_file_behind() {
+    emulated_board_is_there();
+    use std::io::BufRead;
+    let mut demo = Command::new(env!("CARGO_BIN_EXE_hammer"))
+        .args(["demo", "--headless", "--real-time", "--cycles", "1000"])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let prefix = format!("hammer-stimulus-{}-", demo.id());
+    let leftovers = || -> Vec<String> {
+        std::fs::read_dir("/dev/shm")
+            .into_iter()
+            .flatten()
+            .flatten()
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .filter(|n| n.starts_with(&prefix))
+            .collect()
+    };
+    let lines = std::io::BufReader::new(demo.stdout.take().unwrap()).lines();
+    let mut reports = 0;
+    for l in lines.map_while(Result::ok) {
+        if l.starts_with("cycle ") {
+            reports += 1;
+            if reports == 5 {
+                break;
+            }
+        }
+    }
+    assert_eq!(reports, 5, "the board ran");
+    assert_eq!(leftovers(), Vec::<String>::new(), "unlinked while running");
+    demo.kill().unwrap();
+    demo.wait().unwrap();
+    assert_eq!(leftovers(), Vec::<String>::new(), "nothing left after SIGKILL");
 }

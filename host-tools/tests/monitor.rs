@@ -1245,3 +1245,60 @@ fn the_fleet_dashboard_shows_each_board_and_switches_between_them() {
     tmux.wait_text("> demo2-7.0bar");
     tmux.quit();
 }
+
+/// A stream whose sequence runs backwards "restarts" at every report: the
+/// headless output and link.log say so a few times a second, then how many
+/// they did not list, instead of a line per report.
+#[test]
+fn a_sequence_running_backwards_is_reported_a_few_times_not_per_report() {
+    let f = fixture();
+    let dir = tmp_dir("seq-backwards");
+    let (listener, port) = listen();
+    let mut child = spawn(
+        hammer(&[
+            "monitor",
+            "--port",
+            &format!("tcp:127.0.0.1:{port}"),
+            "--headless",
+            "--exit-after-reports",
+            "201",
+            "--log",
+            dir.to_str().unwrap(),
+        ])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped()),
+    );
+    let lines = Lines::of(&mut child);
+    let mut peer = Peer::accept(&listener);
+    peer.handshake(PROTOCOL_VERSION);
+    let backwards = |seq: u32| CycleReport { seq, ..f.reports[0] };
+    // 200 reports in one burst, each a step back.
+    let burst: Vec<u8> = (0..200)
+        .flat_map(|k| frame(&DeviceMsg::Report(backwards(1000 - k))))
+        .collect();
+    peer.raw(&burst);
+    // A second later, one more: its line says how many were not listed.
+    std::thread::sleep(Duration::from_millis(1100));
+    peer.reports(&[backwards(800)]);
+    let (st, _, err) = child.finish(T);
+    let out = lines.rest();
+    assert!(st.success(), "{err}\n{out}");
+    let restarts = out.lines().filter(|l| l.contains("sequence restarted")).count();
+    assert!((2..=11).contains(&restarts), "{restarts} lines:\n{out}");
+    let held: u64 = out
+        .lines()
+        .filter_map(|l| {
+            l.split(" [")
+                .nth(1)?
+                .strip_suffix(" more not listed]")?
+                .parse::<u64>()
+                .ok()
+        })
+        .sum();
+    assert_eq!(held + restarts as u64, 200, "every restart listed or counted:\n{out}");
+    let log = read(&dir.join("link.log"));
+    let logged = log.lines().filter(|l| l.contains("sequence restarted")).count();
+    assert!(logged <= 21, "{logged} in link.log:\n{log}");
+    assert!(log.contains("more sequence gaps or restarts not listed"), "{log}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -8,14 +8,16 @@
 
 use std::collections::BTreeMap;
 use std::net::TcpListener;
-use std::path::Path;
-use std::process::{Child, Command, Stdio};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use rumqttc::{Client, Event, MqttOptions, Packet, QoS};
+use rumqttc::{Client, Event, MqttOptions, Packet, QoS, TlsConfiguration, Transport};
 use serde_json::Value;
+
+mod pki;
 
 fn mosquitto_present() -> bool {
     let ok = Command::new("mosquitto")
@@ -40,20 +42,33 @@ fn free_port() -> u16 {
 
 /// A broker on 127.0.0.1:`port` that keeps sessions across a restart.
 fn broker(dir: &Path, port: u16) -> Child {
+    broker_with(dir, port, "allow_anonymous true\n")
+}
+
+/// A broker on 127.0.0.1:`port` with `settings` for its listener (TLS,
+/// logins), keeping sessions across a restart; its log appended to
+/// `dir/mosquitto.log`. Started as root, Mosquitto drops to its own user:
+/// what it reads must be readable by others (test keys only).
+fn broker_with(dir: &Path, port: u16, settings: &str) -> Child {
     let conf = dir.join("mosquitto.conf");
     std::fs::write(
         &conf,
         format!(
-            "listener {port} 127.0.0.1\nallow_anonymous true\npersistence true\npersistence_location {}/\n",
-            dir.display()
+            "listener {port} 127.0.0.1\n{settings}persistence true\npersistence_location {}/\nlog_dest stderr\nlog_type all\n",
+            dir.display(),
         ),
     )
     .unwrap();
+    let log = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(dir.join("mosquitto.log"))
+        .unwrap();
     let child = Command::new("mosquitto")
         .arg("-c")
         .arg(&conf)
         .stdout(Stdio::null())
-        .stderr(Stdio::null())
+        .stderr(log)
         .spawn()
         .unwrap();
     let deadline = Instant::now() + Duration::from_secs(10);
@@ -71,10 +86,30 @@ fn stop(mut b: Child) {
 }
 
 /// A subscriber with a persistent session: what the broker holds for it
-/// while it is away arrives when it is back.
-fn subscribe(port: u16, got: Arc<Mutex<Vec<(String, Value)>>>, stop: Arc<AtomicBool>) -> std::thread::JoinHandle<()> {
+/// while it is away arrives when it is back. Over TLS with `tls` (the CA
+/// and the login of [`tls_broker`]).
+fn subscribe(
+    port: u16,
+    got: Arc<Mutex<Vec<(String, Value)>>>,
+    stop: Arc<AtomicBool>,
+    tls: Option<&pki::Pki>,
+) -> std::thread::JoinHandle<()> {
+    let tls = tls.map(|p| {
+        hammer_host::tls::client_config(
+            &hammer_host::tls::TlsFiles {
+                ca: Some(p.ca.clone()),
+                ..Default::default()
+            },
+            "--test",
+        )
+        .unwrap()
+    });
     std::thread::spawn(move || {
         let mut opts = MqttOptions::new("hammer-test-sub", "127.0.0.1", port);
+        if let Some(cfg) = tls {
+            opts.set_transport(Transport::tls_with_config(TlsConfiguration::Rustls(cfg)));
+            opts.set_credentials(USER, PASSWORD);
+        }
         opts.set_clean_session(false);
         opts.set_keep_alive(Duration::from_secs(5));
         let (client, mut conn) = Client::new(opts, 64);
@@ -98,17 +133,34 @@ fn subscribe(port: u16, got: Arc<Mutex<Vec<(String, Value)>>>, stop: Arc<AtomicB
 
 #[test]
 fn every_report_arrives_once_in_order_through_a_broker_outage() {
-    if !mosquitto_present() {
-        return;
+    if mosquitto_present() {
+        through_an_outage(false);
     }
-    let dir = std::env::temp_dir().join(format!("hammer-mqtt-test-{}", std::process::id()));
+}
+
+/// The same over TLS with a password: the TLS session is set up again
+/// after the outage and nothing is lost.
+#[test]
+fn over_tls_with_a_password_every_report_arrives_once_in_order_through_a_broker_outage() {
+    if mosquitto_present() && pki::openssl_present() {
+        through_an_outage(true);
+    }
+}
+
+fn through_an_outage(tls: bool) {
+    let dir = std::env::temp_dir().join(format!("hammer-mqtt-test-{tls}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     let port = free_port();
-    let b = broker(&dir, port);
+    let pki = tls.then(|| pki::make(&dir.join("pki")));
+    let settings = match &pki {
+        Some(p) => tls_settings(&dir, p, ""),
+        None => "allow_anonymous true\n".to_string(),
+    };
+    let b = broker_with(&dir, port, &settings);
     let got = Arc::new(Mutex::new(vec![]));
     let done = Arc::new(AtomicBool::new(false));
-    let sub = subscribe(port, got.clone(), done.clone());
+    let sub = subscribe(port, got.clone(), done.clone(), pki.as_ref());
     let cycles = |got: &Mutex<Vec<(String, Value)>>| {
         got.lock()
             .unwrap()
@@ -119,15 +171,27 @@ fn every_report_arrives_once_in_order_through_a_broker_outage() {
     // The subscriber connects and subscribes within a moment.
     std::thread::sleep(Duration::from_secs(1));
     // 400 cycles at the hammer's own pace: about 19 s.
-    let demo = Command::new(env!("CARGO_BIN_EXE_hammer"))
-        .args(["demo", "--headless", "--real-time", "--cycles", "400"])
-        .args(["--mqtt", &format!("mqtt://127.0.0.1:{port}"), "--site", "ci"])
-        .arg("--mqtt-buffer")
-        .arg(dir.join("buffer"))
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let mut demo = Command::new(env!("CARGO_BIN_EXE_hammer"));
+    demo.args(["demo", "--headless", "--real-time", "--cycles", "400"])
+        .args(["--site", "ci", "--mqtt-buffer"])
+        .arg(dir.join("buffer"));
+    match &pki {
+        Some(p) => {
+            demo.args([
+                "--mqtt",
+                &format!("mqtts://127.0.0.1:{port}"),
+                "--mqtt-user",
+                USER,
+                "--mqtt-ca",
+            ])
+            .arg(&p.ca)
+            .env(hammer_host::mqtt::PASSWORD_ENV, PASSWORD);
+        }
+        None => {
+            demo.args(["--mqtt", &format!("mqtt://127.0.0.1:{port}")]);
+        }
+    }
+    let demo = demo.stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().unwrap();
     // Once reports flow, the broker goes away for 10 s, then comes back.
     let deadline = Instant::now() + Duration::from_secs(60);
     while cycles(&got) < 20 {
@@ -136,7 +200,7 @@ fn every_report_arrives_once_in_order_through_a_broker_outage() {
     }
     stop(b);
     std::thread::sleep(Duration::from_secs(10));
-    let b = broker(&dir, port);
+    let b = broker_with(&dir, port, &settings);
     let out = demo.wait_with_output().unwrap();
     let (stdout, stderr) = (
         String::from_utf8_lossy(&out.stdout),
@@ -220,6 +284,15 @@ fn every_report_arrives_once_in_order_through_a_broker_outage() {
     );
     assert_eq!(states.last().unwrap()["online"], false);
     assert!(stderr.contains("0 still buffered, 0 dropped"), "{stderr}");
+    assert_eq!(
+        pki::holders_of(
+            PASSWORD,
+            &dir.join("buffer"),
+            &[("stdout", &stdout), ("stderr", &stderr)]
+        ),
+        Vec::<String>::new(),
+        "the password leaked"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -254,22 +327,7 @@ fn two_boards_publish_their_births_and_reports() {
     std::fs::create_dir_all(&dir).unwrap();
     let port = free_port();
     let b = broker(&dir, port);
-    let sub = Command::new("mosquitto_sub")
-        .args([
-            "-h",
-            "127.0.0.1",
-            "-p",
-            &port.to_string(),
-            "-v",
-            "-q",
-            "1",
-            "-t",
-            "hammer/#",
-        ])
-        .stdout(Stdio::piped())
-        .spawn()
-        .expect("mosquitto_sub (Debian: mosquitto-clients)");
-    std::thread::sleep(Duration::from_secs(1));
+    let sub = mosquitto_sub(port, &[]);
     let out = Command::new(env!("CARGO_BIN_EXE_hammer"))
         .args(["demo", "--headless", "--devices", "2", "--cycles", "15"])
         .args(["--mqtt", &format!("mqtt://127.0.0.1:{port}")])
@@ -283,10 +341,15 @@ fn two_boards_publish_their_births_and_reports() {
         "{stdout}\n{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    std::thread::sleep(Duration::from_secs(1));
-    let _ = Command::new("kill").arg(sub.id().to_string()).status();
-    let seen_text = String::from_utf8_lossy(&sub.wait_with_output().unwrap().stdout).into_owned();
+    let seen_text = stop_sub(sub);
     stop(b);
+    assert_each_board_delivered(&stdout, &seen_text);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Both demo boards' births and every printed report of each, once, in
+/// order, with the printed friction, in `mosquitto_sub -v` output.
+fn assert_each_board_delivered(stdout: &str, seen_text: &str) {
     // "topic payload" lines.
     let got: Vec<(String, Value)> = seen_text
         .lines()
@@ -329,5 +392,601 @@ fn two_boards_publish_their_births_and_reports() {
             "no birth from {device}:\n{seen_text}"
         );
     }
+}
+
+/// The broker login of the TLS tests.
+const USER: &str = "hammer-site";
+/// Only in the demo's environment and (hashed) in the broker's password
+/// file: the tests grep every output and every file the run wrote for it.
+const PASSWORD: &str = "fleet-pw-7f3a9c";
+
+/// Listener settings for TLS with `cert`/`key`, logins from a password
+/// file made with `mosquitto_passwd`, then `extra`.
+fn tls_settings_with(dir: &Path, cert: &Path, key: &Path, extra: &str) -> String {
+    let passwd = dir.join("passwd");
+    if !passwd.exists() {
+        let ok = Command::new("mosquitto_passwd")
+            .args(["-c", "-b"])
+            .arg(&passwd)
+            .args([USER, PASSWORD])
+            .status()
+            .expect("mosquitto_passwd (Debian: mosquitto)");
+        assert!(ok.success());
+        use std::os::unix::fs::PermissionsExt;
+        std::fs::set_permissions(&passwd, std::fs::Permissions::from_mode(0o644)).unwrap();
+    }
+    format!(
+        "certfile {}\nkeyfile {}\nallow_anonymous false\npassword_file {}\n{extra}",
+        cert.display(),
+        key.display(),
+        passwd.display()
+    )
+}
+
+/// TLS with the server certificate for 127.0.0.1, logins by password.
+fn tls_settings(dir: &Path, p: &pki::Pki, extra: &str) -> String {
+    tls_settings_with(dir, &p.server_cert, &p.server_key, extra)
+}
+
+/// Runs `hammer demo --headless` with `args`, the outage buffer in
+/// `buffer`, and `password` (if any) in the environment.
+fn demo(args: &[String], buffer: &Path, password: Option<&str>) -> (Output, String, String) {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_hammer"));
+    c.args(["demo", "--headless"])
+        .args(args)
+        .arg("--mqtt-buffer")
+        .arg(buffer);
+    c.env_remove(hammer_host::mqtt::PASSWORD_ENV);
+    if let Some(p) = password {
+        c.env(hammer_host::mqtt::PASSWORD_ENV, p);
+    }
+    let out = c.output().unwrap();
+    let (stdout, stderr) = (
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    );
+    (out, stdout, stderr)
+}
+
+/// The seqs of the cycle reports a one-board demo printed.
+fn printed_seqs(stdout: &str) -> Vec<u64> {
+    stdout
+        .lines()
+        .filter_map(|l| {
+            let w: Vec<&str> = l.split_whitespace().collect();
+            (w.first() == Some(&"cycle")).then(|| w[1].parse().unwrap())
+        })
+        .collect()
+}
+
+/// The seqs of the cycle reports waiting in an outage buffer file (records
+/// `<crc32> <json>`).
+fn buffered_seqs(file: &Path) -> Vec<u64> {
+    std::fs::read_to_string(file)
+        .unwrap_or_default()
+        .lines()
+        .map(|l| serde_json::from_str::<Value>(&l[9..]).unwrap())
+        .filter(|v| v["kind"] == "cycle")
+        .map(|v| v["body"]["seq"].as_u64().unwrap())
+        .collect()
+}
+
+/// `mosquitto_sub -v` on everything under hammer/, with `args` for TLS.
+fn mosquitto_sub(port: u16, args: &[String]) -> Sub {
+    let mut child = Command::new("mosquitto_sub")
+        .args([
+            "-h",
+            "127.0.0.1",
+            "-p",
+            &port.to_string(),
+            "-v",
+            "-q",
+            "1",
+            "-t",
+            "hammer/#",
+        ])
+        .args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("mosquitto_sub (Debian: mosquitto-clients)");
+    let seen = Arc::new(Mutex::new((String::new(), Instant::now())));
+    let reader = {
+        let (stdout, seen) = (child.stdout.take().unwrap(), seen.clone());
+        std::thread::spawn(move || {
+            use std::io::BufRead;
+            for line in std::io::BufReader::new(stdout).lines().map_while(Result::ok) {
+                let mut s = seen.lock().unwrap();
+                s.0 += &line;
+                s.0.push('\n');
+                s.1 = Instant::now();
+            }
+        })
+    };
+    std::thread::sleep(Duration::from_secs(1));
+    Sub { child, seen, reader }
+}
+
+/// A running `mosquitto_sub` and what it printed so far, with when.
+struct Sub {
+    child: Child,
+    seen: Arc<Mutex<(String, Instant)>>,
+    reader: std::thread::JoinHandle<()>,
+}
+
+/// Stops the subscriber once it has printed nothing for 2 s (at most 20 s):
+/// what the broker still forwards arrives first.
+fn stop_sub(mut sub: Sub) -> String {
+    let deadline = Instant::now() + Duration::from_secs(20);
+    while sub.seen.lock().unwrap().1.elapsed() < Duration::from_secs(2) && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let _ = Command::new("kill").arg(sub.child.id().to_string()).status();
+    let _ = sub.child.wait();
+    sub.reader.join().unwrap();
+    let text = sub.seen.lock().unwrap().0.clone();
+    text
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("hammer-mqtt-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// `hammer demo --headless --devices 2 --mqtt mqtts://… --mqtt-ca ca.pem
+/// --mqtt-user u`, the password in the environment, watched by
+/// `mosquitto_sub` over TLS: every report of both boards once, in order.
+#[test]
+fn two_boards_over_tls_with_a_password_deliver_every_report_once_in_order() {
+    if !(mosquitto_present() && pki::openssl_present()) {
+        return;
+    }
+    let dir = scratch("tls-two");
+    let p = pki::make(&dir.join("pki"));
+    let port = free_port();
+    let b = broker_with(&dir, port, &tls_settings(&dir, &p, ""));
+    let ca = p.ca.display().to_string();
+    let sub = mosquitto_sub(port, &["--cafile", &ca, "-u", USER, "-P", PASSWORD].map(String::from));
+    let args: Vec<String> = [
+        "--devices",
+        "2",
+        "--cycles",
+        "15",
+        "--mqtt",
+        &format!("mqtts://127.0.0.1:{port}"),
+        "--mqtt-ca",
+        &ca,
+        "--mqtt-user",
+        USER,
+    ]
+    .map(String::from)
+    .into();
+    let buffer = dir.join("buffer");
+    let (out, stdout, stderr) = demo(&args, &buffer, Some(PASSWORD));
+    let seen = stop_sub(sub);
+    stop(b);
+    assert!(out.status.success(), "{stdout}\n{stderr}");
+    assert_each_board_delivered(&stdout, &seen);
+    assert_eq!(
+        pki::holders_of(PASSWORD, &buffer, &[("stdout", &stdout), ("stderr", &stderr)]),
+        Vec::<String>::new(),
+        "the password leaked"
+    );
+    // The buffer is its owner's alone.
+    use std::os::unix::fs::PermissionsExt;
+    let mode = |p: &Path| std::fs::metadata(p).unwrap().permissions().mode() & 0o777;
+    assert_eq!(mode(&buffer), 0o700);
+    for f in ["demo1-4.0bar.jsonl", "demo2-7.0bar.jsonl"] {
+        assert_eq!(mode(&buffer.join(f)), 0o600, "{f}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Each way a TLS broker says no: a clear message naming what to check, a
+/// non-zero exit, every report kept in the outage buffer for a later run,
+/// the password nowhere, and no tight retry loop.
+#[test]
+fn refusals_say_what_to_check_and_keep_every_report() {
+    if !(mosquitto_present() && pki::openssl_present()) {
+        return;
+    }
+    let dir = scratch("refusals");
+    let p = pki::make(&dir.join("pki"));
+    let tls = tls_settings(&dir, &p, "");
+    let wrong_name = tls_settings_with(&dir, &p.wrong_name_cert, &p.wrong_name_key, "");
+    let client_required = format!(
+        "certfile {}\nkeyfile {}\ncafile {}\nrequire_certificate true\nuse_identity_as_username true\nallow_anonymous false\n",
+        p.server_cert.display(),
+        p.server_key.display(),
+        p.ca.display()
+    );
+    let (ca, other_ca) = (p.ca.display().to_string(), p.other_ca.display().to_string());
+    let cases: [(&str, &str, &str, &str, Option<&str>, &str); 6] = [
+        (
+            "wrong-password",
+            &tls,
+            "mqtts",
+            &ca,
+            Some("not-the-password"),
+            "refused the",
+        ),
+        (
+            "another-ca",
+            &tls,
+            "mqtts",
+            &other_ca,
+            Some(PASSWORD),
+            "not signed by a CA",
+        ),
+        (
+            "another-name",
+            &wrong_name,
+            "mqtts",
+            &ca,
+            Some(PASSWORD),
+            "another name than \"127.0.0.1\"",
+        ),
+        (
+            "tls-to-plain",
+            "allow_anonymous true\n",
+            "mqtts",
+            &ca,
+            Some(PASSWORD),
+            "does not answer in TLS",
+        ),
+        (
+            "plain-to-tls",
+            &tls,
+            "mqtt",
+            "",
+            Some(PASSWORD),
+            "TLS listener, use mqtts://",
+        ),
+        (
+            "no-client-certificate",
+            &client_required,
+            "mqtts",
+            &ca,
+            None,
+            "client certificate",
+        ),
+    ];
+    for (name, settings, scheme, ca_file, password, expected) in cases {
+        let case_dir = dir.join(name);
+        std::fs::create_dir_all(&case_dir).unwrap();
+        let port = free_port();
+        let b = broker_with(&case_dir, port, settings);
+        let mut args: Vec<String> = [
+            "--cycles",
+            "60",
+            "--real-time",
+            "--mqtt",
+            &format!("{scheme}://127.0.0.1:{port}"),
+        ]
+        .map(String::from)
+        .into();
+        if !ca_file.is_empty() {
+            args.extend(["--mqtt-ca".to_string(), ca_file.to_string()]);
+        }
+        if password.is_some() {
+            args.extend(["--mqtt-user".to_string(), USER.to_string()]);
+        }
+        let buffer = case_dir.join("buffer");
+        let (out, stdout, stderr) = demo(&args, &buffer, password);
+        stop(b);
+        assert!(!out.status.success(), "{name}: a refused run exits non-zero\n{stderr}");
+        assert!(stderr.contains(expected), "{name}: {expected:?} not said:\n{stderr}");
+        assert!(
+            stderr.contains(&format!("127.0.0.1:{port}")),
+            "{name}: the broker is named:\n{stderr}"
+        );
+        let printed = printed_seqs(&stdout);
+        assert!(printed.len() >= 60, "{name}: {stdout}");
+        assert_eq!(
+            buffered_seqs(&buffer.join("demo1-4.0bar.jsonl")),
+            printed,
+            "{name}: every report waits in the buffer"
+        );
+        assert_eq!(
+            pki::holders_of(PASSWORD, &buffer, &[("stdout", &stdout), ("stderr", &stderr)]),
+            Vec::<String>::new(),
+            "{name}: the password leaked"
+        );
+        // About 3 s of refusals: asked again after 1, 2, 4 s, not in a loop.
+        let log = std::fs::read_to_string(case_dir.join("mosquitto.log")).unwrap_or_default();
+        // (A TLS listener logs a refused handshake as a failed client
+        // connection; the start-up probe's bare connect is an unexpected EOF.)
+        let attempts = log
+            .lines()
+            .filter(|l| {
+                (l.contains("New connection from") || l.contains("Client connection from"))
+                    && !l.contains("unexpected eof")
+            })
+            .count();
+        println!(
+            "{name}: {attempts} connection attempts in a {}-report run; said: {}",
+            printed.len(),
+            stderr.lines().find(|l| l.contains(expected)).unwrap_or_default()
+        );
+        assert!((1..=6).contains(&attempts), "{name}: {attempts} attempts\n{log}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A broker that requires client certificates (`require_certificate true`,
+/// the certificate's name as the user) takes the demo's and delivers.
+#[test]
+fn a_client_certificate_logs_in_and_delivers() {
+    if !(mosquitto_present() && pki::openssl_present()) {
+        return;
+    }
+    let dir = scratch("client-cert");
+    let p = pki::make(&dir.join("pki"));
+    let port = free_port();
+    let settings = format!(
+        "certfile {}\nkeyfile {}\ncafile {}\nrequire_certificate true\nuse_identity_as_username true\nallow_anonymous false\n",
+        p.server_cert.display(),
+        p.server_key.display(),
+        p.ca.display()
+    );
+    let b = broker_with(&dir, port, &settings);
+    let s = |p: &Path| p.display().to_string();
+    let sub = mosquitto_sub(
+        port,
+        &[
+            "--cafile".into(),
+            s(&p.ca),
+            "--cert".into(),
+            s(&p.client_cert),
+            "--key".into(),
+            s(&p.client_key),
+        ],
+    );
+    let args: Vec<String> = vec![
+        "--cycles".into(),
+        "15".into(),
+        "--mqtt".into(),
+        format!("mqtts://127.0.0.1:{port}"),
+        "--mqtt-ca".into(),
+        s(&p.ca),
+        "--mqtt-cert".into(),
+        s(&p.client_cert),
+        "--mqtt-key".into(),
+        s(&p.client_key),
+    ];
+    let (out, stdout, stderr) = demo(&args, &dir.join("buffer"), None);
+    let seen = stop_sub(sub);
+    stop(b);
+    assert!(out.status.success(), "{stdout}\n{stderr}");
+    let delivered: Vec<u64> = seen
+        .lines()
+        .filter_map(|l| l.strip_prefix("hammer/lab/demo1-4.0bar/cycle "))
+        .map(|p| serde_json::from_str::<Value>(p).unwrap()["seq"].as_u64().unwrap())
+        .collect();
+    assert_eq!(
+        delivered,
+        printed_seqs(&stdout),
+        "every report once, in order:\n{stderr}"
+    );
+    assert!(stderr.contains("0 still buffered"), "{stderr}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A buffer left by a run without a broker, then damaged (a flipped digit
+/// that is still JSON, an invalid UTF-8 byte, binary garbage): the next run
+/// replays every intact record, counts the damaged ones, and publishes its
+/// own reports live.
+#[test]
+fn a_damaged_buffer_replays_the_intact_records_and_publishing_goes_on() {
+    if !mosquitto_present() {
+        return;
+    }
+    let dir = scratch("damaged");
+    let buffer = dir.join("buffer");
+    let file = buffer.join("demo1-4.0bar.jsonl");
+    let port = free_port();
+    let args: Vec<String> = ["--cycles", "20", "--mqtt", &format!("mqtt://127.0.0.1:{port}")]
+        .map(String::from)
+        .into();
+    let (out, stdout, stderr) = demo(&args, &buffer, None);
+    assert!(!out.status.success(), "undelivered: non-zero\n{stdout}\n{stderr}");
+    assert!(
+        stderr.contains(" still buffered") && stderr.contains("next run"),
+        "{stderr}"
+    );
+    let first = printed_seqs(&stdout);
+    assert_eq!(buffered_seqs(&file), first);
+    // Damage: a digit of the 6th cycle record flipped (still valid JSON),
+    // an invalid UTF-8 byte in the 9th, garbage lines appended.
+    let text = std::fs::read(&file).unwrap();
+    let mut lines: Vec<Vec<u8>> = text.split(|&b| b == b'\n').map(<[u8]>::to_vec).collect();
+    lines.pop();
+    let cycle_lines: Vec<usize> = (0..lines.len())
+        .filter(|&i| String::from_utf8_lossy(&lines[i]).contains("\"kind\":\"cycle\""))
+        .collect();
+    let flipped = cycle_lines[5];
+    let at = lines[flipped].windows(12).position(|w| w == b"\"friction_n\"").unwrap() + 13;
+    lines[flipped][at] = if lines[flipped][at] == b'1' { b'2' } else { b'1' };
+    let broken = cycle_lines[8];
+    let mid = lines[broken].len() / 2;
+    lines[broken][mid] = 0xff;
+    let seq_of = |l: &[u8]| -> u64 {
+        let s = String::from_utf8_lossy(l);
+        let v: Value = serde_json::from_str(&s[9..]).unwrap_or(Value::Null);
+        v["body"]["seq"].as_u64().unwrap_or(u64::MAX)
+    };
+    let (lost_a, lost_b) = (seq_of(&lines[flipped]), first[8]);
+    let mut damaged = lines.join(&b'\n');
+    damaged.push(b'\n');
+    damaged.extend_from_slice(b"\xff\n\x00\x01\x02garbage\xfe\n");
+    std::fs::write(&file, &damaged).unwrap();
+
+    let b = broker(&dir, port);
+    let sub = mosquitto_sub(port, &[]);
+    let (out, stdout, stderr) = demo(&args, &buffer, None);
+    let seen = stop_sub(sub);
+    stop(b);
+    let delivered: Vec<(u64, bool)> = seen
+        .lines()
+        .filter_map(|l| l.strip_prefix("hammer/lab/demo1-4.0bar/cycle "))
+        .map(|p| {
+            let v: Value = serde_json::from_str(p).unwrap();
+            (v["seq"].as_u64().unwrap(), v["historical"] == true)
+        })
+        .collect();
+    let replayed: Vec<u64> = delivered.iter().filter(|d| d.1).map(|d| d.0).collect();
+    let intact: Vec<u64> = first.iter().copied().filter(|&s| s != lost_a && s != lost_b).collect();
+    assert_eq!(
+        replayed, intact,
+        "every intact record replayed, the damaged not:\n{stderr}"
+    );
+    let live: Vec<u64> = delivered.iter().filter(|d| !d.1).map(|d| d.0).collect();
+    assert_eq!(live, printed_seqs(&stdout), "and publishing went on");
+    assert!(stderr.contains("4 damaged records"), "{stderr}");
+    assert!(!out.status.success(), "damage lost data: the run says so in its exit");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Another local user made the buffer directory first and planted a
+/// symlink and a forged alarm in it: the run refuses the directory, says
+/// so, buffers in a private one, publishes nothing forged and follows no link.
+#[test]
+fn a_buffer_directory_planted_by_another_user_is_refused() {
+    if !mosquitto_present() {
+        return;
+    }
+    if hammer_host::private_files::euid() != 0 {
+        eprintln!("SKIPPED: needs root to create a directory owned by another user");
+        return;
+    }
+    let dir = scratch("planted");
+    let shared = dir.join("shared");
+    std::fs::create_dir_all(&shared).unwrap();
+    let victim = dir.join("victim.txt");
+    std::fs::write(&victim, "the victim's file\n").unwrap();
+    let forged = serde_json::json!({"kind": "alarm", "body": {"kind": "forged", "device": "demo1-4.0bar"}}).to_string();
+    std::fs::write(
+        shared.join("demo1-4.0bar.jsonl"),
+        format!("{:08x} {forged}\n", crc32fast::hash(forged.as_bytes())),
+    )
+    .unwrap();
+    for name in ["demo1-4.0bar.jsonl.tmp", ".demo1-4.0bar.jsonl.tmp"] {
+        std::os::unix::fs::symlink(&victim, shared.join(name)).unwrap();
+    }
+    let chown = Command::new("chown")
+        .args(["-Rh", "65534:65534"])
+        .arg(&shared)
+        .status()
+        .unwrap();
+    assert!(chown.success());
+    let port = free_port();
+    let b = broker(&dir, port);
+    let sub = mosquitto_sub(port, &[]);
+    let args: Vec<String> = ["--cycles", "10", "--mqtt", &format!("mqtt://127.0.0.1:{port}")]
+        .map(String::from)
+        .into();
+    let (out, stdout, stderr) = demo(&args, &shared, None);
+    let seen = stop_sub(sub);
+    stop(b);
+    assert!(out.status.success(), "{stdout}\n{stderr}");
+    assert!(stderr.contains("belongs to another user"), "{stderr}");
+    // The private directory it took instead, named in the note.
+    let taken = stderr
+        .split("buffering in ")
+        .nth(1)
+        .and_then(|r| r.split(" instead").next())
+        .expect("the directory taken is named");
+    let _ = std::fs::remove_dir_all(taken);
+    assert!(!seen.contains("forged"), "{seen}");
+    assert_eq!(std::fs::read_to_string(&victim).unwrap(), "the victim's file\n");
+    let delivered = seen.lines().filter(|l| l.contains("/cycle ")).count();
+    assert_eq!(delivered, printed_seqs(&stdout).len());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Two users on one machine, neither naming a buffer directory: each gets
+/// their own under their home's state directory, owner-only, and both keep
+/// every report for their broker (here: none listening).
+#[test]
+fn a_second_user_gets_their_own_buffer() {
+    if hammer_host::private_files::euid() != 0 || Command::new("setpriv").arg("--help").output().is_err() {
+        eprintln!("SKIPPED: needs root and setpriv to run as a second user");
+        return;
+    }
+    let dir = scratch("two-users");
+    use std::os::unix::fs::{MetadataExt, PermissionsExt};
+    std::fs::set_permissions(&dir, std::fs::Permissions::from_mode(0o755)).unwrap();
+    let port = free_port();
+    let mut runs = vec![];
+    for (user, uid) in [("root", 0u32), ("nobody", 65534)] {
+        let home = dir.join(user);
+        std::fs::create_dir_all(&home).unwrap();
+        let chown = Command::new("chown")
+            .arg(format!("{uid}:{uid}"))
+            .arg(&home)
+            .status()
+            .unwrap();
+        assert!(chown.success());
+        let mut c = Command::new("setpriv");
+        c.args([&format!("--reuid={uid}"), &format!("--regid={uid}"), "--clear-groups"])
+            .arg(env!("CARGO_BIN_EXE_hammer"))
+            .args(["demo", "--headless", "--native", "--cycles", "10"])
+            .args(["--mqtt", &format!("mqtt://127.0.0.1:{port}")])
+            .env("HOME", &home)
+            .env_remove("XDG_STATE_HOME")
+            .current_dir(&home);
+        let out = c.output().unwrap();
+        let (stdout, stderr) = (
+            String::from_utf8_lossy(&out.stdout).into_owned(),
+            String::from_utf8_lossy(&out.stderr).into_owned(),
+        );
+        assert!(!out.status.success(), "{user}: no broker, non-zero\n{stdout}\n{stderr}");
+        assert!(!stderr.contains("Permission denied"), "{user}: {stderr}");
+        runs.push((user, uid, home, printed_seqs(&stdout)));
+    }
+    for (user, uid, home, printed) in runs {
+        let buffer = home.join(".local/state/hammer/mqtt-buffer");
+        let file = buffer.join("demo1-4.0bar.jsonl");
+        let (d, f) = (std::fs::metadata(&buffer).unwrap(), std::fs::metadata(&file).unwrap());
+        assert_eq!((d.uid(), f.uid()), (uid, uid), "{user}'s own");
+        assert_eq!((d.mode() & 0o777, f.mode() & 0o777), (0o700, 0o600), "{user}");
+        assert_eq!(buffered_seqs(&file), printed, "{user}: every report kept");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `--mqtt-insecure-skip-verify` connects to a broker whose CA it was not
+/// given, and warns at the connection.
+#[test]
+fn skipping_verification_is_named_and_warned_about() {
+    if !(mosquitto_present() && pki::openssl_present()) {
+        return;
+    }
+    let dir = scratch("insecure");
+    let p = pki::make(&dir.join("pki"));
+    let port = free_port();
+    let b = broker_with(&dir, port, &tls_settings(&dir, &p, ""));
+    let args: Vec<String> = [
+        "--cycles",
+        "10",
+        "--mqtt",
+        &format!("mqtts://127.0.0.1:{port}"),
+        "--mqtt-insecure-skip-verify",
+        "--mqtt-user",
+        USER,
+    ]
+    .map(String::from)
+    .into();
+    let (out, stdout, stderr) = demo(&args, &dir.join("buffer"), Some(PASSWORD));
+    stop(b);
+    assert!(out.status.success(), "{stdout}\n{stderr}");
+    let warnings = stderr.matches("WARNING").count();
+    assert!(
+        warnings >= 1 && stderr.contains("--mqtt-insecure-skip-verify"),
+        "{stderr}"
+    );
+    assert!(stderr.contains("0 still buffered"), "{stderr}");
     let _ = std::fs::remove_dir_all(&dir);
 }

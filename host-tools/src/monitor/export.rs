@@ -33,16 +33,22 @@ pub struct ExportArgs {
     #[arg(long, value_name = "DIR")]
     pub parquet: Option<PathBuf>,
     /// Write cycle reports as InfluxDB line protocol to a FILE (appended),
-    /// udp://HOST:PORT or http://HOST:PORT/PATH (a write endpoint; gzip;
-    /// token from INFLUX_TOKEN).
+    /// udp://HOST:PORT or http(s)://HOST:PORT/PATH (a write endpoint; gzip;
+    /// token from INFLUX_TOKEN or --influx-token-file).
     #[arg(long, value_name = "DEST")]
     pub influx: Option<String>,
+    #[command(flatten)]
+    pub influx_http: influx::HttpArgs,
     /// Publish every report, status, alarm and link event to an MQTT
-    /// broker, mqtt://HOST[:PORT], under hammer/<site>/<device>/ (docs/fleet.md).
+    /// broker, mqtt://HOST[:PORT] or over TLS mqtts://HOST[:PORT], under
+    /// hammer/<site>/<device>/ (docs/fleet.md).
     #[arg(long, value_name = "URL")]
     pub mqtt: Option<String>,
-    /// The MQTT outage buffer's directory (default: hammer-mqtt-buffer in
-    /// the temporary directory); a buffer left by an earlier run is replayed.
+    #[command(flatten)]
+    pub broker: mqtt::BrokerArgs,
+    /// The MQTT outage buffer's directory (default: the user's own,
+    /// $XDG_STATE_HOME/hammer/mqtt-buffer or ~/.local/state/hammer/mqtt-buffer);
+    /// used only if private to this user. A buffer left by an earlier run is replayed.
     #[arg(long, value_name = "DIR")]
     pub mqtt_buffer: Option<PathBuf>,
     /// The outage buffer's cap per device, MB; beyond it the oldest
@@ -60,7 +66,9 @@ impl Default for ExportArgs {
         Self {
             parquet: None,
             influx: None,
+            influx_http: Default::default(),
             mqtt: None,
+            broker: Default::default(),
             mqtt_buffer: None,
             mqtt_buffer_mb: crate::mqtt::DEFAULT_BUFFER_MB,
             site: None,
@@ -84,6 +92,8 @@ pub struct Exports {
     mqtt: Option<mqtt::Options>,
     /// The devices' MQTT summaries, as their publishers stop.
     mqtt_summaries: Vec<String>,
+    /// A publisher lost messages or could not deliver them all.
+    mqtt_lost: bool,
 }
 
 impl Exports {
@@ -97,22 +107,23 @@ impl Exports {
         let influx = args
             .influx
             .as_deref()
-            .map(|d| Destination::parse(d).and_then(influx::Writer::open))
+            .map(|d| Destination::parse(d).and_then(|d| influx::Writer::open(d, &args.influx_http)))
             .transpose()?;
         let mqtt = match &args.mqtt {
             Some(url) => {
-                mqtt::parse_url(url)?;
+                let endpoint = mqtt::Endpoint::resolve(url, &args.broker)?;
+                let (buffer_dir, note) = mqtt::buffer_dir(args.mqtt_buffer.as_deref())?;
+                if let Some(note) = note {
+                    eprintln!("{note}");
+                }
                 if !(args.mqtt_buffer_mb.is_finite() && args.mqtt_buffer_mb > 0.0) {
                     anyhow::bail!("--mqtt-buffer-mb must be a positive number of MB");
                 }
                 Some(mqtt::Options {
-                    url: url.clone(),
+                    endpoint,
                     site: args.site.clone().unwrap_or_else(|| "lab".into()),
                     device: String::new(),
-                    buffer_dir: args
-                        .mqtt_buffer
-                        .clone()
-                        .unwrap_or_else(|| std::env::temp_dir().join("hammer-mqtt-buffer")),
+                    buffer_dir,
                     buffer_bytes: (args.mqtt_buffer_mb * 1e6) as usize,
                 })
             }
@@ -124,6 +135,7 @@ impl Exports {
             site: args.site.clone(),
             mqtt,
             mqtt_summaries: vec![],
+            mqtt_lost: false,
         }))))
     }
 
@@ -145,6 +157,30 @@ impl Exports {
         }
         parts.extend(self.mqtt_summaries.iter().cloned());
         parts.join("; ")
+    }
+
+    /// What a sink lost or could not deliver, if anything: a run that lost
+    /// data ends non-zero.
+    pub fn loss(&self) -> Option<String> {
+        let mut lost = vec![];
+        if let Some(p) = &self.parquet {
+            let s = p.stats();
+            if s.rows_failed > 0 {
+                lost.push(format!("{} reports not written to Parquet", s.rows_failed));
+            }
+        }
+        if let Some(w) = &self.influx {
+            if w.lines_failed > 0 {
+                lost.push(format!("{} line-protocol points not delivered", w.lines_failed));
+            }
+        }
+        if self.mqtt_lost {
+            lost.push(
+                "MQTT messages dropped, damaged or not delivered (those in the outage buffer go out with the next run)"
+                    .to_string(),
+            );
+        }
+        (!lost.is_empty()).then(|| lost.join(", "))
     }
 
     /// Writes everything pending (Parquet files, the line batch).
@@ -222,9 +258,17 @@ impl DeviceExport {
         p.send(kind, body, &host_time);
     }
 
-    /// Takes in one event; returns a note to show when an export failed.
+    /// Takes in one event; returns a note to show when an export failed or
+    /// the broker has something to say (a refusal, a TLS warning).
     pub fn event(&mut self, ev: &Stamped) -> Option<String> {
         self.publish(ev);
+        let mqtt_notes = self.mqtt.as_ref().map(|p| p.counters.take_notes()).unwrap_or_default();
+        let note = self.export_event(ev);
+        let notes: Vec<String> = mqtt_notes.into_iter().chain(note).collect();
+        (!notes.is_empty()).then(|| notes.join("\n"))
+    }
+
+    fn export_event(&mut self, ev: &Stamped) -> Option<String> {
         let result = match &ev.event {
             Event::Connected { .. } => {
                 self.anchor.reset();
@@ -267,7 +311,7 @@ impl DeviceExport {
             Ok(()) => None,
             Err(e) if self.last_note.is_none_or(|t| t.elapsed() >= NOTE_EVERY) => {
                 self.last_note = Some(Instant::now());
-                Some(format!("export failed (counted, the logs are complete): {e:#}"))
+                Some(format!("export failed (counted): {e:#}"))
             }
             Err(_) => None,
         }
@@ -279,12 +323,14 @@ impl Drop for DeviceExport {
     /// on disk) and leaves its summary for the closing line.
     fn drop(&mut self) {
         if let Some(p) = self.mqtt.take() {
-            let publisher_summary = { drop_publisher(p) };
-            self.exports
-                .lock()
-                .unwrap_or_else(|e| e.into_inner())
-                .mqtt_summaries
-                .push(publisher_summary);
+            let counters = p.counters.clone();
+            let publisher_summary = drop_publisher(p);
+            let mut x = self.exports.lock().unwrap_or_else(|e| e.into_inner());
+            for n in counters.take_notes() {
+                eprintln!("{n}");
+            }
+            x.mqtt_summaries.push(publisher_summary);
+            x.mqtt_lost |= counters.undelivered();
         }
     }
 }

@@ -79,8 +79,8 @@ pub fn run(devices: Vec<(String, Box<dyn Connector>)>, args: &MonitorArgs, headl
             eprintln!("a reader thread panicked; its logs may be incomplete");
         }
     }
-    super::close_exports(exports);
-    result
+    let closed = super::close_exports(exports);
+    result.and(closed)
 }
 
 /// Takes what each device has sent; `line` gets each one's printable lines.

@@ -143,6 +143,8 @@ fn say(out: &mut impl Write, text: &str) -> bool {
 pub fn run(app: &mut App, rx: &Receiver<Stamped>, opts: UiOptions) -> Result<()> {
     let mut out = std::io::stdout().lock();
     let mut errors = Limiter::new(10);
+    // A stream whose sequence runs backwards "restarts" at every report.
+    let mut seq_events = Limiter::new(10);
     let mut stall = Stall::new(Instant::now());
     let mut unlogged = (Unlogged::default(), Unlogged::default(), None::<Instant>);
     loop {
@@ -169,7 +171,10 @@ pub fn run(app: &mut App, rx: &Receiver<Stamped>, opts: UiOptions) -> Result<()>
         app.on_event(&ev);
         let line = match &ev.event {
             Event::Msg(DeviceMsg::Report(r)) => Some(report_line(r)),
-            Event::FrameError { .. } => match errors.allow(ev.t_us) {
+            Event::FrameError { .. } | Event::SeqGap { .. } => match match &ev.event {
+                Event::SeqGap { .. } => seq_events.allow(ev.t_us),
+                _ => errors.allow(ev.t_us),
+            } {
                 Some(held) => describe(&ev.event).map(|(_, t)| {
                     let more = if held > 0 {
                         format!(" [{held} more not listed]")

@@ -14,7 +14,10 @@
 //!   [`MAX_CHUNK`] bytes, so anything longer is corruption.
 //!
 //! Existing files are appended to (a second run adds a new connection to
-//! frames.bin). Everything is flushed every [`FLUSH_EVERY`] and on each
+//! frames.bin; a line torn by a crash or a full disk is cut back first).
+//! The directory is created 0700 and the files 0600, opened without
+//! following symlinks; a directory another user owns or can write is
+//! refused ([`crate::private_files`]). Everything is flushed every [`FLUSH_EVERY`] and on each
 //! disconnect, so a crash loses at most that much.
 //!
 //! Size cap (`--log-max-mb`, [`DEFAULT_MAX_MB`] by default, over the three
@@ -29,7 +32,7 @@
 //! the totals when the monitor stops. The two notice lines are the only
 //! bytes past the cap.
 
-use std::fs::{File, OpenOptions};
+use std::fs::File;
 use std::io::{self, BufWriter, Read, Write};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -86,6 +89,8 @@ pub struct Logger {
     frames: BufWriter<File>,
     last_flush: Instant,
     frame_errors: Limiter,
+    /// Sequence gaps and restarts: a stream running backwards makes one per report.
+    seq_events: Limiter,
     max_bytes: u64,
     /// What the three files hold, counting what they held before.
     size_bytes: u64,
@@ -95,19 +100,29 @@ pub struct Logger {
     unlogged: Unlogged,
 }
 
+/// A binary log, appended to: owner-only, never through a symlink.
 fn append(path: &Path) -> io::Result<(File, u64)> {
-    let f = OpenOptions::new().create(true).append(true).open(path)?;
+    let f = crate::private_files::open_append(path)?;
     let len = f.metadata()?.len();
+    Ok((f, len))
+}
+
+/// A text log, appended to as [`append`], a line torn by a crash or a full
+/// disk cut back first so the next run's lines stay whole.
+fn append_lines(path: &Path) -> io::Result<(File, u64)> {
+    let (f, len, _torn) = crate::private_files::open_append_whole_lines(path)?;
     Ok((f, len))
 }
 
 impl Logger {
     /// Logs into `dir` until the three files hold `max_bytes` together.
+    /// The directory is created 0700 and the files 0600; a directory
+    /// another user owns or can write is refused (they could plant links).
     pub fn open(dir: &Path, max_bytes: u64) -> io::Result<Self> {
-        std::fs::create_dir_all(dir)?;
-        let (cycles, cycles_len) = append(&dir.join("cycles.csv"))?;
+        crate::private_files::ensure_private_dir(dir).map_err(|e| io::Error::other(format!("{e:#}")))?;
+        let (cycles, cycles_len) = append_lines(&dir.join("cycles.csv"))?;
         let (frames, frames_len) = append(&dir.join("frames.bin"))?;
-        let (link, link_len) = append(&dir.join("link.log"))?;
+        let (link, link_len) = append_lines(&dir.join("link.log"))?;
         let mut l = Self {
             dir: dir.to_path_buf(),
             cycles: BufWriter::new(cycles),
@@ -115,6 +130,7 @@ impl Logger {
             frames: BufWriter::with_capacity(64 * 1024, frames),
             last_flush: Instant::now(),
             frame_errors: Limiter::new(20),
+            seq_events: Limiter::new(20),
             max_bytes,
             size_bytes: cycles_len + frames_len + link_len,
             capped: false,
@@ -223,6 +239,18 @@ impl Logger {
                 Some(held) => {
                     if held > 0 {
                         self.line(ev.t_us, &format!("({held} more frame errors not listed)"))?;
+                    }
+                    match describe(&ev.event) {
+                        Some((_, text)) => self.line(ev.t_us, &text),
+                        None => Ok(()),
+                    }
+                }
+                None => Ok(()),
+            },
+            Event::SeqGap { .. } => match self.seq_events.allow(ev.t_us) {
+                Some(held) => {
+                    if held > 0 {
+                        self.line(ev.t_us, &format!("({held} more sequence gaps or restarts not listed)"))?;
                     }
                     match describe(&ev.event) {
                         Some((_, text)) => self.line(ev.t_us, &text),
@@ -420,6 +448,25 @@ mod tests {
         ));
         let header = std::fs::read_to_string(dir.join("cycles.csv")).unwrap();
         assert_eq!(header.trim_end(), cycles_header());
+        // Owner-only, and a line torn by a crash is cut back before the next run appends.
+        use std::os::unix::fs::PermissionsExt;
+        let mode = |p: &Path| std::fs::metadata(p).unwrap().permissions().mode() & 0o777;
+        assert_eq!(mode(&dir), 0o700);
+        for f in ["cycles.csv", "frames.bin", "link.log"] {
+            assert_eq!(mode(&dir.join(f)), 0o600, "{f}");
+        }
+        let mut torn = std::fs::read(dir.join("link.log")).unwrap();
+        let whole = torn.len();
+        torn.extend_from_slice(b"2026-11-27T05:00:00Z half a li");
+        std::fs::write(dir.join("link.log"), &torn).unwrap();
+        drop(Logger::open(&dir, 1 << 20).unwrap());
+        let text = std::fs::read_to_string(dir.join("link.log")).unwrap();
+        assert!(!text.contains("half a li") && text.len() > whole, "{text}");
+        assert!(text.lines().all(|l| l.starts_with("20")), "{text}");
+        // A log directory other users can write is refused.
+        std::fs::set_permissions(&dir, std::fs::Permissions::from_mode(0o777)).unwrap();
+        let e = Logger::open(&dir, 1 << 20).err().expect("refused");
+        assert!(e.to_string().contains("writable by other users"), "{e}");
         let _ = std::fs::remove_dir_all(&dir);
     }
 

@@ -233,19 +233,24 @@ pub fn run_with(connector: Box<dyn Connector>, args: &MonitorArgs) -> Result<()>
     if reader.join().is_err() {
         eprintln!("the reader thread panicked; the logs may be incomplete");
     }
-    close_exports(exports);
-    result
+    let closed = close_exports(exports);
+    result.and(closed)
 }
 
-/// Writes what the exports still hold and says what they did.
-pub(crate) fn close_exports(exports: Option<Arc<std::sync::Mutex<export::Exports>>>) {
+/// Writes what the exports still hold and says what they did; an error
+/// (so a non-zero exit) when a sink lost data or its server refused it.
+pub(crate) fn close_exports(exports: Option<Arc<std::sync::Mutex<export::Exports>>>) -> Result<()> {
     if let Some(x) = exports {
         let mut x = x.lock().unwrap_or_else(|e| e.into_inner());
         if let Err(e) = x.flush() {
             eprintln!("export: {e:#}");
         }
         eprintln!("{}", x.summary());
+        if let Some(loss) = x.loss() {
+            bail!("not every report reached its destination: {loss}");
+        }
     }
+    Ok(())
 }
 
 /// Replays a recorded `frames.bin` through the decoder and the dashboard.
