@@ -9,8 +9,8 @@
 //! - [`client`]: the one protocol client (its sans-IO decoding core, the blocking client);
 //! - [`board`], [`stimulus`], [`emulator`]: the firmware's app natively, the
 //!   emulated board's ADC ring, and the board on QEMU's mps2-an386;
-//! - [`estimate`], [`report`], [`plot`]: offline: per-cycle records, the
-//!   report page, the effect figures;
+//! - [`import`], [`estimate`], [`report`], [`plot`]: offline: recorders'
+//!   files converted, per-cycle records, the report page, the effect figures;
 //! - [`diagnose`]: the sim-to-real gap diagnosis and its benchmarks;
 //! - [`flash`], [`capture`], [`calibrate`], [`selftest`], [`demo`], [`soak`], [`monitor`]: live: raw captures, calibration, the
 //!   no-hardware demo, the full-rate soak, the dashboard, logs and replay;
@@ -30,6 +30,7 @@ pub mod diagnose;
 pub mod emulator;
 pub mod estimate;
 pub mod flash;
+pub mod import;
 pub mod influx;
 pub mod monitor;
 pub mod mqtt;

@@ -7,8 +7,9 @@ use hammer_estimator::{Config, CycleReport, Estimator, RawSample};
 use hammer_trace::config::ConfigError;
 use std::path::Path;
 
-use hammer_trace::rows::{Item, Row, RowReader, Uniform};
-use hammer_trace::trace::{read_csv, Gap, Trace, TraceError};
+use hammer_trace::import::{self, Understood};
+use hammer_trace::rows::{Item, Row, Uniform};
+use hammer_trace::trace::{parse_sidecar_as, Gap, Trace, TraceError};
 use hammer_trace::EstimatorParams;
 
 use crate::params::HammerParams;
@@ -157,6 +158,8 @@ pub struct EstimationInput {
     pub supply_bar: Option<f64>,
     pub config: Config,
     pub codes: Vec<RawSample>,
+    /// What the file was read as (format, columns, units).
+    pub understood: Understood,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -167,16 +170,18 @@ pub enum OpenError {
     Config(#[from] ConfigError),
 }
 
-/// Opens `path` (and its sidecar) for estimation: the hammer and sensors the
-/// simulator recorded in the sidecar win over `file`'s, the estimator table
-/// comes from `file`, the supply pressure from `supply_bar` or the sidecar.
+/// Opens `path` (and its sidecar) for estimation: any format
+/// `hammer_trace::import` reads, through `file`'s `[import]` mapping. The
+/// hammer and sensors the simulator recorded in the sidecar win over
+/// `file`'s, the estimator table comes from `file`, the supply pressure from
+/// `supply_bar`, else the sidecar, else the mapping.
 pub fn open_for_estimation(
     path: &Path,
     file: &SimConfig,
     supply_bar: Option<f64>,
 ) -> Result<EstimationInput, OpenError> {
-    let trace = read_csv(path)?;
-    let (sidecar, supply_bar, config) = config_for(path, file, supply_bar, 1.0 / trace.dt_s)?;
+    let (trace, understood, embedded) = import::read_trace(path, file.import.as_ref())?;
+    let (sidecar, supply_bar, config) = config_for(path, embedded.as_deref(), file, supply_bar, 1.0 / trace.dt_s)?;
     let codes = to_codes(&trace, &config);
     Ok(EstimationInput {
         trace,
@@ -184,19 +189,32 @@ pub fn open_for_estimation(
         supply_bar,
         config,
         codes,
+        understood,
     })
 }
 
 /// The sidecar of the trace at `path`, the operating point (the caller's,
 /// else the sidecar's) and the estimator configuration that reads it.
+/// `embedded` is a sidecar the file carried inside (a Parquet capture's),
+/// used when none lies beside it.
 fn config_for(
     path: &Path,
+    embedded: Option<&str>,
     file: &SimConfig,
     supply_bar: Option<f64>,
     sample_rate_hz: f64,
 ) -> Result<(Option<Sidecar>, Option<f64>, Config), OpenError> {
-    let sidecar = read_simulated_sidecar(path)?;
-    let supply_bar = supply_bar.or(sidecar.as_ref().and_then(|s| s.supply_pressure_bar));
+    let sidecar = match (read_simulated_sidecar(path)?, embedded) {
+        (Some(s), _) => Some(s),
+        (None, Some(text)) => Some(parse_sidecar_as(
+            text,
+            &format!("{} (embedded sidecar)", path.display()),
+        )?),
+        (None, None) => None,
+    };
+    let supply_bar = supply_bar
+        .or(sidecar.as_ref().and_then(|s| s.supply_pressure_bar))
+        .or(file.import.as_ref().and_then(|m| m.supply_pressure_bar));
     let sensors = sensors_for(sidecar.as_ref(), &file.sensors);
     let hammer = sidecar
         .as_ref()
@@ -288,7 +306,7 @@ const STREAM_BLOCK: usize = 4096;
 
 /// The estimator over a trace file of any length in bounded memory: rows are
 /// read, converted to codes and pushed block by block, only the required
-/// columns parsed. Same configuration rules as [`open_for_estimation`];
+/// columns parsed (text streams; a binary recorder's file is read whole). Same configuration rules as [`open_for_estimation`];
 /// `on_report` sees each cycle as it closes.
 pub fn stream_estimation(
     path: &Path,
@@ -296,14 +314,10 @@ pub fn stream_estimation(
     supply_bar: Option<f64>,
     mut on_report: impl FnMut(CycleReport),
 ) -> Result<StreamSummary, OpenError> {
-    let label = path.display().to_string();
-    let f = std::fs::File::open(path).map_err(|error| TraceError::Io {
-        path: label.clone(),
-        error,
-    })?;
-    let rows = RowReader::new(std::io::BufReader::with_capacity(1 << 16, f), &label, false)?;
-    let mut u = Uniform::new(rows)?;
-    let (_, supply_bar, config) = config_for(path, file, supply_bar, 1.0 / u.dt_s())?;
+    let opened = import::open(path, file.import.as_ref(), false)?;
+    let embedded = opened.embedded_sidecar;
+    let mut u = Uniform::new(opened.source)?;
+    let (_, supply_bar, config) = config_for(path, embedded.as_deref(), file, supply_bar, 1.0 / u.dt_s())?;
     let mut est = estimator(config)?;
     let mut block = Vec::with_capacity(STREAM_BLOCK);
     let mut summary = StreamSummary {

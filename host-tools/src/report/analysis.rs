@@ -12,7 +12,6 @@ use super::{stage, ReportArgs};
 use hammer_sim::estimation::open_for_estimation;
 use hammer_sim::simulate::{Sidecar, SimulationInfo};
 use hammer_sim::{CycleTruth, SimConfig};
-use hammer_trace::config::load_toml;
 use hammer_trace::trace::Trace;
 
 /// A report cycle and a truth cycle are the same impact when their impact
@@ -104,10 +103,7 @@ impl Analysis {
 /// Reads the trace and runs the estimator over it, configured exactly as
 /// `hammer estimate` does (config file, then the sidecar's hammer and sensors).
 pub(super) fn analyse(args: &ReportArgs, pb: &ProgressBar) -> Result<Analysis> {
-    let file: SimConfig = match &args.config {
-        Some(p) => load_toml(p)?,
-        None => SimConfig::default(),
-    };
+    let file: SimConfig = crate::import::config_with_map(args.config.as_deref(), args.map.as_deref())?;
     // The reader's message already names the path and the OS error; as an anyhow
     // chain it would print the OS error twice.
     let input = open_for_estimation(&args.input, &file, args.supply_bar).map_err(|e| anyhow!("{e}"))?;
