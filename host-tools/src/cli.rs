@@ -461,7 +461,7 @@ fn estimate_cmd(args: &EstimateArgs) -> Result<()> {
             args.trace.display(),
             summary.samples,
             (summary.samples + summary.missing_samples) as f64 / summary.sample_rate_hz,
-            crate::report::no_impact_note(&reports)
+            crate::report::no_impact_note(&reports, &summary.config)
         )
     };
     if reports.is_empty() {
@@ -512,6 +512,9 @@ fn estimate_cmd(args: &EstimateArgs) -> Result<()> {
     })?;
     if no_cycle {
         return Err(no_cycle_error());
+    }
+    if let Some(hint) = crate::report::geometry_hint(&reports, &summary.config) {
+        eprintln!("note: no valid cycle: {hint}");
     }
     Ok(())
 }

@@ -7,6 +7,7 @@ use hammer_estimator::{Config, CycleReport, Estimator, RawSample};
 use hammer_trace::config::ConfigError;
 use std::path::Path;
 
+use hammer_trace::import::inspect::ABSOLUTE_MIN_GAUGE_PA;
 use hammer_trace::import::{self, Understood};
 use hammer_trace::rows::{Item, Row, Uniform};
 use hammer_trace::trace::{parse_sidecar_as, Gap, Trace, TraceError};
@@ -39,7 +40,46 @@ pub fn estimator_config(
     };
     p.apply(&mut c);
     c.validate().map_err(in_user_terms)?;
+    if sample_rate_hz < MIN_SAMPLE_RATE_HZ {
+        return Err(ConfigError::Invalid {
+            field: "sample rate".into(),
+            message: format!(
+                "{} kS/s is below the {} kS/s this estimator needs: the impact's contact lasts about 80 µs, and below that rate it can fall between samples, so impacts are missed and cycles merge (docs/estimator.md, \"Sample rate\"); record at {} kS/s or more",
+                sample_rate_hz / 1e3,
+                MIN_SAMPLE_RATE_HZ / 1e3,
+                MIN_SAMPLE_RATE_HZ / 1e3
+            ),
+        });
+    }
     Ok(c)
+}
+
+/// The lowest sample rate a trace is estimated at. The impact (steel on
+/// steel) lasts about 80 µs: at 20 kS/s (50 µs) every contact holds at least
+/// one sample, with margin for a recorder's anti-alias filter, which at
+/// 16.7 kS/s already loses impacts (docs/estimator.md, "Sample rate").
+pub const MIN_SAMPLE_RATE_HZ: f64 = 20e3;
+
+/// Shortest trace on which both chambers staying above
+/// [`ABSOLUTE_MIN_GAUGE_PA`] means absolute pressure: several cycles long.
+pub const ABSOLUTE_CHECK_MIN_S: f64 = 0.05;
+
+/// Refuses pressures that are absolute where gauge is expected: a running
+/// hammer vents each chamber to atmosphere every cycle, so its lowest gauge
+/// pressure is near 0; both chambers staying above half a bar over several
+/// cycles is atmosphere left in.
+pub fn check_gauge(path: &Path, min_rear_pa: f64, min_front_pa: f64, duration_s: f64) -> Result<(), OpenError> {
+    if duration_s >= ABSOLUTE_CHECK_MIN_S && min_rear_pa > ABSOLUTE_MIN_GAUGE_PA && min_front_pa > ABSOLUTE_MIN_GAUGE_PA
+    {
+        return Err(OpenError::Refused(format!(
+            "{}: both chambers stay above {} bar gauge (lowest: rear {:.3} bar, front {:.3} bar); a running hammer vents each chamber to about 0 gauge every cycle, so these pressures look absolute. Give them as gauge: `absolute = true` under [import.p_rear] and [import.p_front] (--map FILE.toml or the config's [import]; docs/trace-format.md)",
+            path.display(),
+            ABSOLUTE_MIN_GAUGE_PA / 1e5,
+            min_rear_pa / 1e5,
+            min_front_pa / 1e5
+        )));
+    }
+    Ok(())
 }
 
 /// The config-file key each estimator field is built from in
@@ -168,6 +208,9 @@ pub enum OpenError {
     Trace(#[from] TraceError),
     #[error(transparent)]
     Config(#[from] ConfigError),
+    /// A trace that cannot be read right as it is (the message names the fix).
+    #[error("{0}")]
+    Refused(String),
 }
 
 /// Opens `path` (and its sidecar) for estimation: any format
@@ -182,6 +225,13 @@ pub fn open_for_estimation(
 ) -> Result<EstimationInput, OpenError> {
     let (trace, understood, embedded) = import::read_trace(path, file.import.as_ref())?;
     let (sidecar, supply_bar, config) = config_for(path, embedded.as_deref(), file, supply_bar, 1.0 / trace.dt_s)?;
+    let min = |x: &[f64]| x.iter().copied().fold(f64::INFINITY, f64::min);
+    check_gauge(
+        path,
+        min(&trace.p_rear_pa),
+        min(&trace.p_front_pa),
+        trace.len() as f64 * trace.dt_s,
+    )?;
     let codes = to_codes(&trace, &config);
     Ok(EstimationInput {
         trace,
@@ -299,6 +349,8 @@ pub struct StreamSummary {
     pub missing_samples: u64,
     pub sample_rate_hz: f64,
     pub supply_bar: Option<f64>,
+    /// The configuration the estimator ran with (its geometry names the hammer).
+    pub config: Config,
 }
 
 /// Sample-sets converted and handed to the estimator at a time.
@@ -325,10 +377,14 @@ pub fn stream_estimation(
         missing_samples: 0,
         sample_rate_hz: 1.0 / u.dt_s(),
         supply_bar,
+        config,
     };
+    let (mut min_rear, mut min_front) = (f64::INFINITY, f64::INFINITY);
     while let Some(item) = u.next_item()? {
         match item {
             Item::Sample(r) => {
+                min_rear = min_rear.min(r.p_rear_pa);
+                min_front = min_front.min(r.p_front_pa);
                 block.push(row_codes(&config, &r));
                 summary.samples += 1;
                 if block.len() == STREAM_BLOCK {
@@ -345,6 +401,12 @@ pub fn stream_estimation(
         }
     }
     est.push_block(&block, &mut on_report);
+    check_gauge(
+        path,
+        min_rear,
+        min_front,
+        summary.samples as f64 / summary.sample_rate_hz,
+    )?;
     Ok(summary)
 }
 

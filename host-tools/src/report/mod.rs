@@ -23,7 +23,8 @@ use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 pub use analysis::{
-    match_truth, no_impact_note, summarize, truth_summary, Matched, Summary, TruthSummary, MATCH_TOLERANCE_S,
+    geometry_hint, match_truth, no_impact_note, summarize, truth_summary, Matched, Summary, TruthSummary,
+    MATCH_TOLERANCE_S,
 };
 
 pub const CYCLE_PNG: &str = "cycle.png";

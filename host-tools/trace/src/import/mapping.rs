@@ -270,6 +270,21 @@ impl ImportMap {
         })
     }
 
+    /// Whether the map says anything about the signals or the text layout
+    /// (beyond the operating point): then it applies even to a file in the
+    /// project's own format.
+    pub fn maps_signals(&self) -> bool {
+        self.t.is_some()
+            || self.p_rear.is_some()
+            || self.p_front.is_some()
+            || self.accel.is_some()
+            || self.delimiter.is_some()
+            || self.decimal.is_some()
+            || self.skip_lines.is_some()
+            || self.header.is_some()
+            || self.sample_rate_hz.is_some()
+    }
+
     /// Whether the map names a time column (else the time comes from a rate).
     pub fn has_time_column(&self) -> bool {
         self.t.as_ref().is_some_and(|t| t.column.is_some())

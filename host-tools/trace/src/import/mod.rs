@@ -169,7 +169,8 @@ fn is_native(head: &[u8]) -> bool {
 }
 
 /// Opens any trace file for reading row by row. `map` says what a
-/// recorder's file means; a file in the project's names needs none.
+/// recorder's file means; a file in the project's names needs none (and a
+/// map without signal tables leaves the project's CSV as it is).
 /// `keep_extra` keeps the native CSV's further columns.
 pub fn open(path: &Path, map: Option<&ImportMap>, keep_extra: bool) -> Result<Opened, TraceError> {
     let label = path.display().to_string();
@@ -177,7 +178,12 @@ pub fn open(path: &Path, map: Option<&ImportMap>, keep_extra: bool) -> Result<Op
     let mut input = BufReader::with_capacity(1 << 16, file);
     let head = input.fill_buf().map_err(|e| io(&label, e))?;
     let head = &head[..head.len().min(HEAD_BYTES)];
-    let format = detect(head);
+    let mut format = detect(head);
+    // The project's CSV read through a mapping that says something of its
+    // columns (absolute pressure, a sign, a unit): the mapping applies.
+    if format == Format::Native && map.is_some_and(ImportMap::maps_signals) {
+        format = Format::Delimited;
+    }
     open_from(input, &label, format, map, keep_extra)
 }
 
