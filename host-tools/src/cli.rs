@@ -72,6 +72,11 @@ pub enum Command {
     /// without friction, frequency (Hz), wear index (J), each with its
     /// expanded uncertainty, and quality flags.
     Estimate(EstimateArgs),
+    /// The performance sheet over supply pressure from traces at several
+    /// operating points: friction per phase, energy with and without friction,
+    /// frequency, power, the fitted friction law, the model's curves, the
+    /// paper's Table 3; HTML, PNG and CSV.
+    BenchSheet(crate::bench_sheet::BenchSheetArgs),
     /// Convert a recorder's file (delimited text with a mapping, NI TDMS,
     /// MATLAB MAT v5, multi-channel WAV, Parquet) to the project's trace;
     /// prints what it understood (channels, units, rate, duration, ranges,
@@ -295,6 +300,12 @@ pub fn run(cli: Cli) -> Result<()> {
             Ok(())
         }
         Command::Estimate(args) => estimate_cmd(&args),
+        Command::BenchSheet(args) => {
+            for f in crate::bench_sheet::run(&args)? {
+                outln!("wrote {}", f.display());
+            }
+            Ok(())
+        }
         Command::Import(args) => {
             out!("{}", crate::import::run(&args)?);
             Ok(())

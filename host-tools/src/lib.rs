@@ -9,8 +9,9 @@
 //! - [`client`]: the one protocol client (its sans-IO decoding core, the blocking client);
 //! - [`board`], [`stimulus`], [`emulator`]: the firmware's app natively, the
 //!   emulated board's ADC ring, and the board on QEMU's mps2-an386;
-//! - [`import`], [`estimate`], [`report`], [`plot`]: offline: recorders'
-//!   files converted, per-cycle records, the report page, the effect figures;
+//! - [`import`], [`estimate`], [`report`], [`bench_sheet`], [`plot`]: offline:
+//!   recorders' files converted, per-cycle records, the report page, the
+//!   performance sheet over supply pressure, the effect figures;
 //! - [`diagnose`]: the sim-to-real gap diagnosis and its benchmarks;
 //! - [`flash`], [`capture`], [`calibrate`], [`selftest`], [`demo`], [`soak`], [`monitor`]: live: raw captures, calibration, the
 //!   no-hardware demo, the full-rate soak, the dashboard, logs and replay;
@@ -19,6 +20,7 @@
 #[macro_use]
 mod stdout;
 
+pub mod bench_sheet;
 pub mod board;
 pub mod calibrate;
 pub mod capture;
