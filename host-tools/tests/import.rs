@@ -199,3 +199,45 @@ fn malformed_files_get_a_clear_error() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A recorder that clipped the rear chamber's dip at 0 gauge: `hammer
+/// import` names the rail; the same trace unclipped (the dip below 0 kept,
+/// noise-free) has none.
+#[test]
+fn import_names_the_values_a_recorder_clipped() {
+    let dir = tmp_dir("rails");
+    let ideal = dir.join("ideal.csv");
+    let (code, _, err) = hammer(&[
+        "simulate",
+        "--supply-bar",
+        "4",
+        "--duration",
+        "0.4",
+        "--ideal-sensors",
+        "--out",
+        ideal.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let text = std::fs::read_to_string(&ideal).unwrap();
+    let mut clipped = String::from("t_s,p_rear_pa,p_front_pa,accel_mps2\n");
+    let mut plain = clipped.clone();
+    for line in text.lines().skip(1) {
+        let f: Vec<&str> = line.split(',').collect();
+        let rear: f64 = f[1].parse().unwrap();
+        clipped.push_str(&format!("{},{},{},{}\n", f[0], rear.max(0.0), f[2], f[3]));
+        plain.push_str(&format!("{},{},{},{}\n", f[0], f[1], f[2], f[3]));
+    }
+    let said = |name: &str, body: &str| {
+        let p = write(&dir, name, body);
+        let out = dir.join(format!("conv-{name}"));
+        let (code, said, err) = hammer(&["import", &p, "--out", out.to_str().unwrap()]);
+        assert_eq!(code, 0, "{err}");
+        said
+    };
+    let c = said("clipped.csv", &clipped);
+    let rear = c.lines().find(|l| l.trim_start().starts_with("p_rear_pa")).unwrap();
+    assert!(rear.contains("rail at 0.0000 bar"), "{c}");
+    let p = said("plain.csv", &plain);
+    assert!(!p.contains("rail at"), "{p}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -79,18 +79,24 @@ pub fn stats(t: &Trace) -> Stats {
 }
 
 /// Whether `v` (an extreme of `x`) is a value a recorder clipped to: it
-/// occurs in at least [`RAIL_MIN_RUNS`] runs of [`RAIL_MIN_RUN`] samples,
-/// equal neighbours are rare elsewhere (the channel is neither quantised nor
-/// flat), and the signal arrives at and leaves it steeply (at least half the
-/// channel's median step): a clipped signal runs into the rail, while a
-/// chamber that settles at a value (a vented chamber at exactly 0 gauge in
-/// noise-free data) creeps into it with ever smaller steps.
+/// is the channel's extreme over the file, occurs in at least
+/// [`RAIL_MIN_RUNS`] runs of [`RAIL_MIN_RUN`] samples, and equal neighbours
+/// are rare elsewhere (the channel is neither quantised nor flat, so a
+/// repeated value means something). A vented chamber that rests at exactly
+/// 0 gauge in noise-free data is not a rail as long as it dips below
+/// atmosphere somewhere else in the file (as a running hammer's does): 0 is
+/// then not the channel's extreme.
 pub fn clipped_at(x: &[f64], v: f64) -> Option<Rail> {
     if x.len() < 8 {
         return None;
     }
+    let (lo, hi) = x
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &y| (a.min(y), b.max(y)));
+    if v != lo && v != hi {
+        return None;
+    }
     let (mut runs, mut samples, mut equal_elsewhere, mut pairs_elsewhere) = (0usize, 0usize, 0usize, 0usize);
-    let mut edge_steps = Vec::new();
     let mut i = 0;
     while i < x.len() {
         if x[i] == v {
@@ -98,17 +104,9 @@ pub fn clipped_at(x: &[f64], v: f64) -> Option<Rail> {
             while i < x.len() && x[i] == v {
                 i += 1;
             }
-            let len = i - start;
-            samples += len;
-            if len >= RAIL_MIN_RUN {
+            samples += i - start;
+            if i - start >= RAIL_MIN_RUN {
                 runs += 1;
-                // The steps next to the run (the one into it is cut by the clip).
-                if start > 1 {
-                    edge_steps.push((x[start - 1] - x[start - 2]).abs());
-                }
-                if i + 1 < x.len() {
-                    edge_steps.push((x[i + 1] - x[i]).abs());
-                }
             }
         } else {
             if i + 1 < x.len() && x[i + 1] != v {
@@ -126,15 +124,7 @@ pub fn clipped_at(x: &[f64], v: f64) -> Option<Rail> {
     if equal_elsewhere as f64 > RAIL_MAX_EQUAL_ELSEWHERE * pairs_elsewhere as f64 {
         return None;
     }
-    let mut steps: Vec<f64> = x.windows(2).map(|w| (w[1] - w[0]).abs()).filter(|d| *d > 0.0).collect();
-    if steps.is_empty() || edge_steps.is_empty() {
-        return None;
-    }
-    steps.sort_by(f64::total_cmp);
-    let median = steps[steps.len() / 2];
-    edge_steps.sort_by(f64::total_cmp);
-    let edge = edge_steps[edge_steps.len() / 2];
-    (edge >= 0.5 * median).then_some(Rail {
+    Some(Rail {
         value: v,
         samples,
         runs,
@@ -145,9 +135,9 @@ pub fn clipped_at(x: &[f64], v: f64) -> Option<Rail> {
 mod tests {
     use super::*;
 
-    /// A sine clipped at −0.5 is a rail; the same shape settling
-    /// exponentially onto exactly 0 (a vented chamber, noise-free) is not;
-    /// a quantised channel's repeated extreme is not either.
+    /// A sine clipped at −0.5 is a rail; a chamber resting at exactly 0
+    /// between dips below it (a vented chamber, noise-free) is not; a
+    /// quantised channel's repeated extreme is not either.
     #[test]
     fn clipped_values_are_rails_and_settled_values_are_not() {
         let n = 5000;
@@ -156,23 +146,23 @@ mod tests {
             .collect();
         let r = clipped_at(&clipped, -0.5).expect("a clipped sine has a rail");
         assert!(r.runs >= 5 && r.samples > n / 10, "{r:?}");
-        // Cycles of a rise then an exponential settle onto exactly 0.
+        // Cycles of a rise, a dip below 0, then a rest at exactly 0.
         let settled: Vec<f64> = (0..n)
             .map(|i| {
                 let k = i % 500;
                 if k < 100 {
                     k as f64 / 100.0
+                } else if k < 200 {
+                    -0.05 * ((k - 100) as f64 * std::f64::consts::PI / 100.0).sin()
                 } else {
-                    let v = (-(k as f64 - 100.0) / 20.0).exp();
-                    if v < 1e-6 {
-                        0.0
-                    } else {
-                        v
-                    }
+                    0.0
                 }
             })
             .collect();
         assert_eq!(clipped_at(&settled, 0.0), None);
+        // The same clipped at 0 by a recorder: then 0 is a rail.
+        let at_zero: Vec<f64> = settled.iter().map(|v| v.max(0.0)).collect();
+        assert!(clipped_at(&at_zero, 0.0).is_some());
         let quantised: Vec<f64> = clipped.iter().map(|v| (v * 20.0).round() / 20.0).collect();
         assert_eq!(clipped_at(&quantised, -0.5), None);
     }
