@@ -241,3 +241,61 @@ fn import_names_the_values_a_recorder_clipped() {
     assert!(!p.contains("rail at"), "{p}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The project's own Parquet capture (`hammer capture --out X.parquet`,
+/// zstd, the ADC codes beside the values, the sidecar in the metadata) reads
+/// back as the trace it holds, with the sidecar's operating point.
+#[test]
+fn the_projects_parquet_capture_reads_back_with_its_sidecar() {
+    use hammer_sim::estimation::open_for_estimation;
+    use hammer_sim::SimConfig;
+    let dir = tmp_dir("capture");
+    let native = dir.join("run.csv");
+    let (code, _, err) = hammer(&[
+        "simulate",
+        "--supply-bar",
+        "5",
+        "--duration",
+        "0.3",
+        "--out",
+        native.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    std::fs::remove_file(dir.join("run.json")).unwrap();
+    let trace = hammer_trace::trace::read_csv(&native).unwrap();
+    let codes: Vec<[u16; 3]> = (0..trace.len()).map(|i| [i as u16, 0, 1]).collect();
+    let pq = dir.join("capture.parquet");
+    let mut f = std::fs::File::create(&pq).unwrap();
+    hammer_host::parquet_files::write_trace(
+        &mut f,
+        &trace,
+        &codes,
+        "{\"supply_pressure_bar\":5,\"source\":\"device\"}",
+    )
+    .unwrap();
+    drop(f);
+    let from_pq = open_for_estimation(&pq, &SimConfig::default(), None).unwrap();
+    assert_eq!(from_pq.supply_bar, Some(5.0), "the embedded sidecar's operating point");
+    assert_eq!(from_pq.sidecar.as_ref().map(|s| s.source.as_str()), Some("device"));
+    assert_eq!(from_pq.trace.p_rear_pa, trace.p_rear_pa);
+    assert_eq!(from_pq.trace.accel_mps2, trace.accel_mps2);
+    assert_eq!(
+        estimate_at(&pq, "5"),
+        estimate_at(&native, "5"),
+        "the same cycles from the capture and the CSV"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+fn estimate_at(trace: &Path, bar: &str) -> String {
+    let (code, out, err) = hammer(&[
+        "estimate",
+        trace.to_str().unwrap(),
+        "--supply-bar",
+        bar,
+        "--format",
+        "csv",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    out
+}
