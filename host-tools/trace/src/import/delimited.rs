@@ -368,3 +368,81 @@ fn guess_delimiter(text: &str, named: &[&str]) -> char {
         })
         .unwrap_or(',')
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::import::mapping::{ColumnRef, Signal};
+
+    fn sig(col: ColumnRef, unit: &str) -> Option<Signal> {
+        Some(Signal {
+            column: Some(col),
+            unit: Some(unit.into()),
+            ..Signal::default()
+        })
+    }
+
+    /// Tab-separated, no header, columns by position, a sample rate instead
+    /// of a time column, absolute kPa, an inverted accelerometer in g.
+    #[test]
+    fn positions_a_rate_absolute_pressure_and_a_sign() {
+        let map = ImportMap {
+            delimiter: Some("\\t".into()),
+            header: Some(false),
+            skip_lines: Some(1),
+            sample_rate_hz: Some(50_000.0),
+            p_rear: Some(Signal {
+                absolute: true,
+                ..sig(ColumnRef::Index(2), "kPa").unwrap()
+            }),
+            p_front: sig(ColumnRef::Index(3), "psi"),
+            accel: Some(Signal {
+                sign: Some(-1.0),
+                ..sig(ColumnRef::Index(1), "g").unwrap()
+            }),
+            ..ImportMap::default()
+        };
+        let text = "logger v2 (no header below)\n1\t201.325\t0\n-2\t101.325\t14.5\n";
+        let mut d = Delimited::new(text.as_bytes(), "t.tsv", &map).unwrap();
+        let r0 = d.next_row().unwrap().unwrap();
+        let r1 = d.next_row().unwrap().unwrap();
+        assert!(d.next_row().unwrap().is_none());
+        assert_eq!((r0.t_s, r1.t_s), (0.0, 2e-5));
+        assert!(
+            (r0.p_rear_pa - 1e5).abs() < 1e-6 && r1.p_rear_pa.abs() < 1e-6,
+            "{r0:?} {r1:?}"
+        );
+        assert!((r1.p_front_pa - 14.5 * 6_894.757_293_168_361).abs() < 1e-6);
+        assert_eq!((r0.accel_mps2, r1.accel_mps2), (-9.806_65, 2.0 * 9.806_65));
+    }
+
+    /// A unit of the wrong kind, a missing column and a bad number are
+    /// named with what to do.
+    #[test]
+    fn mapping_errors_name_the_key_and_the_choices() {
+        let map = ImportMap {
+            p_rear: sig(ColumnRef::Name("P1".into()), "g"),
+            ..ImportMap::default()
+        };
+        let e = Delimited::new("P1;p_front_pa\n".as_bytes(), "x.csv", &map)
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(e.contains("import.p_rear.unit") && e.contains("bar"), "{e}");
+        let map = ImportMap {
+            p_rear: sig(ColumnRef::Name("P1".into()), "bar"),
+            ..ImportMap::default()
+        };
+        let e = Delimited::new("P9;p_front_pa;accel_mps2;t_s\n1;2;3;4\n".as_bytes(), "x.csv", &map)
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(e.contains("no header row") && e.contains("`P1`"), "{e}");
+        let mut d = Delimited::new("t_s;P1;p_front_pa;accel_mps2\n0;1;2;x\n".as_bytes(), "x.csv", &map).unwrap();
+        let e = d.next_row().unwrap_err().to_string();
+        assert!(
+            e.contains("x.csv:2") && e.contains("accel_mps2") && e.contains("`x`"),
+            "{e}"
+        );
+    }
+}
