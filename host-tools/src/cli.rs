@@ -76,6 +76,17 @@ pub enum Command {
     /// without friction, frequency (Hz), wear index (J), each with its
     /// expanded uncertainty, and quality flags.
     Estimate(EstimateArgs),
+    /// The performance sheet over supply pressure from traces at several
+    /// operating points: friction per phase, energy with and without friction,
+    /// frequency, power, the fitted friction law, the model's curves, the
+    /// paper's Table 3; HTML, PNG and CSV.
+    BenchSheet(crate::bench_sheet::BenchSheetArgs),
+    /// Convert a recorder's file (delimited text with a mapping, NI TDMS,
+    /// MATLAB MAT v5, multi-channel WAV, Parquet) to the project's trace;
+    /// prints what it understood (channels, units, rate, duration, ranges,
+    /// gaps, rails) and keeps it in the sidecar. Every command that takes a
+    /// trace reads these files directly too (with --map or [import]).
+    Import(crate::import::ImportArgs),
     /// Sim-to-real gap diagnosis: where the nominal model misses the measured
     /// traces (signal × stage), which catalogued effect explains it (fitted,
     /// ranked, with evidence), and how far the gap shrinks on held-out data.
@@ -134,15 +145,20 @@ pub enum Format {
 
 #[derive(Args, Debug)]
 pub struct EstimateArgs {
-    /// Trace in the project's format (CSV; its sidecar JSON is read if present).
+    /// Trace: the project's CSV (its sidecar JSON is read if present), or a
+    /// recorder's file (delimited text, TDMS, MAT v5, WAV, Parquet) read through --map / [import].
     pub trace: PathBuf,
     /// Gauge supply pressure, bar: the operating point of the drift baseline
     /// (default: the sidecar's; unknown means binning by peak rear pressure).
     #[arg(long)]
     pub supply_bar: Option<f64>,
-    /// TOML file: [hammer] geometry, [sensors.*] calibration ranges, [estimator] thresholds and accuracy.
+    /// TOML file: [hammer] geometry, [sensors.*] calibration ranges, [estimator] thresholds and accuracy,
+    /// [import] what a recorder's file means.
     #[arg(long)]
     pub config: Option<PathBuf>,
+    /// TOML file with the `[import]` table for a recorder's file (overrides the config's).
+    #[arg(long, value_name = "FILE.toml")]
+    pub map: Option<PathBuf>,
     #[arg(long, value_enum, default_value_t = Format::Table)]
     pub format: Format,
     /// Write to this file instead of standard output.
@@ -288,6 +304,16 @@ pub fn run(cli: Cli) -> Result<()> {
             Ok(())
         }
         Command::Estimate(args) => estimate_cmd(&args),
+        Command::BenchSheet(args) => {
+            for f in crate::bench_sheet::run(&args)? {
+                outln!("wrote {}", f.display());
+            }
+            Ok(())
+        }
+        Command::Import(args) => {
+            out!("{}", crate::import::run(&args)?);
+            Ok(())
+        }
         Command::Diagnose(args) => crate::diagnose::command::run(&args),
         Command::DiagnoseBench(args) => crate::diagnose::command::bench(&args),
         Command::Demo(args) => crate::demo::run(&args),
@@ -437,10 +463,7 @@ fn config_check(file: &std::path::Path) -> Result<()> {
 
 fn estimate_cmd(args: &EstimateArgs) -> Result<()> {
     use crate::estimate::*;
-    let file: SimConfig = match &args.config {
-        Some(p) => load_toml(p)?,
-        None => SimConfig::default(),
-    };
+    let file = crate::import::config_with_map(args.config.as_deref(), args.map.as_deref())?;
     // Streamed: an hour of samples takes no more memory than a second.
     let mut reports = Vec::new();
     let summary = hammer_sim::estimation::stream_estimation(&args.trace, &file, args.supply_bar, |r| reports.push(r))?;
@@ -453,7 +476,7 @@ fn estimate_cmd(args: &EstimateArgs) -> Result<()> {
             args.trace.display(),
             summary.samples,
             (summary.samples + summary.missing_samples) as f64 / summary.sample_rate_hz,
-            crate::report::no_impact_note(&reports)
+            crate::report::no_impact_note(&reports, &summary.config)
         )
     };
     if reports.is_empty() {
@@ -507,6 +530,9 @@ fn estimate_cmd(args: &EstimateArgs) -> Result<()> {
     }
     if no_cycle {
         return Err(no_cycle_error());
+    }
+    if let Some(hint) = crate::report::geometry_hint(&reports, &summary.config) {
+        eprintln!("note: no valid cycle: {hint}");
     }
     Ok(())
 }

@@ -13,8 +13,9 @@
 //! - [`client`]: the one protocol client (its sans-IO decoding core, the blocking client);
 //! - [`board`], [`stimulus`], [`emulator`]: the firmware's app natively, the
 //!   emulated board's ADC ring, and the board on QEMU's mps2-an386;
-//! - [`estimate`], [`report`], [`plot`]: offline: per-cycle records, the
-//!   report page, the effect figures;
+//! - [`import`], [`estimate`], [`report`], [`bench_sheet`], [`plot`]: offline:
+//!   recorders' files converted, per-cycle records, the report page, the
+//!   performance sheet over supply pressure, the effect figures;
 //! - [`chambers`]: the chamber characteristics against their truth on both model families;
 //! - [`diagnose`]: the sim-to-real gap diagnosis and its benchmarks;
 //! - [`flash`], [`capture`], [`calibrate`], [`selftest`], [`demo`], [`soak`], [`monitor`]: live: raw captures, calibration, the
@@ -25,6 +26,7 @@
 #[macro_use]
 mod stdout;
 
+pub mod bench_sheet;
 pub mod board;
 pub mod calibrate;
 pub mod capture;
@@ -38,6 +40,7 @@ pub mod diagnose;
 pub mod emulator;
 pub mod estimate;
 pub mod flash;
+pub mod import;
 pub mod influx;
 pub mod monitor;
 pub mod mqtt;

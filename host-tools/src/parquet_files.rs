@@ -140,8 +140,9 @@ pub fn write<W: Write + Send>(out: W, rows: &[Row]) -> Result<()> {
     Ok(())
 }
 
-/// The key of a capture's sidecar JSON in the file's key-value metadata.
-pub const SIDECAR_KEY: &str = "hammer.sidecar";
+/// The key of a capture's sidecar JSON in the file's key-value metadata
+/// (the trace reader's, which reads it back).
+pub use hammer_trace::import::parquet::SIDECAR_KEY;
 
 /// A capture: its samples in physical units and the ADC codes, with the
 /// sidecar's JSON, as one Parquet file (row groups of 2^20 samples).

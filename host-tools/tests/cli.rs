@@ -468,10 +468,19 @@ fn config_check_names_the_field_and_range_or_prints_the_resolved_config() {
         err.contains("sensors.rear.range_min, sensors.rear.range_max") && !err.contains("zero_code"),
         "{err}"
     );
-    std::fs::write(&bad, "[sensors.rear]\nrange_min = 0.0\n").unwrap();
+    // A transducer as a user states it: one key, the rest the channel's defaults.
+    std::fs::write(
+        &bad,
+        "[sensors.rear]\nrange_min = 0.0\n[sensors.front]\nrange_min = 0\n",
+    )
+    .unwrap();
+    let (code, out, err) = hammer(&["config", "check", bad.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.contains("pressure 0.00 … 10.00 bar"), "{out}");
+    std::fs::write(&bad, "[sensors.rear]\nrange_mni = 0.0\n").unwrap();
     let (code, _, err) = hammer(&["config", "check", bad.to_str().unwrap()]);
     assert_eq!(code, 2);
-    assert!(err.contains("missing field"), "{err}");
+    assert!(err.contains("unknown field `range_mni`"), "{err}");
 }
 
 #[test]

@@ -55,6 +55,7 @@ fn args(input: &Path, out: &Path) -> ReportArgs {
         out: out.to_path_buf(),
         supply_bar: None,
         config: None,
+        map: None,
     }
 }
 

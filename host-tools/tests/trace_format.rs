@@ -253,3 +253,30 @@ fn streamed_estimation_matches_the_in_memory_path_and_flags_gaps() {
     let back = open_for_estimation(&cut, &SimConfig::default(), None).unwrap();
     assert_eq!(back.run().unwrap(), gapped);
 }
+
+/// A recorder that stamps time in whole µs at 48 kS/s writes intervals of 20
+/// and 21 µs: that is uniform sampling, read at the true rate (here to
+/// within 1 S/s), and a real jitter in such a file is still refused.
+#[test]
+fn time_stamps_rounded_to_the_recorders_resolution_are_uniform() {
+    use hammer_trace::rows::{RowReader, Uniform};
+    let mut text = String::from("t_s,p_rear_pa,p_front_pa,accel_mps2\n");
+    for i in 0..20_000 {
+        text.push_str(&format!("{:.6},{},0,0\n", i as f64 / 48_000.0, i % 7));
+    }
+    let path = tmp("us48k.csv");
+    std::fs::write(&path, &text).unwrap();
+    let t = read_csv(&path).unwrap();
+    assert_eq!(t.len(), 20_000);
+    assert!(t.gaps.is_empty());
+    assert!((1.0 / t.dt_s - 48_000.0).abs() < 1.0, "{}", 1.0 / t.dt_s);
+    // The streaming reader knows the rate up front, from its first rows.
+    let u = Uniform::new(RowReader::new(text.as_bytes(), "us48k", false).unwrap()).unwrap();
+    assert!((1.0 / u.dt_s() - 48_000.0).abs() < 1.0, "{}", 1.0 / u.dt_s());
+    // A step of 3 µs off the grid in the same file is jitter, not rounding.
+    let bad = text.replacen("\n0.000104,", "\n0.000107,", 1);
+    assert_ne!(bad, text);
+    std::fs::write(&path, &bad).unwrap();
+    let e = read_csv(&path).unwrap_err().to_string();
+    assert!(e.contains("not uniform"), "{e}");
+}

@@ -3,6 +3,7 @@
 pub mod app;
 pub mod config;
 pub mod frame;
+pub mod import;
 pub mod sidecar;
 pub mod trace_csv;
 
@@ -26,6 +27,7 @@ pub const TARGETS: &[Target] = &[
     trace_csv::TARGET,
     sidecar::TARGET,
     config::TARGET,
+    import::TARGET,
 ];
 
 pub fn by_name(name: &str) -> Option<&'static Target> {

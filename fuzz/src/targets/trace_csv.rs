@@ -117,6 +117,7 @@ fn error_code(e: &TraceError) -> u32 {
         TraceError::NotUtf8 { .. } => 8,
         TraceError::TooShort { .. } => 9,
         TraceError::Sidecar { .. } => 10,
+        TraceError::Import { .. } => 11,
     }
 }
 

@@ -7,8 +7,10 @@ use hammer_estimator::{Config, CycleReport, Estimator, RawSample};
 use hammer_trace::config::ConfigError;
 use std::path::Path;
 
-use hammer_trace::rows::{Item, Row, RowReader, Uniform};
-use hammer_trace::trace::{read_csv, Gap, Trace, TraceError};
+use hammer_trace::import::inspect::ABSOLUTE_MIN_GAUGE_PA;
+use hammer_trace::import::{self, Understood};
+use hammer_trace::rows::{Item, Row, Uniform};
+use hammer_trace::trace::{parse_sidecar_as, Gap, Trace, TraceError};
 use hammer_trace::EstimatorParams;
 
 use crate::params::HammerParams;
@@ -38,7 +40,46 @@ pub fn estimator_config(
     };
     p.apply(&mut c);
     c.validate().map_err(in_user_terms)?;
+    if sample_rate_hz < MIN_SAMPLE_RATE_HZ {
+        return Err(ConfigError::Invalid {
+            field: "sample rate".into(),
+            message: format!(
+                "{} kS/s is below the {} kS/s this estimator needs: the impact's contact lasts about 80 µs, and below that rate it can fall between samples, so impacts are missed and cycles merge (docs/estimator.md, \"Sample rate\"); record at {} kS/s or more",
+                sample_rate_hz / 1e3,
+                MIN_SAMPLE_RATE_HZ / 1e3,
+                MIN_SAMPLE_RATE_HZ / 1e3
+            ),
+        });
+    }
     Ok(c)
+}
+
+/// The lowest sample rate a trace is estimated at. The impact (steel on
+/// steel) lasts about 80 µs: at 20 kS/s (50 µs) every contact holds at least
+/// one sample, with margin for a recorder's anti-alias filter, which at
+/// 16.7 kS/s already loses impacts (docs/estimator.md, "Sample rate").
+pub const MIN_SAMPLE_RATE_HZ: f64 = 20e3;
+
+/// Shortest trace on which both chambers staying above
+/// [`ABSOLUTE_MIN_GAUGE_PA`] means absolute pressure: several cycles long.
+pub const ABSOLUTE_CHECK_MIN_S: f64 = 0.05;
+
+/// Refuses pressures that are absolute where gauge is expected: a running
+/// hammer vents each chamber to atmosphere every cycle, so its lowest gauge
+/// pressure is near 0; both chambers staying above half a bar over several
+/// cycles is atmosphere left in.
+pub fn check_gauge(path: &Path, min_rear_pa: f64, min_front_pa: f64, duration_s: f64) -> Result<(), OpenError> {
+    if duration_s >= ABSOLUTE_CHECK_MIN_S && min_rear_pa > ABSOLUTE_MIN_GAUGE_PA && min_front_pa > ABSOLUTE_MIN_GAUGE_PA
+    {
+        return Err(OpenError::Refused(format!(
+            "{}: both chambers stay above {} bar gauge (lowest: rear {:.3} bar, front {:.3} bar); a running hammer vents each chamber to about 0 gauge every cycle, so these pressures look absolute. Give them as gauge: `absolute = true` under [import.p_rear] and [import.p_front] (--map FILE.toml or the config's [import]; docs/trace-format.md)",
+            path.display(),
+            ABSOLUTE_MIN_GAUGE_PA / 1e5,
+            min_rear_pa / 1e5,
+            min_front_pa / 1e5
+        )));
+    }
+    Ok(())
 }
 
 /// The config-file key each estimator field is built from in
@@ -157,6 +198,8 @@ pub struct EstimationInput {
     pub supply_bar: Option<f64>,
     pub config: Config,
     pub codes: Vec<RawSample>,
+    /// What the file was read as (format, columns, units).
+    pub understood: Understood,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -165,18 +208,30 @@ pub enum OpenError {
     Trace(#[from] TraceError),
     #[error(transparent)]
     Config(#[from] ConfigError),
+    /// A trace that cannot be read right as it is (the message names the fix).
+    #[error("{0}")]
+    Refused(String),
 }
 
-/// Opens `path` (and its sidecar) for estimation: the hammer and sensors the
-/// simulator recorded in the sidecar win over `file`'s, the estimator table
-/// comes from `file`, the supply pressure from `supply_bar` or the sidecar.
+/// Opens `path` (and its sidecar) for estimation: any format
+/// `hammer_trace::import` reads, through `file`'s `[import]` mapping. The
+/// hammer and sensors the simulator recorded in the sidecar win over
+/// `file`'s, the estimator table comes from `file`, the supply pressure from
+/// `supply_bar`, else the sidecar, else the mapping.
 pub fn open_for_estimation(
     path: &Path,
     file: &SimConfig,
     supply_bar: Option<f64>,
 ) -> Result<EstimationInput, OpenError> {
-    let trace = read_csv(path)?;
-    let (sidecar, supply_bar, config) = config_for(path, file, supply_bar, 1.0 / trace.dt_s)?;
+    let (trace, understood, embedded) = import::read_trace(path, file.import.as_ref())?;
+    let (sidecar, supply_bar, config) = config_for(path, embedded.as_deref(), file, supply_bar, 1.0 / trace.dt_s)?;
+    let min = |x: &[f64]| x.iter().copied().fold(f64::INFINITY, f64::min);
+    check_gauge(
+        path,
+        min(&trace.p_rear_pa),
+        min(&trace.p_front_pa),
+        trace.len() as f64 * trace.dt_s,
+    )?;
     let codes = to_codes(&trace, &config);
     Ok(EstimationInput {
         trace,
@@ -184,19 +239,32 @@ pub fn open_for_estimation(
         supply_bar,
         config,
         codes,
+        understood,
     })
 }
 
 /// The sidecar of the trace at `path`, the operating point (the caller's,
 /// else the sidecar's) and the estimator configuration that reads it.
+/// `embedded` is a sidecar the file carried inside (a Parquet capture's),
+/// used when none lies beside it.
 fn config_for(
     path: &Path,
+    embedded: Option<&str>,
     file: &SimConfig,
     supply_bar: Option<f64>,
     sample_rate_hz: f64,
 ) -> Result<(Option<Sidecar>, Option<f64>, Config), OpenError> {
-    let sidecar = read_simulated_sidecar(path)?;
-    let supply_bar = supply_bar.or(sidecar.as_ref().and_then(|s| s.supply_pressure_bar));
+    let sidecar = match (read_simulated_sidecar(path)?, embedded) {
+        (Some(s), _) => Some(s),
+        (None, Some(text)) => Some(parse_sidecar_as(
+            text,
+            &format!("{} (embedded sidecar)", path.display()),
+        )?),
+        (None, None) => None,
+    };
+    let supply_bar = supply_bar
+        .or(sidecar.as_ref().and_then(|s| s.supply_pressure_bar))
+        .or(file.import.as_ref().and_then(|m| m.supply_pressure_bar));
     let sensors = sensors_for(sidecar.as_ref(), &file.sensors);
     let hammer = sidecar
         .as_ref()
@@ -281,6 +349,8 @@ pub struct StreamSummary {
     pub missing_samples: u64,
     pub sample_rate_hz: f64,
     pub supply_bar: Option<f64>,
+    /// The configuration the estimator ran with (its geometry names the hammer).
+    pub config: Config,
 }
 
 /// Sample-sets converted and handed to the estimator at a time.
@@ -288,7 +358,7 @@ const STREAM_BLOCK: usize = 4096;
 
 /// The estimator over a trace file of any length in bounded memory: rows are
 /// read, converted to codes and pushed block by block, only the required
-/// columns parsed. Same configuration rules as [`open_for_estimation`];
+/// columns parsed (text streams; a binary recorder's file is read whole). Same configuration rules as [`open_for_estimation`];
 /// `on_report` sees each cycle as it closes.
 pub fn stream_estimation(
     path: &Path,
@@ -296,14 +366,10 @@ pub fn stream_estimation(
     supply_bar: Option<f64>,
     mut on_report: impl FnMut(CycleReport),
 ) -> Result<StreamSummary, OpenError> {
-    let label = path.display().to_string();
-    let f = std::fs::File::open(path).map_err(|error| TraceError::Io {
-        path: label.clone(),
-        error,
-    })?;
-    let rows = RowReader::new(std::io::BufReader::with_capacity(1 << 16, f), &label, false)?;
-    let mut u = Uniform::new(rows)?;
-    let (_, supply_bar, config) = config_for(path, file, supply_bar, 1.0 / u.dt_s())?;
+    let opened = import::open(path, file.import.as_ref(), false)?;
+    let embedded = opened.embedded_sidecar;
+    let mut u = Uniform::new(opened.source)?;
+    let (_, supply_bar, config) = config_for(path, embedded.as_deref(), file, supply_bar, 1.0 / u.dt_s())?;
     let mut est = estimator(config)?;
     let mut block = Vec::with_capacity(STREAM_BLOCK);
     let mut summary = StreamSummary {
@@ -311,10 +377,14 @@ pub fn stream_estimation(
         missing_samples: 0,
         sample_rate_hz: 1.0 / u.dt_s(),
         supply_bar,
+        config,
     };
+    let (mut min_rear, mut min_front) = (f64::INFINITY, f64::INFINITY);
     while let Some(item) = u.next_item()? {
         match item {
             Item::Sample(r) => {
+                min_rear = min_rear.min(r.p_rear_pa);
+                min_front = min_front.min(r.p_front_pa);
                 block.push(row_codes(&config, &r));
                 summary.samples += 1;
                 if block.len() == STREAM_BLOCK {
@@ -331,6 +401,12 @@ pub fn stream_estimation(
         }
     }
     est.push_block(&block, &mut on_report);
+    check_gauge(
+        path,
+        min_rear,
+        min_front,
+        summary.samples as f64 / summary.sample_rate_hz,
+    )?;
     Ok(summary)
 }
 

@@ -302,6 +302,10 @@ pub struct SimConfig {
     pub seed: u64,
     /// How the estimator reads this hammer (thresholds, calibration accuracy).
     pub estimator: hammer_trace::EstimatorParams,
+    /// What a recorder's file means (`[import]`: columns, units, gauge or
+    /// absolute, sign, text layout); none for the project's own traces.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub import: Option<hammer_trace::import::ImportMap>,
 }
 
 impl SimConfig {
@@ -335,6 +339,9 @@ impl SimConfig {
         self.solver.validate()?;
         self.effects.validate()?;
         self.sensors.validate()?;
+        if let Some(m) = &self.import {
+            m.validate()?;
+        }
         Ok(())
     }
 }

@@ -15,7 +15,6 @@ use hammer_sim::estimation::sensors_for;
 use hammer_sim::simulate::{read_simulated_sidecar, Sidecar};
 use hammer_sim::SimConfig;
 use hammer_trace::config::load_toml;
-use hammer_trace::trace::read_csv;
 
 #[derive(Args, Debug)]
 pub struct DiagnoseArgs {
@@ -172,7 +171,7 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
         // A folder's traces are one cycle each: all fitted unless told.
         let fit_folder = folder.is_some() && (args.fit_on.is_empty() || args.fit_on.iter().any(|f| same(f, path)));
         for (trace, bar) in traces {
-            let (input, sidecar) = read_input(&trace, bar)?;
+            let (input, sidecar) = read_input(&trace, bar, base.import.as_ref())?;
             if inputs.is_empty() && args.config.is_none() {
                 base.sensors = sensors_for(sidecar.as_ref(), &base.sensors);
             }
@@ -199,10 +198,10 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
                 eprintln!("warning: {what}; the change read includes the recalibration's (--allow-stale-reference)");
             }
             for (trace, bar) in record.traces(path) {
-                references.push(read_input(&trace, Some(bar))?.0);
+                references.push(read_input(&trace, Some(bar), base.import.as_ref())?.0);
             }
         } else {
-            references.push(read_input(path, ref_bars[k])?.0);
+            references.push(read_input(path, ref_bars[k], base.import.as_ref())?.0);
         }
     }
     for f in &args.fit_on {
@@ -236,13 +235,20 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
     Ok(())
 }
 
-/// One trace with its sidecar; its supply pressure from `bar` (the
-/// command line) or the sidecar.
-fn read_input(path: &Path, bar: Option<f64>) -> Result<(MeasuredInput, Option<Sidecar>)> {
-    let trace = read_csv(path).with_context(|| format!("reading {}", path.display()))?;
+/// One trace (any format `hammer_trace::import` reads, through the
+/// config's `[import]`) with its sidecar; its supply pressure from `bar`
+/// (the command line), the sidecar, or the mapping.
+fn read_input(
+    path: &Path,
+    bar: Option<f64>,
+    map: Option<&hammer_trace::import::ImportMap>,
+) -> Result<(MeasuredInput, Option<Sidecar>)> {
+    let (trace, _, _) =
+        hammer_trace::import::read_trace(path, map).with_context(|| format!("reading {}", path.display()))?;
     let sidecar = read_simulated_sidecar(path).with_context(|| format!("reading the sidecar of {}", path.display()))?;
     let supply_bar = bar
         .or_else(|| sidecar.as_ref().and_then(|s| s.supply_pressure_bar))
+        .or_else(|| map.and_then(|m| m.supply_pressure_bar))
         .with_context(|| {
             format!(
                 "{}: supply pressure unknown: not in its sidecar; give --supply-bar BAR right after it",

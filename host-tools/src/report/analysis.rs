@@ -12,7 +12,6 @@ use super::{stage, ReportArgs};
 use hammer_sim::estimation::open_for_estimation;
 use hammer_sim::simulate::{Sidecar, SimulationInfo};
 use hammer_sim::{CycleTruth, SimConfig};
-use hammer_trace::config::load_toml;
 use hammer_trace::trace::Trace;
 
 /// A report cycle and a truth cycle are the same impact when their impact
@@ -104,10 +103,7 @@ impl Analysis {
 /// Reads the trace and runs the estimator over it, configured exactly as
 /// `hammer estimate` does (config file, then the sidecar's hammer and sensors).
 pub(super) fn analyse(args: &ReportArgs, pb: &ProgressBar) -> Result<Analysis> {
-    let file: SimConfig = match &args.config {
-        Some(p) => load_toml(p)?,
-        None => SimConfig::default(),
-    };
+    let file: SimConfig = crate::import::config_with_map(args.config.as_deref(), args.map.as_deref())?;
     // The reader's message already names the path and the OS error; as an anyhow
     // chain it would print the OS error twice.
     let input = open_for_estimation(&args.input, &file, args.supply_bar).map_err(|e| anyhow!("{e}"))?;
@@ -128,7 +124,7 @@ pub(super) fn analyse(args: &ReportArgs, pb: &ProgressBar) -> Result<Analysis> {
             trace.len() as f64 * trace.dt_s,
             cfg.impact_threshold_mps2,
             cfg.max_period_s,
-            no_impact_note(&reports)
+            no_impact_note(&reports, &input.config)
         );
     }
     Ok(Analysis {
@@ -233,18 +229,48 @@ pub fn truth_summary(matched: &[Matched]) -> TruthSummary {
 
 /// What the estimator's no-impact records blame, for an error that would
 /// otherwise only say "no cycle".
-pub fn no_impact_note(reports: &[hammer_estimator::CycleReport]) -> String {
+/// When no cycle is valid and the records say the force balance is far off
+/// (the accelerometer at odds with the pressure force, or cycles whose
+/// friction is implausible), the likeliest cause on sound sensors is the
+/// wrong hammer: names the geometry in use and how to give the right one.
+pub fn geometry_hint(reports: &[hammer_estimator::CycleReport], config: &hammer_estimator::Config) -> Option<String> {
+    use hammer_estimator::Flags;
+    if reports.is_empty() || reports.iter().any(|r| r.is_valid()) {
+        return None;
+    }
+    let off = reports
+        .iter()
+        .all(|r| r.flags.contains(Flags::ACCEL_FAULT) || (r.is_cycle() && r.flags.contains(Flags::IMPLAUSIBLE)));
+    if !off {
+        return None;
+    }
+    let g = config.geometry;
+    let paper = g == hammer_estimator::Geometry::PAPER;
+    Some(format!(
+        "the force balance (pressures × areas against mass × acceleration) is far off with the hammer geometry in use: piston {} kg, bore {} mm, rod {} mm{}; give your hammer's [hammer] piston_mass_kg, bore_diameter_m, rod_diameter_m with --config FILE",
+        g.piston_mass_kg,
+        g.bore_diameter_m * 1e3,
+        g.rod_diameter_m * 1e3,
+        if paper { " (the paper's hammer, the default)" } else { "" }
+    ))
+}
+
+pub fn no_impact_note(reports: &[hammer_estimator::CycleReport], config: &hammer_estimator::Config) -> String {
     let flags = reports
         .iter()
         .filter(|r| !r.is_cycle())
         .fold(hammer_estimator::Flags::default(), |f, r| f | r.flags);
     if reports.is_empty() {
-        String::new()
-    } else {
-        format!(
-            "; {} no-impact record(s) flagged {}",
-            reports.len(),
-            flags.names().collect::<Vec<_>>().join(",")
-        )
+        return String::new();
     }
+    let mut note = format!(
+        "; {} no-impact record(s) flagged {}",
+        reports.len(),
+        flags.names().collect::<Vec<_>>().join(",")
+    );
+    if let Some(hint) = geometry_hint(reports, config) {
+        note.push_str("; ");
+        note.push_str(&hint);
+    }
+    note
 }

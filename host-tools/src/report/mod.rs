@@ -23,7 +23,8 @@ use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 pub use analysis::{
-    match_truth, no_impact_note, summarize, truth_summary, Matched, Summary, TruthSummary, MATCH_TOLERANCE_S,
+    geometry_hint, match_truth, no_impact_note, summarize, truth_summary, Matched, Summary, TruthSummary,
+    MATCH_TOLERANCE_S,
 };
 
 pub const CYCLE_PNG: &str = "cycle.png";
@@ -41,7 +42,8 @@ pub const TRUTH_SIZE: (u32, u32) = (1100, 800);
 /// trace the estimate against the simulator's truth.
 #[derive(clap::Args, Debug)]
 pub struct ReportArgs {
-    /// Trace in the project's format (CSV, SI units, gauge pressures). Its sidecar
+    /// Trace in the project's format (CSV, SI units, gauge pressures), or a recorder's
+    /// file (delimited text, TDMS, MAT v5, WAV, Parquet) read through --map / [import]. Its sidecar
     /// JSON beside it (same name, extension .json) is read if present: the operating
     /// point and, for a simulated trace, the per-cycle truth the estimate is compared with.
     pub input: PathBuf,
@@ -58,6 +60,9 @@ pub struct ReportArgs {
     /// sidecar supplies its own hammer and sensors).
     #[arg(long)]
     pub config: Option<PathBuf>,
+    /// TOML file with the `[import]` table for a recorder's file (overrides the config's).
+    #[arg(long, value_name = "FILE.toml")]
+    pub map: Option<PathBuf>,
 }
 
 /// Writes the report of `args.input` into `args.out`; returns the files written

@@ -5,12 +5,16 @@
 //! Module map:
 //! - [`trace`]: the trace CSV and its JSON sidecar (`docs/trace-format.md`);
 //!   the sidecar's `simulation` object is opaque here (the simulator types it).
-//! - [`rows`]: the CSV read row by row in bounded memory, with the time base and gaps.
+//! - [`rows`]: the CSV read row by row in bounded memory, with the time base and gaps;
+//!   the time base works over any [`rows::RowSource`].
+//! - [`import`]: recorders' files (delimited text with a mapping, TDMS, MAT v5,
+//!   WAV, Parquet) as row sources; the one place a trace file is opened.
 //! - [`config`]: configuration errors that name the field and its range, TOML loading.
 //! - [`estimator_params`]: the `[estimator]` table of the project configuration.
 
 pub mod config;
 pub mod estimator_params;
+pub mod import;
 pub mod rows;
 pub mod trace;
 

@@ -19,6 +19,10 @@ use crate::trace::{TraceError, REQUIRED_COLUMNS};
 pub const MAX_LINE_BYTES: usize = 64 * 1024;
 /// Intervals from which the sample period is taken.
 pub const LOOKAHEAD: usize = 64;
+/// Rows from which the period is taken when the time stamps are rounded
+/// coarser than [`UNIFORM_TOLERANCE`] (1 µs stamps at 48 kS/s): the period
+/// is then good to about resolution / this many periods.
+pub const QUANTIZED_LOOKAHEAD: usize = 4096;
 /// Relative deviation of an interval from a whole number of sample periods
 /// that still counts as uniform sampling.
 pub const UNIFORM_TOLERANCE: f64 = 1e-3;
@@ -32,6 +36,73 @@ pub struct Row {
     pub accel_mps2: f64,
 }
 
+/// Where [`Uniform`] takes its rows from: the project's CSV ([`RowReader`]),
+/// or a recorder's file through [`crate::import`]. One time-base layer over
+/// every source, so a foreign file's samples reach the estimator exactly as
+/// the same samples in the native CSV would.
+pub trait RowSource {
+    /// The next row, `None` at the end.
+    fn next_row(&mut self) -> Result<Option<Row>, TraceError>;
+    /// Names the input in errors (its path).
+    fn label(&self) -> &str;
+    /// Where the latest row is, for errors (a line, or a sample number).
+    fn line(&self) -> usize;
+    /// The further channels' values of the latest row (see [`RowReader::extra`]).
+    fn extra(&self) -> &[f64] {
+        &[]
+    }
+    /// Resolution of the time stamps read so far, s (0 when exact): a
+    /// recorder that stamps in whole µs at 48 kS/s writes intervals of 20 and
+    /// 21 µs, which is uniform sampling, not jitter.
+    fn time_resolution_s(&self) -> f64 {
+        0.0
+    }
+}
+
+impl<R: BufRead> RowSource for RowReader<R> {
+    fn next_row(&mut self) -> Result<Option<Row>, TraceError> {
+        RowReader::next_row(self)
+    }
+    fn label(&self) -> &str {
+        &self.label
+    }
+    fn line(&self) -> usize {
+        self.line_no
+    }
+    fn extra(&self) -> &[f64] {
+        &self.extra
+    }
+    fn time_resolution_s(&self) -> f64 {
+        resolution_of(self.time_decimals)
+    }
+}
+
+/// Decimals a number is written with: `0.000021` → 6, `42` → 0; an
+/// exponent form counts as exact (`EXACT_DECIMALS`). The finest over a
+/// column is its resolution: a recorder writes a fixed count, and a
+/// shortest-form writer's longest value shows its precision.
+pub fn decimals(text: &str) -> i32 {
+    let t = text.trim();
+    if t.contains(['e', 'E']) {
+        return EXACT_DECIMALS;
+    }
+    match t.find(['.', ',']) {
+        Some(i) => (t.len() - i - 1).min(EXACT_DECIMALS as usize) as i32,
+        None => 0,
+    }
+}
+
+/// Decimals that stand for an exact value (beyond f64's precision anyway).
+pub const EXACT_DECIMALS: i32 = 30;
+
+/// The resolution of a column written with at most `decimals` decimals, in its unit.
+pub fn resolution_of(decimals: Option<i32>) -> f64 {
+    match decimals {
+        Some(d) if d < EXACT_DECIMALS => 10f64.powi(-d),
+        _ => 0.0,
+    }
+}
+
 /// The CSV layer: header, lines, fields. No time-base logic.
 pub struct RowReader<R> {
     input: R,
@@ -43,6 +114,8 @@ pub struct RowReader<R> {
     extra: Vec<f64>,
     line_no: usize,
     buf: Vec<u8>,
+    /// The most decimals a time stamp was written with (see [`RowSource::time_resolution_s`]).
+    time_decimals: Option<i32>,
 }
 
 impl<R: BufRead> RowReader<R> {
@@ -59,6 +132,7 @@ impl<R: BufRead> RowReader<R> {
             extra: Vec::new(),
             line_no: 0,
             buf: Vec::with_capacity(256),
+            time_decimals: None,
         };
         if !r.read_line()? {
             return Err(TraceError::Empty { path: r.label });
@@ -153,6 +227,10 @@ impl<R: BufRead> RowReader<R> {
             }
             match self.required.iter().position(|&r| r == j) {
                 Some(k) => {
+                    if k == 0 {
+                        let d = decimals(f);
+                        self.time_decimals = Some(self.time_decimals.map_or(d, |m| m.max(d)));
+                    }
                     values[k] =
                         f.trim()
                             .parse()
@@ -229,10 +307,12 @@ pub enum Item {
     },
 }
 
-/// The time-base layer over [`RowReader`]: a sample period known up front,
-/// gaps found, irregular timing refused with its line.
-pub struct Uniform<R> {
-    rows: RowReader<R>,
+/// The time-base layer over a [`RowSource`]: a sample period known up front,
+/// gaps found, irregular timing refused with its line. An interval may miss
+/// a whole number of periods by the tolerance, or by the time stamps'
+/// resolution when that is coarser.
+pub struct Uniform<S> {
+    rows: S,
     /// Rows read ahead to find the period, with their line and extra values.
     ahead: VecDeque<(Row, usize, Vec<f64>)>,
     dt_s: f64,
@@ -243,10 +323,13 @@ pub struct Uniform<R> {
     /// Sample periods from the first row to the latest (gaps included).
     slots: u64,
     first_t_s: f64,
+    /// How far an interval may miss a whole number of periods: the
+    /// tolerance, or the stamps' resolution when they are rounded coarser.
+    allowed_s: f64,
 }
 
-impl<R: BufRead> Uniform<R> {
-    pub fn new(mut rows: RowReader<R>) -> Result<Self, TraceError> {
+impl<S: RowSource> Uniform<S> {
+    pub fn new(mut rows: S) -> Result<Self, TraceError> {
         let mut ahead = VecDeque::new();
         while ahead.len() <= LOOKAHEAD {
             match rows.next_row()? {
@@ -259,7 +342,35 @@ impl<R: BufRead> Uniform<R> {
                 path: rows.label().to_string(),
             });
         }
-        let dt_s = period(ahead.iter().map(|(r, _, _)| r.t_s));
+        let mut dt_s = period(ahead.iter().map(|(r, _, _)| r.t_s));
+        let resolution = rows.time_resolution_s();
+        // Rounding explains the spread of the first intervals (each within one
+        // resolution step of a whole number of periods), and exceeds the tolerance.
+        let rounded = dt_s > 0.0
+            && resolution > UNIFORM_TOLERANCE * dt_s
+            && ahead.iter().zip(ahead.iter().skip(1)).all(|((a, _, _), (b, _, _))| {
+                let d = b.t_s - a.t_s;
+                (d - (d / dt_s).round() * dt_s).abs() <= resolution * (1.0 + 1e-9)
+            });
+        if rounded {
+            // Stamps rounded coarser than the tolerance: the period from a
+            // longer span, so the rounding of its ends weighs little.
+            while ahead.len() <= QUANTIZED_LOOKAHEAD {
+                match rows.next_row()? {
+                    Some(r) => ahead.push_back((r, rows.line(), rows.extra().to_vec())),
+                    None => break,
+                }
+            }
+            let slots: f64 = ahead
+                .iter()
+                .zip(ahead.iter().skip(1))
+                .map(|((a, _, _), (b, _, _))| ((b.t_s - a.t_s) / dt_s).round().max(0.0))
+                .sum();
+            let span = ahead[ahead.len() - 1].0.t_s - ahead[0].0.t_s;
+            if slots >= 1.0 && span > 0.0 {
+                dt_s = span / slots;
+            }
+        }
         if !(dt_s > 0.0 && dt_s.is_finite()) {
             let (r1, line, _) = &ahead[1];
             return Err(TraceError::NotUniform {
@@ -270,7 +381,13 @@ impl<R: BufRead> Uniform<R> {
             });
         }
         let first_t_s = ahead[0].0.t_s;
+        let allowed_s = if rounded {
+            resolution * (1.0 + 1e-9)
+        } else {
+            UNIFORM_TOLERANCE * dt_s
+        };
         Ok(Self {
+            allowed_s,
             rows,
             ahead,
             dt_s,
@@ -288,7 +405,8 @@ impl<R: BufRead> Uniform<R> {
         self.dt_s
     }
 
-    pub fn reader(&self) -> &RowReader<R> {
+    /// Where the rows come from.
+    pub fn source(&self) -> &S {
         &self.rows
     }
 
@@ -333,7 +451,7 @@ impl<R: BufRead> Uniform<R> {
         let k = (d / self.dt_s).round();
         // A step that overflows, or a "gap" longer than the estimator can count
         // (hours at full rate), is not a gap in one recording: refuse it here.
-        if !(k >= 1.0 && k <= MAX_GAP_SLOTS) || (d - k * self.dt_s).abs() > UNIFORM_TOLERANCE * self.dt_s {
+        if !(k >= 1.0 && k <= MAX_GAP_SLOTS) || (d - k * self.dt_s).abs() > self.allowed_s {
             return Err(TraceError::NotUniform {
                 path: self.rows.label().to_string(),
                 line,

@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::rows::{Item, RowReader, Uniform};
+use crate::rows::{RowReader, Uniform};
 
 pub const REQUIRED_COLUMNS: [&str; 4] = ["t_s", "p_rear_pa", "p_front_pa", "accel_mps2"];
 pub const SIDECAR_FORMAT: &str = "hammer-trace";
@@ -82,6 +82,9 @@ pub enum TraceError {
     NotUtf8 { path: String, line: usize },
     #[error("{path}: needs at least 2 samples")]
     TooShort { path: String },
+    /// A recorder's file that cannot be read as a trace (`crate::import`).
+    #[error("{path}: {message}")]
+    Import { path: String, message: String },
     #[error("{path}: sidecar: {message}")]
     Sidecar { path: String, message: String },
 }
@@ -188,37 +191,7 @@ pub fn read_csv(path: &Path) -> Result<Trace, TraceError> {
 pub fn read_csv_from(input: impl BufRead, label: &str) -> Result<Trace, TraceError> {
     let rows = RowReader::new(input, label, true)?;
     let extra_names: Vec<String> = rows.extra_names().map(str::to_string).collect();
-    let mut u = Uniform::new(rows)?;
-    let mut trace = Trace::default();
-    let mut extra: Vec<Vec<f64>> = vec![Vec::new(); extra_names.len()];
-    while let Some(item) = u.next_item()? {
-        match item {
-            Item::Gap { missing } => trace.gaps.push(Gap {
-                before: trace.t_s.len(),
-                missing,
-            }),
-            Item::Sample(r) => {
-                trace.t_s.push(r.t_s);
-                trace.p_rear_pa.push(r.p_rear_pa);
-                trace.p_front_pa.push(r.p_front_pa);
-                trace.accel_mps2.push(r.accel_mps2);
-                for (col, v) in extra.iter_mut().zip(u.extra()) {
-                    col.push(*v);
-                }
-            }
-        }
-    }
-    // The mean interval over the whole file: the most accurate period there is.
-    // (Divided first where the span itself would overflow: times near f64's range.)
-    let (first, last, slots) = (trace.t_s[0], trace.t_s[trace.t_s.len() - 1], u.slots() as f64);
-    let span = last - first;
-    trace.dt_s = if span.is_finite() {
-        span / slots
-    } else {
-        last / slots - first / slots
-    };
-    trace.extra = extra_names.into_iter().zip(extra).collect();
-    Ok(trace)
+    crate::import::collect(Uniform::new(rows)?, extra_names)
 }
 
 /// `S` is what the writer knew about the trace's origin: the simulator types
@@ -244,6 +217,11 @@ pub struct Sidecar<S = serde_json::Value> {
     /// a record made before a recalibration is told from one made after.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub calibration_hash: Option<u32>,
+    /// What `hammer import` understood of a recorder's file: format, each
+    /// signal's column, unit, gauge or absolute, sign, the mapping used,
+    /// rails found (`docs/trace-format.md`, "Recorders' files").
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub import: Option<serde_json::Value>,
 }
 
 fn default_format() -> String {
@@ -267,6 +245,7 @@ impl<S> Sidecar<S> {
             source: source.into(),
             simulation: None,
             calibration_hash: None,
+            import: None,
         }
     }
 }

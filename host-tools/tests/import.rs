@@ -1,0 +1,301 @@
+//! Recorders' files give the native result: the same samples written by each
+//! format's own reference writer (npTDMS, scipy.io.savemat, pyarrow with
+//! Snappy, a pandas CSV in bar/g/ms with `;` and a decimal comma, Python's
+//! `wave` at 16 bit) give `hammer estimate --format csv` output
+//! byte-identical to the project's CSV of the same samples. The writers are
+//! Python packages that `.ci/run` installs at pinned versions; without them
+//! the test says so, and under CI it fails.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn hammer(args: &[&str]) -> (i32, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_hammer")).args(args).output().unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+fn tmp_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("hammer-import-test-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// The reference writers are installed (or the test is skipped outside CI).
+fn writers() -> bool {
+    let ok = Command::new("python3")
+        .args(["-c", "import numpy, scipy, pandas, pyarrow, nptdms"])
+        .status()
+        .is_ok_and(|s| s.success());
+    if !ok {
+        assert!(
+            std::env::var_os("CI").is_none(),
+            "CI is set but a reference writer (numpy, scipy, pandas, pyarrow, npTDMS) is missing (.ci/run installs them)"
+        );
+        eprintln!("SKIPPED: `python3 -m pip install numpy scipy pandas pyarrow npTDMS` to run it");
+    }
+    ok
+}
+
+fn estimate(trace: &Path, extra: &[&str]) -> String {
+    let t = trace.to_str().unwrap();
+    let mut args = vec!["estimate", t, "--supply-bar", "4", "--format", "csv"];
+    args.extend_from_slice(extra);
+    let (code, out, err) = hammer(&args);
+    assert_eq!(code, 0, "{t}: {err}");
+    out
+}
+
+fn write(dir: &Path, name: &str, text: &str) -> String {
+    let p = dir.join(name);
+    std::fs::write(&p, text).unwrap();
+    p.to_str().unwrap().to_string()
+}
+
+#[test]
+fn foreign_files_give_the_native_result() {
+    if !writers() {
+        return;
+    }
+    let dir = tmp_dir("formats");
+    let native = dir.join("native.csv");
+    let (code, _, err) = hammer(&[
+        "simulate",
+        "--supply-bar",
+        "4",
+        "--duration",
+        "0.4",
+        "--seed",
+        "3",
+        "--out",
+        native.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    // No sidecar: every file is read with the same config and --supply-bar.
+    std::fs::remove_file(dir.join("native.json")).unwrap();
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/import/writers.py");
+    let out = Command::new("python3")
+        .arg(&script)
+        .arg(&native)
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+
+    let want = estimate(&native, &[]);
+    let cycles = want.lines().count() - 1;
+    assert!(cycles >= 5, "the native trace gives cycles to compare: {want}");
+    // The project's names need no mapping.
+    for f in [
+        "tdms_rate.tdms",
+        "tdms_time.tdms",
+        "mat_vectors.mat",
+        "mat_rate.mat",
+        "arrow.parquet",
+    ] {
+        assert_eq!(estimate(&dir.join(f), &[]), want, "{f}");
+    }
+    let recorder_map = write(
+        &dir,
+        "recorder.toml",
+        "[import]\ndecimal = \",\"\n\
+         t = { column = \"Zeit [ms]\", unit = \"ms\" }\n\
+         p_rear = { column = \"P hinten [bar]\", unit = \"bar\" }\n\
+         p_front = { column = \"P vorne [bar]\", unit = \"bar\" }\n\
+         accel = { column = \"Beschl. [g]\", unit = \"g\" }\n",
+    );
+    assert_eq!(
+        estimate(&dir.join("recorder.csv"), &["--map", &recorder_map]),
+        want,
+        "pandas CSV"
+    );
+
+    // WAV rounds to 16 bit: compared with the project's CSV of the same rounded values.
+    let wav_map = write(
+        &dir,
+        "wav.toml",
+        "p_rear = { column = 1, unit = \"bar\", scale = 10 }\n\
+         p_front = { column = 2, unit = \"bar\", scale = 10 }\n\
+         accel = { column = 3, unit = \"m/s2\", scale = 2000 }\n",
+    );
+    let wav_want = estimate(&dir.join("sound_native.csv"), &[]);
+    assert!(wav_want.lines().count() > 5, "{wav_want}");
+    assert_eq!(estimate(&dir.join("sound.wav"), &["--map", &wav_map]), wav_want, "WAV");
+
+    // `hammer import` converts, says what it understood, and the converted trace reads the same.
+    let conv = dir.join("converted.csv");
+    let (code, said, err) = hammer(&[
+        "import",
+        dir.join("recorder.csv").to_str().unwrap(),
+        "--map",
+        &recorder_map,
+        "--supply-bar",
+        "4",
+        "--out",
+        conv.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    for part in [
+        "delimited text",
+        "delimiter `;`, decimal `,`, header on line 4",
+        "p_rear   <- P hinten [bar] [bar] gauge",
+        "accel    <- Beschl. [g] [g]",
+        "40001 samples at 100.000000 kS/s",
+    ] {
+        assert!(said.contains(part), "`{part}` in:\n{said}");
+    }
+    let sidecar: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("converted.json")).unwrap()).unwrap();
+    assert_eq!(sidecar["supply_pressure_bar"], 4.0);
+    assert_eq!(sidecar["import"]["understood"]["signals"][1]["unit"], "bar");
+    assert_eq!(sidecar["import"]["understood"]["mapping"]["decimal"], ",");
+    assert_eq!(estimate(&conv, &[]), want, "the converted trace");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Malformed files of each format: a clear error naming the file, exit 2, no panic.
+#[test]
+fn malformed_files_get_a_clear_error() {
+    let dir = tmp_dir("malformed");
+    let mut tdms = b"TDSm".to_vec();
+    tdms.extend_from_slice(&[0x0e, 0, 0, 0, 0x68, 0x12, 0, 0]);
+    tdms.extend_from_slice(&u64::MAX.to_le_bytes());
+    tdms.extend_from_slice(&20u64.to_le_bytes());
+    tdms.extend_from_slice(&[1, 0, 0, 0, 0xff, 0xff, 0xff, 0x7f]);
+    let mut mat = vec![b' '; 128];
+    mat[..19].copy_from_slice(b"MATLAB 5.0 MAT-file");
+    mat[124..128].copy_from_slice(&[0, 1, b'I', b'M']);
+    mat.extend_from_slice(&[14, 0, 0, 0, 0xff, 0xff, 0xff, 0x0f]);
+    let mut mat73 = vec![b' '; 600];
+    mat73[..19].copy_from_slice(b"MATLAB 7.3 MAT-file");
+    mat73[124..128].copy_from_slice(&[0, 2, b'I', b'M']);
+    mat73[512..516].copy_from_slice(b"\x89HDF");
+    let mut wav = b"RIFF\x24\x00\x00\x00WAVEfmt ".to_vec();
+    wav.extend_from_slice(&[16, 0, 0, 0, 1, 0, 0, 0, 0x44, 0xac, 0, 0]);
+    let parquet = b"PAR1\x00\x00\x00garbagePAR1".to_vec();
+    let cases: [(&str, Vec<u8>, &str); 6] = [
+        ("bad.tdms", tdms, "NI TDMS"),
+        ("bad.mat", mat, "a data element claims"),
+        ("v73.mat", mat73, "v7.3"),
+        ("bad.wav", wav, "WAV"),
+        ("bad.parquet", parquet, "Parquet"),
+        (
+            "bad.txt",
+            b"Zeit;Druck\n0;1\n".to_vec(),
+            "no header row with the columns",
+        ),
+    ];
+    for (name, bytes, says) in cases {
+        let p = dir.join(name);
+        std::fs::write(&p, bytes).unwrap();
+        let (code, _, err) = hammer(&["estimate", p.to_str().unwrap(), "--supply-bar", "4"]);
+        assert_eq!(code, 2, "{name}: {err}");
+        assert!(err.contains(name) && err.contains(says), "{name}: {err}");
+        assert!(!err.contains("panicked"), "{name}: {err}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A recorder that clipped the rear chamber's dip at 0 gauge: `hammer
+/// import` names the rail; the same trace unclipped (the dip below 0 kept,
+/// noise-free) has none.
+#[test]
+fn import_names_the_values_a_recorder_clipped() {
+    let dir = tmp_dir("rails");
+    let ideal = dir.join("ideal.csv");
+    let (code, _, err) = hammer(&[
+        "simulate",
+        "--supply-bar",
+        "4",
+        "--duration",
+        "0.4",
+        "--ideal-sensors",
+        "--out",
+        ideal.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let text = std::fs::read_to_string(&ideal).unwrap();
+    let mut clipped = String::from("t_s,p_rear_pa,p_front_pa,accel_mps2\n");
+    let mut plain = clipped.clone();
+    for line in text.lines().skip(1) {
+        let f: Vec<&str> = line.split(',').collect();
+        let rear: f64 = f[1].parse().unwrap();
+        clipped.push_str(&format!("{},{},{},{}\n", f[0], rear.max(0.0), f[2], f[3]));
+        plain.push_str(&format!("{},{},{},{}\n", f[0], f[1], f[2], f[3]));
+    }
+    let said = |name: &str, body: &str| {
+        let p = write(&dir, name, body);
+        let out = dir.join(format!("conv-{name}"));
+        let (code, said, err) = hammer(&["import", &p, "--out", out.to_str().unwrap()]);
+        assert_eq!(code, 0, "{err}");
+        said
+    };
+    let c = said("clipped.csv", &clipped);
+    let rear = c.lines().find(|l| l.trim_start().starts_with("p_rear_pa")).unwrap();
+    assert!(rear.contains("rail at 0.0000 bar"), "{c}");
+    let p = said("plain.csv", &plain);
+    assert!(!p.contains("rail at"), "{p}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The project's own Parquet capture (`hammer capture --out X.parquet`,
+/// zstd, the ADC codes beside the values, the sidecar in the metadata) reads
+/// back as the trace it holds, with the sidecar's operating point.
+#[test]
+fn the_projects_parquet_capture_reads_back_with_its_sidecar() {
+    use hammer_sim::estimation::open_for_estimation;
+    use hammer_sim::SimConfig;
+    let dir = tmp_dir("capture");
+    let native = dir.join("run.csv");
+    let (code, _, err) = hammer(&[
+        "simulate",
+        "--supply-bar",
+        "5",
+        "--duration",
+        "0.3",
+        "--out",
+        native.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    std::fs::remove_file(dir.join("run.json")).unwrap();
+    let trace = hammer_trace::trace::read_csv(&native).unwrap();
+    let codes: Vec<[u16; 3]> = (0..trace.len()).map(|i| [i as u16, 0, 1]).collect();
+    let pq = dir.join("capture.parquet");
+    let mut f = std::fs::File::create(&pq).unwrap();
+    hammer_host::parquet_files::write_trace(
+        &mut f,
+        &trace,
+        &codes,
+        "{\"supply_pressure_bar\":5,\"source\":\"device\"}",
+    )
+    .unwrap();
+    drop(f);
+    let from_pq = open_for_estimation(&pq, &SimConfig::default(), None).unwrap();
+    assert_eq!(from_pq.supply_bar, Some(5.0), "the embedded sidecar's operating point");
+    assert_eq!(from_pq.sidecar.as_ref().map(|s| s.source.as_str()), Some("device"));
+    assert_eq!(from_pq.trace.p_rear_pa, trace.p_rear_pa);
+    assert_eq!(from_pq.trace.accel_mps2, trace.accel_mps2);
+    assert_eq!(
+        estimate_at(&pq, "5"),
+        estimate_at(&native, "5"),
+        "the same cycles from the capture and the CSV"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+fn estimate_at(trace: &Path, bar: &str) -> String {
+    let (code, out, err) = hammer(&[
+        "estimate",
+        trace.to_str().unwrap(),
+        "--supply-bar",
+        bar,
+        "--format",
+        "csv",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    out
+}

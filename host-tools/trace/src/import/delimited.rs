@@ -1,0 +1,448 @@
+//! Delimited text from a recorder: any delimiter, a decimal comma, preamble
+//! lines, columns by name or position in any unit. Streamed row by row in
+//! bounded memory like the project's own CSV (`crate::rows`).
+
+use std::io::BufRead;
+
+use crate::import::mapping::{ColumnRef, ImportMap, Resolved};
+use crate::rows::{decimals, resolution_of, Row, RowSource, MAX_LINE_BYTES};
+use crate::trace::TraceError;
+
+/// Lines searched for the header row when the map gives no `skip_lines`.
+pub const HEADER_SEARCH_LINES: usize = 64;
+/// Delimiters tried, in order, when the map gives none.
+const DELIMITERS: [char; 4] = [';', '\t', ',', '|'];
+
+pub struct Delimited<R> {
+    input: R,
+    label: String,
+    delimiter: char,
+    decimal_comma: bool,
+    /// The header's names (empty without a header).
+    pub names: Vec<String>,
+    /// Column index of t (None: from the rate), p_rear, p_front, accel.
+    cols: [Option<usize>; 4],
+    signals: [Resolved; 4],
+    increment_s: Option<f64>,
+    atmosphere_pa: f64,
+    line_no: usize,
+    /// Line of the latest row.
+    current: usize,
+    samples: usize,
+    buf: Vec<u8>,
+    /// Lines read ahead while looking for the header, to be parsed as rows.
+    pending: std::collections::VecDeque<(usize, Vec<u8>)>,
+    time_decimals: Option<i32>,
+    /// The header line (1-based), 0 without one.
+    pub header_line: usize,
+    field: String,
+}
+
+impl<R: BufRead> Delimited<R> {
+    pub fn new(mut input: R, label: &str, map: &ImportMap) -> Result<Self, TraceError> {
+        let err = |message: String| TraceError::Import {
+            path: label.to_string(),
+            message,
+        };
+        map.validate().map_err(|e| err(e.to_string()))?;
+        let signals = [
+            map.resolve("t").map_err(|e| err(e.to_string()))?,
+            map.resolve("p_rear").map_err(|e| err(e.to_string()))?,
+            map.resolve("p_front").map_err(|e| err(e.to_string()))?,
+            map.resolve("accel").map_err(|e| err(e.to_string()))?,
+        ];
+        let rate = if map.has_time_column() {
+            None
+        } else {
+            map.sample_rate_hz
+        };
+        let header = map.header.unwrap_or(true);
+        // Read the lines up to the header (or the first row).
+        let mut lines: Vec<(usize, Vec<u8>)> = Vec::new();
+        let want = match (map.skip_lines, header) {
+            (Some(k), true) => k + 1,
+            (Some(k), false) => k,
+            (None, true) => HEADER_SEARCH_LINES,
+            (None, false) => 0,
+        };
+        let mut line_no = 0;
+        while lines.len() < want {
+            let mut buf = Vec::new();
+            if !read_line(&mut input, &mut buf, label, line_no + 1)? {
+                break;
+            }
+            line_no += 1;
+            lines.push((line_no, buf));
+        }
+        let text_of = |b: &[u8], n: usize| -> Result<String, TraceError> {
+            std::str::from_utf8(b)
+                .map(|s| {
+                    s.trim_end_matches(['\n', '\r'])
+                        .trim_start_matches('\u{feff}')
+                        .to_string()
+                })
+                .map_err(|_| TraceError::NotUtf8 {
+                    path: label.to_string(),
+                    line: n,
+                })
+        };
+        let named: Vec<&str> = signals
+            .iter()
+            .enumerate()
+            .filter(|(k, _)| *k > 0 || rate.is_none())
+            .filter_map(|(_, s)| match &s.column {
+                ColumnRef::Name(n) => Some(n.as_str()),
+                ColumnRef::Index(_) => None,
+            })
+            .collect();
+        let configured = map.delimiter().map_err(|e| err(e.to_string()))?;
+        let split_with = |text: &str, d: char| -> Vec<String> { split(text, d) };
+        // The header: the given line, or the first holding every named column.
+        let mut header_at: Option<usize> = None;
+        let mut delimiter = configured.unwrap_or(',');
+        if header {
+            match map.skip_lines {
+                Some(k) => {
+                    if lines.len() <= k {
+                        return Err(TraceError::Empty { path: label.into() });
+                    }
+                    let text = text_of(&lines[k].1, lines[k].0)?;
+                    delimiter = configured.unwrap_or_else(|| guess_delimiter(&text, &named));
+                    header_at = Some(k);
+                }
+                None => {
+                    'search: for (j, (n, b)) in lines.iter().enumerate() {
+                        let Ok(text) = text_of(b, *n) else { continue };
+                        let candidates: Vec<char> = configured.map_or(DELIMITERS.to_vec(), |d| vec![d]);
+                        for d in candidates {
+                            let fields = split_with(&text, d);
+                            if !named.is_empty() && named.iter().all(|w| fields.iter().any(|f| f == w)) {
+                                delimiter = d;
+                                header_at = Some(j);
+                                break 'search;
+                            }
+                        }
+                    }
+                    if header_at.is_none() {
+                        if lines.is_empty() {
+                            return Err(TraceError::Empty { path: label.into() });
+                        }
+                        let first = text_of(&lines[0].1, lines[0].0)?;
+                        return Err(err(format!(
+                            "no header row with the columns {} in the first {HEADER_SEARCH_LINES} lines (line 1: `{}`); name the columns in the mapping ([import.p_rear] column = ..., docs/trace-format.md), or give import.skip_lines",
+                            named.iter().map(|n| format!("`{n}`")).collect::<Vec<_>>().join(", "),
+                            first.chars().take(120).collect::<String>()
+                        )));
+                    }
+                }
+            }
+        }
+        let (names, rest_from) = match header_at {
+            Some(j) => {
+                let text = text_of(&lines[j].1, lines[j].0)?;
+                (split_with(&text, delimiter), j + 1)
+            }
+            None => (Vec::new(), map.skip_lines.unwrap_or(0).min(lines.len())),
+        };
+        let pending: std::collections::VecDeque<(usize, Vec<u8>)> = lines.into_iter().skip(rest_from).collect();
+        if header_at.is_none() && configured.is_none() {
+            if let Some((n, b)) = pending.front() {
+                delimiter = guess_delimiter(&text_of(b, *n)?, &[]);
+            }
+        }
+        let mut cols = [None; 4];
+        for (k, s) in signals.iter().enumerate() {
+            if k == 0 && rate.is_some() {
+                continue;
+            }
+            let c = match &s.column {
+                ColumnRef::Index(i) => i - 1,
+                ColumnRef::Name(n) => names.iter().position(|h| h == n).ok_or_else(|| {
+                    err(format!(
+                        "no column `{n}` for {} (columns: {}); name it in the mapping ([import.{}] column = ...)",
+                        s.signal,
+                        names.join(", "),
+                        s.signal
+                    ))
+                })?,
+            };
+            cols[k] = Some(c);
+        }
+        Ok(Self {
+            input,
+            label: label.to_string(),
+            delimiter,
+            decimal_comma: map.decimal_comma(),
+            names,
+            cols,
+            signals,
+            increment_s: rate.map(|r| 1.0 / r),
+            atmosphere_pa: map.atmosphere_pa(),
+            line_no,
+            current: 0,
+            samples: 0,
+            buf: Vec::with_capacity(256),
+            pending,
+            time_decimals: None,
+            header_line: header_at.map_or(0, |j| j + 1),
+            field: String::new(),
+        })
+    }
+
+    pub fn delimiter(&self) -> char {
+        self.delimiter
+    }
+
+    /// The column each signal comes from (`t` is None with a sample rate).
+    pub fn columns(&self) -> [(Option<usize>, &Resolved); 4] {
+        [0, 1, 2, 3].map(|k| (self.cols[k], &self.signals[k]))
+    }
+
+    fn parse(&mut self, line: usize, buf: &[u8]) -> Result<Option<Row>, TraceError> {
+        let text = std::str::from_utf8(buf).map_err(|_| TraceError::NotUtf8 {
+            path: self.label.clone(),
+            line,
+        })?;
+        let text = text.trim_end_matches(['\n', '\r']);
+        if text.trim().is_empty() {
+            return Ok(None);
+        }
+        let mut v = [f64::NAN; 4];
+        let mut found = 0;
+        for (j, f) in text.split(self.delimiter).enumerate() {
+            found = j + 1;
+            let Some(k) = self.cols.iter().position(|c| *c == Some(j)) else {
+                continue;
+            };
+            let f = f.trim().trim_matches('"').trim();
+            self.field.clear();
+            if self.decimal_comma {
+                self.field.extend(f.chars().map(|c| if c == ',' { '.' } else { c }));
+            } else {
+                self.field.push_str(f);
+            }
+            let raw: f64 =
+                self.field
+                    .parse()
+                    .ok()
+                    .filter(|x: &f64| x.is_finite())
+                    .ok_or_else(|| TraceError::BadNumber {
+                        path: self.label.clone(),
+                        line,
+                        column: self.column_name(k),
+                        text: f.to_string(),
+                    })?;
+            if k == 0 {
+                let d = decimals(f);
+                self.time_decimals = Some(self.time_decimals.map_or(d, |m| m.max(d)));
+            }
+            v[k] = self.signals[k].si(raw, self.atmosphere_pa);
+        }
+        for k in 0..4 {
+            if let Some(c) = self.cols[k] {
+                if c >= found {
+                    return Err(TraceError::FieldCount {
+                        path: self.label.clone(),
+                        line,
+                        expected: c + 1,
+                        found,
+                    });
+                }
+            }
+        }
+        if self.cols[0].is_none() {
+            v[0] = self.samples as f64 * self.increment_s.unwrap_or(f64::NAN);
+        }
+        for (k, x) in v.iter().enumerate() {
+            if !x.is_finite() {
+                return Err(TraceError::BadNumber {
+                    path: self.label.clone(),
+                    line,
+                    column: self.column_name(k),
+                    text: x.to_string(),
+                });
+            }
+        }
+        self.samples += 1;
+        Ok(Some(Row {
+            t_s: v[0],
+            p_rear_pa: v[1],
+            p_front_pa: v[2],
+            accel_mps2: v[3],
+        }))
+    }
+
+    fn column_name(&self, k: usize) -> String {
+        match self.cols[k].and_then(|c| self.names.get(c)) {
+            Some(n) => n.clone(),
+            None => match self.cols[k] {
+                Some(c) => format!("#{} ({})", c + 1, self.signals[k].signal),
+                None => self.signals[k].signal.to_string(),
+            },
+        }
+    }
+}
+
+impl<R: BufRead> RowSource for Delimited<R> {
+    fn next_row(&mut self) -> Result<Option<Row>, TraceError> {
+        loop {
+            let (line, buf) = match self.pending.pop_front() {
+                Some(p) => p,
+                None => {
+                    let mut buf = std::mem::take(&mut self.buf);
+                    if !read_line(&mut self.input, &mut buf, &self.label, self.line_no + 1)? {
+                        self.buf = buf;
+                        return Ok(None);
+                    }
+                    self.line_no += 1;
+                    (self.line_no, buf)
+                }
+            };
+            self.current = line;
+            let r = self.parse(line, &buf);
+            self.buf = buf;
+            if let Some(row) = r? {
+                return Ok(Some(row));
+            }
+        }
+    }
+
+    fn label(&self) -> &str {
+        &self.label
+    }
+
+    fn line(&self) -> usize {
+        self.current
+    }
+
+    fn time_resolution_s(&self) -> f64 {
+        if self.cols[0].is_none() {
+            return 0.0;
+        }
+        resolution_of(self.time_decimals) * self.signals[0].factor
+    }
+}
+
+/// One line into `buf`, bounded by [`MAX_LINE_BYTES`]; false at the end.
+fn read_line(input: &mut impl BufRead, buf: &mut Vec<u8>, label: &str, line: usize) -> Result<bool, TraceError> {
+    buf.clear();
+    let limit = MAX_LINE_BYTES as u64;
+    let n = std::io::Read::take(&mut *input, limit)
+        .read_until(b'\n', buf)
+        .map_err(|error| TraceError::Io {
+            path: label.to_string(),
+            error,
+        })?;
+    if n == 0 {
+        return Ok(false);
+    }
+    if n as u64 == limit && buf.last() != Some(&b'\n') {
+        return Err(TraceError::LineTooLong {
+            path: label.to_string(),
+            line,
+            max: MAX_LINE_BYTES,
+        });
+    }
+    Ok(true)
+}
+
+/// A line's fields, trimmed and unquoted.
+pub fn split(text: &str, d: char) -> Vec<String> {
+    text.split(d)
+        .map(|f| f.trim().trim_matches('"').trim().to_string())
+        .collect()
+}
+
+/// The delimiter of a line: the first of [`DELIMITERS`] that splits it into
+/// fields holding every name in `named` (or, with no names, that occurs).
+fn guess_delimiter(text: &str, named: &[&str]) -> char {
+    DELIMITERS
+        .into_iter()
+        .find(|&d| {
+            let f = split(text, d);
+            if named.is_empty() {
+                f.len() > 1
+            } else {
+                named.iter().all(|w| f.iter().any(|x| x == w))
+            }
+        })
+        .unwrap_or(',')
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::import::mapping::{ColumnRef, Signal};
+
+    fn sig(col: ColumnRef, unit: &str) -> Option<Signal> {
+        Some(Signal {
+            column: Some(col),
+            unit: Some(unit.into()),
+            ..Signal::default()
+        })
+    }
+
+    /// Tab-separated, no header, columns by position, a sample rate instead
+    /// of a time column, absolute kPa, an inverted accelerometer in g.
+    #[test]
+    fn positions_a_rate_absolute_pressure_and_a_sign() {
+        let map = ImportMap {
+            delimiter: Some("\\t".into()),
+            header: Some(false),
+            skip_lines: Some(1),
+            sample_rate_hz: Some(50_000.0),
+            p_rear: Some(Signal {
+                absolute: true,
+                ..sig(ColumnRef::Index(2), "kPa").unwrap()
+            }),
+            p_front: sig(ColumnRef::Index(3), "psi"),
+            accel: Some(Signal {
+                sign: Some(-1.0),
+                ..sig(ColumnRef::Index(1), "g").unwrap()
+            }),
+            ..ImportMap::default()
+        };
+        let text = "logger v2 (no header below)\n1\t201.325\t0\n-2\t101.325\t14.5\n";
+        let mut d = Delimited::new(text.as_bytes(), "t.tsv", &map).unwrap();
+        let r0 = d.next_row().unwrap().unwrap();
+        let r1 = d.next_row().unwrap().unwrap();
+        assert!(d.next_row().unwrap().is_none());
+        assert_eq!((r0.t_s, r1.t_s), (0.0, 2e-5));
+        assert!(
+            (r0.p_rear_pa - 1e5).abs() < 1e-6 && r1.p_rear_pa.abs() < 1e-6,
+            "{r0:?} {r1:?}"
+        );
+        assert!((r1.p_front_pa - 14.5 * 6_894.757_293_168_361).abs() < 1e-6);
+        assert_eq!((r0.accel_mps2, r1.accel_mps2), (-9.806_65, 2.0 * 9.806_65));
+    }
+
+    /// A unit of the wrong kind, a missing column and a bad number are
+    /// named with what to do.
+    #[test]
+    fn mapping_errors_name_the_key_and_the_choices() {
+        let map = ImportMap {
+            p_rear: sig(ColumnRef::Name("P1".into()), "g"),
+            ..ImportMap::default()
+        };
+        let e = Delimited::new("P1;p_front_pa\n".as_bytes(), "x.csv", &map)
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(e.contains("import.p_rear.unit") && e.contains("bar"), "{e}");
+        let map = ImportMap {
+            p_rear: sig(ColumnRef::Name("P1".into()), "bar"),
+            ..ImportMap::default()
+        };
+        let e = Delimited::new("P9;p_front_pa;accel_mps2;t_s\n1;2;3;4\n".as_bytes(), "x.csv", &map)
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(e.contains("no header row") && e.contains("`P1`"), "{e}");
+        let mut d = Delimited::new("t_s;P1;p_front_pa;accel_mps2\n0;1;2;x\n".as_bytes(), "x.csv", &map).unwrap();
+        let e = d.next_row().unwrap_err().to_string();
+        assert!(
+            e.contains("x.csv:2") && e.contains("accel_mps2") && e.contains("`x`"),
+            "{e}"
+        );
+    }
+}
