@@ -6,34 +6,41 @@
 //!
 //! `cargo run --release -p hammer-host --example chambers [-- SECONDS]`
 
-use hammer_host::chambers::{compare, mean_front_port_opening_s, mean_onset_s, run, Family, Tally};
+use hammer_host::chambers::{compare, effects_of, mean_front_port_opening_s, mean_onset_s, run, Family, Tally};
 use hammer_sim::effects::Effects;
+
+/// The effects the characteristics are checked with (the pressure gain
+/// error left out: a calibration error, which the stated uncertainty leaves
+/// out by design).
+const CHECKED_EFFECTS: [&str; 8] = [
+    "none",
+    "coulomb_friction:f0_n=1.7,k_n_per_bar=2.14",
+    "viscous_friction",
+    "leakage",
+    "valve_delay:tau_s=0.0015",
+    "heat_transfer",
+    "supply_restriction",
+    "accel_zero_shift",
+];
 
 fn main() {
     let seconds: f64 = std::env::args().nth(1).and_then(|s| s.parse().ok()).unwrap_or(1.0);
-    let specs = [
-        "none",
-        "coulomb_friction:f0_n=1.7,k_n_per_bar=2.14",
-        "viscous_friction",
-        "leakage",
-        "valve_delay:tau_s=0.0015",
-        "heat_transfer",
-        "supply_restriction",
-        "accel_zero_shift",
-        "pressure_gain_error",
-    ];
     let mut total = Tally::default();
     for family in [Family::Model, Family::Variant] {
         for bar in [4.0, 7.0] {
-            for spec in specs {
-                let mut e = Effects::default();
-                if spec != "none" {
-                    e.apply_spec(spec).expect("catalogue effect");
-                }
-                let t = compare(family, bar, &e, seconds, 11);
+            for spec in CHECKED_EFFECTS {
+                let t = compare(family, bar, &effects_of(spec), seconds, 11);
                 println!("{:8} {bar} bar {spec:44} {}", family.name(), t.line());
                 total.add(&t);
             }
+            // Shown, not counted: a calibration error, outside the stated uncertainty.
+            let spec = "pressure_gain_error";
+            let t = compare(family, bar, &effects_of(spec), seconds, 11);
+            println!(
+                "{:8} {bar} bar {spec:44} {} (not in the total)",
+                family.name(),
+                t.line()
+            );
         }
     }
     println!("all {}", total.line());

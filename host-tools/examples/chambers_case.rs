@@ -1,3 +1,12 @@
+//! The chamber characteristics the diagnosis reads (its features), on a
+//! hammer of the second family of a chosen structure and on the model, with
+//! no effect and with a valve delay, a restriction, heat exchange and a
+//! leak: which characteristic moves with which effect (docs/diagnosis.md,
+//! "The chamber characteristics and commissioning").
+//!
+//! `cargo run --release -p hammer-host --example chambers_case [-- I J]`,
+//! I and J indices into `Structure::singles()` (none: the base hammer).
+
 use hammer_host::diagnose::engine::extractor_for;
 use hammer_host::diagnose::features::{
     summarize, Signals, FRONT_AREA, FRONT_EXPONENT, FRONT_FEED, REAR_AREA, REAR_EXPONENT, REAR_FEED,

@@ -172,11 +172,11 @@ fn model_run(base: &SimConfig, supply_bar: f64, law: Option<(f64, f64)>, duratio
     cfg.effects = hammer_sim::Effects::default();
     cfg.import = None;
     if let Some((f0, k)) = law {
-        cfg.effects.apply_spec(&format!(
-            "coulomb_friction:f0_n={},k_n_per_bar={}",
-            f0.max(0.0),
-            k.max(0.0)
-        ))?;
+        cfg.effects.coulomb_friction = Some(hammer_sim::effects::CoulombFriction {
+            f0_n: f0.max(0.0),
+            k_n_per_bar: k.max(0.0),
+            ..Default::default()
+        });
     }
     cfg.validate()?;
     let run = simulate_truth(&cfg).map_err(|e| anyhow!("the model at {supply_bar} bar: {e}"))?;

@@ -15,6 +15,15 @@ use hammer_sim::SimConfig;
 use hammer_trace::trace::Trace;
 use hammer_variants::{generate, Structure, VariantParams};
 
+/// The effects of `spec` (`"none"`, or a catalogue spec).
+pub fn effects_of(spec: &str) -> Effects {
+    let mut e = Effects::default();
+    if spec != "none" {
+        e.apply_spec(spec).expect("catalogue effect");
+    }
+    e
+}
+
 /// Which hammer made the trace.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Family {

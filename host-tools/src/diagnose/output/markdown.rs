@@ -18,6 +18,9 @@ macro_rules! line {
     }};
 }
 
+mod evidence;
+use evidence::{chambers_md, model_free_md};
+
 /// Where cells listed in the Markdown report.
 const TOP_WHERE: usize = 10;
 
@@ -249,65 +252,6 @@ fn verdict_md(s: &mut String, report: &Report) {
     recalibration_md(s, report);
     remainder_md(s, report);
     floors_md(s, report);
-}
-
-/// The force balance against the nominal model: the evidence no valve or
-/// port model stands behind.
-fn model_free_md(s: &mut String, report: &Report) {
-    if report.model_free.is_empty() {
-        return;
-    }
-    line!(s, "### Model-free evidence (the force balance)");
-    line!(s);
-    line!(s, "Fit points' mean; z = (measured − nominal) / standard error; an effect the force balance sees is named only at z ≥ {}.", num(report.options.min_model_free_z));
-    line!(s);
-    line!(s, "| quantity | measured | nominal model | ± | z |");
-    line!(s, "|---|---:|---:|---:|---:|");
-    for m in &report.model_free {
-        line!(
-            s,
-            "| {} | {} | {} | {} | {} |",
-            m.feature,
-            num(m.measured),
-            num(m.nominal),
-            num(m.se),
-            num(m.z)
-        );
-    }
-    line!(s);
-}
-
-/// The chamber characteristics against the nominal model, or their change
-/// since the reference: where the gap lies in physical terms, true also
-/// when no effect can be named.
-fn chambers_md(s: &mut String, report: &Report) {
-    if report.chambers.is_empty() {
-        return;
-    }
-    line!(s, "### Chamber characteristics (valve switching, fills, closed phases)");
-    line!(s);
-    if report.references.is_empty() {
-        line!(s, "Fit points' mean, read from the pressures and the piston's track with no valve or port model (docs/estimator.md). Against the model alone a difference includes the model's form error.");
-        line!(s);
-        line!(s, "| quantity | measured | nominal model | ± | z |");
-    } else {
-        line!(s, "Fit points' mean; the change since the reference record, set on the nominal model's value (the form error cancels).");
-        line!(s);
-        line!(s, "| quantity | nominal + change | nominal model | ± | z |");
-    }
-    line!(s, "|---|---:|---:|---:|---:|");
-    for m in &report.chambers {
-        line!(
-            s,
-            "| {} | {} | {} | {} | {} |",
-            m.feature,
-            num(m.measured),
-            num(m.nominal),
-            num(m.se),
-            num(m.z)
-        );
-    }
-    line!(s);
 }
 
 /// Where the gap lies: the largest cells against the nominal model.

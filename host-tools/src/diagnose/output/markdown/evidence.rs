@@ -1,0 +1,65 @@
+//! The report's tables of evidence measured from the signals: the force
+//! balance, and the chamber characteristics, each against the nominal model.
+
+use std::fmt::Write as _;
+
+use crate::diagnose::engine::Report;
+use crate::diagnose::report::ModelFreeStat;
+use crate::numfmt::sig3 as num;
+
+/// The force balance against the nominal model: the evidence no valve or
+/// port model stands behind.
+pub(super) fn model_free_md(s: &mut String, report: &Report) {
+    let note = format!("Fit points' mean; z = (measured − nominal) / standard error; an effect the force balance sees is named only at z ≥ {}.", num(report.options.min_model_free_z));
+    stats_md(
+        s,
+        "Model-free evidence (the force balance)",
+        &note,
+        "measured",
+        &report.model_free,
+    );
+}
+
+/// The chamber characteristics against the nominal model, or their change
+/// since the reference: where the gap lies in physical terms, true also
+/// when no effect can be named.
+pub(super) fn chambers_md(s: &mut String, report: &Report) {
+    let (note, measured) = if report.references.is_empty() {
+        ("Fit points' mean, read from the pressures and the piston's track with no valve or port model (docs/estimator.md). Against the model alone a difference includes the model's form error.", "measured")
+    } else {
+        ("Fit points' mean; the change since the reference record, set on the nominal model's value (the form error cancels).", "nominal + change")
+    };
+    stats_md(
+        s,
+        "Chamber characteristics (valve switching, fills, closed phases)",
+        note,
+        measured,
+        &report.chambers,
+    );
+}
+
+/// A table of features against the nominal model under `title`; `measured`
+/// heads the measurement's column.
+fn stats_md(s: &mut String, title: &str, note: &str, measured: &str, stats: &[ModelFreeStat]) {
+    if stats.is_empty() {
+        return;
+    }
+    line!(s, "### {title}");
+    line!(s);
+    line!(s, "{note}");
+    line!(s);
+    line!(s, "| quantity | {measured} | nominal model | ± | z |");
+    line!(s, "|---|---:|---:|---:|---:|");
+    for m in stats {
+        line!(
+            s,
+            "| {} | {} | {} | {} | {} |",
+            m.feature,
+            num(m.measured),
+            num(m.nominal),
+            num(m.se),
+            num(m.z)
+        );
+    }
+    line!(s);
+}
