@@ -78,15 +78,17 @@ fn shock_end(accel: &[f64], i: usize, threshold_mps2: f64, dt_s: f64) -> usize {
 
 /// The characteristics of each span. The samples after a span's closing
 /// impact, where a front feed may start, are tracked as the next span's
-/// when it continues this one; without one (the last cycle of a trace, a
-/// device's one-cycle capture) the piston starts from rest at the impact
-/// there, by the force balance alone. `None` where less than half of
-/// [`LOOK_AFTER_S`] follows the closing impact.
+/// when it continues this one. Without one, with `tail` (a device's
+/// one-cycle capture, whose only cycle has no next) the samples after the
+/// impact are tracked on their own ([`tail_track`], less accurate: a rebound
+/// fitted, not closed); else the span has none. `None` also where less
+/// than half of [`LOOK_AFTER_S`] follows the closing impact.
 pub fn characterise_spans(
     s: &Signals,
     spans: &[Span],
     r: &Reading,
     chambers: &ChamberGeometry,
+    tail: bool,
 ) -> Vec<Option<Characteristics>> {
     let n = s.p_rear_pa.len().min(s.p_front_pa.len()).min(s.accel_mps2.len());
     let index = |t: f64| (t / s.dt_s).round() as usize;
@@ -102,6 +104,9 @@ pub fn characterise_spans(
                 .get(k + 1)
                 .copied()
                 .filter(|nx| index(nx.open_s) == close && index(nx.close_s) < n);
+            if next.is_none() && !tail {
+                return None;
+            }
             let following = next.map_or((close + after).min(n.saturating_sub(1)), |nx| index(nx.close_s));
             // Half the look-after holds any feed within a few ms of the impact.
             if !(open < close && close + look / 2 <= following && following < n) {
@@ -157,7 +162,7 @@ fn tracks(
     let close = index(cur.close_s) - base;
     if next.is_none() {
         let a_end = shock_end(s.accel_mps2, close + base, r.impact_threshold_mps2, s.dt_s) - base;
-        tail(&accel, p2, dt, chambers, close, a_end, &mut x_acc);
+        tail_track(&accel, p2, dt, chambers, close, a_end, &mut x_acc);
         x_force[close..].copy_from_slice(&x_acc[close..]);
     }
     for span in [Some(cur), next].into_iter().flatten() {
@@ -188,7 +193,15 @@ const REBOUND_FIT_S: f64 = 0.5e-3;
 /// model's valve timing and its p·V^1.4 gives the position by itself. On a
 /// hammer whose valve feeds the front chamber before the impact the fit is
 /// off, and so is the tail; its feed's onset lies before the impact there.
-fn tail(accel: &[f32], p2: &[f32], dt: f32, chambers: &ChamberGeometry, close: usize, a_end: usize, x: &mut [f32]) {
+fn tail_track(
+    accel: &[f32],
+    p2: &[f32],
+    dt: f32,
+    chambers: &ChamberGeometry,
+    close: usize,
+    a_end: usize,
+    x: &mut [f32],
+) {
     let n = accel.len().min(p2.len()).min(x.len());
     let impact = chambers.impact_position_m as f32;
     let (v_dead, a2) = (chambers.front_dead_m3 as f32, chambers.front_area_m2 as f32);
@@ -247,7 +260,7 @@ pub fn characterise_cycles(
     let mut run: Vec<(&CycleReport, Span)> = Vec::new();
     let mut flush = |run: &mut Vec<(&CycleReport, Span)>| {
         let spans: Vec<Span> = run.iter().map(|r| r.1).collect();
-        for ((r, _), c) in run.iter().zip(characterise_spans(s, &spans, &reading, chambers)) {
+        for ((r, _), c) in run.iter().zip(characterise_spans(s, &spans, &reading, chambers, false)) {
             if let Some(feeds) = c {
                 out.push(CycleFeeds {
                     seq: r.seq,

@@ -220,7 +220,8 @@ impl Extractor {
 
     /// The chamber characteristics of `cycles` (found between the impacts
     /// `imp`), each cycle's track from its own force balance's friction and
-    /// zero shift; a cycle whose next is missing keeps NaN.
+    /// zero shift; a cycle whose next is missing keeps NaN, unless it is a
+    /// device's one-cycle capture (two impacts), read past its end.
     fn characterise(&self, s: &Signals, imp: &[f64], cycles: &mut [CycleFeatures], chambers: &ChamberGeometry) {
         let g = &self.geometry;
         let reading = Reading {
@@ -262,6 +263,7 @@ impl Extractor {
             &spans,
             &reading,
             chambers,
+            imp.len() == 2,
         );
         for (w, ch) in imp.windows(2).zip(read) {
             let (Some(ch), Some(c)) = (ch, cycles.iter_mut().find(|c| c.t_impact_s == w[0])) else {
