@@ -38,6 +38,11 @@ pub struct CommissionArgs {
     /// trying a diagnosis against a record of the sound one.
     #[arg(long = "effect", value_name = "SPEC", requires = "demo")]
     pub effects: Vec<String>,
+    /// Run the demo board's firmware app natively instead of on QEMU
+    /// (its samples then arrive at the host's pace: under QEMU, fed over
+    /// the emulated UART at the hammer's pace, captures time out today).
+    #[arg(long, requires = "demo")]
+    pub native: bool,
     /// Gauge supply pressure of an operating point, bar (repeatable). On a
     /// device with a terminal you are asked to set each in turn; without
     /// one, give one per run (each run adds its point to the folder).
@@ -227,7 +232,7 @@ fn open(args: &CommissionArgs, bar: f64) -> Result<Session> {
         let mut demo = crate::demo::DemoArgs::for_capture(bar);
         demo.effects = args.effects.clone();
         let codes = crate::demo::hammer_codes(&demo, DEMO_SETTLE_S + DEMO_PER_CAPTURE_S * args.cycles as f64)?;
-        let (board, read, write) = crate::demo::start_board(false, None, false)?;
+        let (board, read, write) = crate::demo::start_board(args.native, None, false)?;
         let writer = Arc::new(Mutex::new(write));
         let port: Box<dyn crate::monitor::Port> = Box::new(crate::demo::SharedPort::new(read, writer.clone()));
         let mut link = Client::new(port);
