@@ -14,7 +14,7 @@
 //!
 //! They run on one cycle's samples at a time (slices, no allocation), on the
 //! host from a raw trace or capture. The board does not compute them: its
-//! image has under 200 B of flash to spare (`docs/firmware.md`), and they
+//! image has under 50 B of flash to spare (`docs/firmware.md`), and they
 //! need the samples around the impact that its checkpoint sums do not keep.
 //!
 //! Module map:

@@ -215,12 +215,63 @@ fn check(field: &'static str, value: f32, min: f32, max: f32) -> Result<(), Conf
     }
 }
 
-fn check_cal(name: [&'static str; 2], c: &ChannelCal) -> Result<(), ConfigError> {
-    check(name[0], c.zero_code, -1e6, 1e6)?;
-    let s = abs_nonzero(c.scale);
-    check(name[1], s, 1e-9, 1e9)
+/// Every field's allowed range, in the order they are checked; `check_all`
+/// walks a segment beside the values. A table rather than a call per field:
+/// each call loaded its name and bounds in code, ~40 B of the board's flash
+/// apiece. The two bounds that depend on another field are checked between
+/// the segments.
+type Limits = [(&'static str, f32, f32)];
+
+const GEOMETRY: [(&str, f32, f32); 3] = [
+    ("sample_rate_hz", 1_000.0, 1_000_000.0),
+    ("geometry.piston_mass_kg", 0.01, 1000.0),
+    ("geometry.bore_diameter_m", 0.001, 1.0),
+];
+
+const CHANNELS: [(&str, f32, f32); 17] = [
+    ("inclination_deg", -90.0, 90.0),
+    ("rear.zero_code", -1e6, 1e6),
+    ("rear.scale", 1e-9, 1e9),
+    ("front.zero_code", -1e6, 1e6),
+    ("front.scale", 1e-9, 1e9),
+    ("accel.zero_code", -1e6, 1e6),
+    ("accel.scale", 1e-9, 1e9),
+    ("rear_spec.gain_rel", 0.0, 0.5),
+    ("rear_spec.offset", 0.0, 1e7),
+    ("front_spec.gain_rel", 0.0, 0.5),
+    ("front_spec.offset", 0.0, 1e7),
+    ("accel_spec.gain_rel", 0.0, 0.5),
+    ("accel_spec.offset", 0.0, 1e7),
+    ("impact_threshold_mps2", 10.0, 1e7),
+    ("blank_before_s", 0.0, 1e-3),
+    ("blank_after_s", 0.0, 0.02),
+    ("min_period_s", 1e-3, 1.0),
+];
+
+const REST: [(&str, f32, f32); 12] = [
+    ("accel_zero_shift_tau_s", 0.0, 10.0),
+    ("coverage_factor", 1.0, 5.0),
+    ("residual_correlation_factor", 1.0, 100.0),
+    ("stuck_after_s", 0.0, 10.0),
+    ("supply_pressure_pa", 0.0, 1e8),
+    ("wear.baseline_cycles", 5.0, 10_000.0),
+    ("wear.cusum_k", 0.0, 10.0),
+    ("wear.cusum_h", 0.5, 1000.0),
+    ("wear.sigma_floor_rel", 0.0, 1.0),
+    ("wear.sigma_floor_n", 1e-4, 1e4),
+    ("wear.budget_j", 1.0, 1e15),
+    ("wear.bin_width_pa", 1e3, 1e7),
+];
+
+fn check_all(limits: &Limits, values: &[f32]) -> Result<(), ConfigError> {
+    debug_assert_eq!(limits.len(), values.len(), "a value per limit");
+    for (&(field, min, max), &v) in limits.iter().zip(values) {
+        check(field, v, min, max)?;
+    }
+    Ok(())
 }
 
+/// A scale's magnitude, NaN for 0 (no scale at all is out of any range).
 fn abs_nonzero(x: f32) -> f32 {
     if x == 0.0 {
         f32::NAN
@@ -231,53 +282,64 @@ fn abs_nonzero(x: f32) -> f32 {
 
 impl Config {
     pub fn validate(&self) -> Result<(), ConfigError> {
-        check("sample_rate_hz", self.sample_rate_hz, 1_000.0, 1_000_000.0)?;
         let g = &self.geometry;
-        check("geometry.piston_mass_kg", g.piston_mass_kg as f32, 0.01, 1000.0)?;
-        check("geometry.bore_diameter_m", g.bore_diameter_m as f32, 0.001, 1.0)?;
+        let bore = math::narrow(g.bore_diameter_m);
+        check_all(&GEOMETRY, &[self.sample_rate_hz, math::narrow(g.piston_mass_kg), bore])?;
         check(
             "geometry.rod_diameter_m",
-            g.rod_diameter_m as f32,
+            math::narrow(g.rod_diameter_m),
             0.0,
-            g.bore_diameter_m as f32 * 0.99,
+            bore * 0.99,
         )?;
-        check("inclination_deg", self.inclination_deg, -90.0, 90.0)?;
-        check_cal(["rear.zero_code", "rear.scale"], &self.rear)?;
-        check_cal(["front.zero_code", "front.scale"], &self.front)?;
-        check_cal(["accel.zero_code", "accel.scale"], &self.accel)?;
-        for (n, s) in [
-            (["rear_spec.gain_rel", "rear_spec.offset"], &self.rear_spec),
-            (["front_spec.gain_rel", "front_spec.offset"], &self.front_spec),
-            (["accel_spec.gain_rel", "accel_spec.offset"], &self.accel_spec),
-        ] {
-            check(n[0], s.gain_rel, 0.0, 0.5)?;
-            check(n[1], s.offset, 0.0, 1e7)?;
-        }
-        check("impact_threshold_mps2", self.impact_threshold_mps2, 10.0, 1e7)?;
-        check("blank_before_s", self.blank_before_s, 0.0, 1e-3)?;
-        check("blank_after_s", self.blank_after_s, 0.0, 0.02)?;
-        check("min_period_s", self.min_period_s, 1e-3, 1.0)?;
+        let (r, f, a) = (&self.rear, &self.front, &self.accel);
+        let (rs, fs, as_) = (&self.rear_spec, &self.front_spec, &self.accel_spec);
+        check_all(
+            &CHANNELS,
+            &[
+                self.inclination_deg,
+                r.zero_code,
+                abs_nonzero(r.scale),
+                f.zero_code,
+                abs_nonzero(f.scale),
+                a.zero_code,
+                abs_nonzero(a.scale),
+                rs.gain_rel,
+                rs.offset,
+                fs.gain_rel,
+                fs.offset,
+                as_.gain_rel,
+                as_.offset,
+                self.impact_threshold_mps2,
+                self.blank_before_s,
+                self.blank_after_s,
+                self.min_period_s,
+            ],
+        )?;
         check("max_period_s", self.max_period_s, self.min_period_s, 10.0)?;
-        check("accel_zero_shift_tau_s", self.accel_zero_shift_tau_s, 0.0, 10.0)?;
-        check("coverage_factor", self.coverage_factor, 1.0, 5.0)?;
-        check(
-            "residual_correlation_factor",
-            self.residual_correlation_factor,
-            1.0,
-            100.0,
-        )?;
-        check("stuck_after_s", self.stuck_after_s, 0.0, 10.0)?;
-        if !self.supply_pressure_pa.is_nan() {
-            check("supply_pressure_pa", self.supply_pressure_pa, 0.0, 1e8)?;
-        }
         let w = &self.wear;
-        check("wear.baseline_cycles", w.baseline_cycles as f32, 5.0, 10_000.0)?;
-        check("wear.cusum_k", w.cusum_k, 0.0, 10.0)?;
-        check("wear.cusum_h", w.cusum_h, 0.5, 1000.0)?;
-        check("wear.sigma_floor_rel", w.sigma_floor_rel, 0.0, 1.0)?;
-        check("wear.sigma_floor_n", w.sigma_floor_n, 1e-4, 1e4)?;
-        check("wear.budget_j", w.budget_j, 1.0, 1e15)?;
-        check("wear.bin_width_pa", w.bin_width_pa, 1e3, 1e7)?;
+        // An unknown supply (NaN) is allowed: 0 stands in for it.
+        let supply = if self.supply_pressure_pa.is_nan() {
+            0.0
+        } else {
+            self.supply_pressure_pa
+        };
+        check_all(
+            &REST,
+            &[
+                self.accel_zero_shift_tau_s,
+                self.coverage_factor,
+                self.residual_correlation_factor,
+                self.stuck_after_s,
+                supply,
+                w.baseline_cycles as f32,
+                w.cusum_k,
+                w.cusum_h,
+                w.sigma_floor_rel,
+                w.sigma_floor_n,
+                w.budget_j,
+                w.bin_width_pa,
+            ],
+        )?;
         let k = self.checkpoint_samples() as f32;
         let limit_s = crate::cycle::MAX_CHECKPOINTS as f32 * k / self.sample_rate_hz;
         if self.max_period_s > limit_s {
@@ -304,17 +366,17 @@ impl Config {
     }
 
     pub fn mass_kg(&self) -> f32 {
-        self.geometry.piston_mass_kg as f32
+        math::narrow(self.geometry.piston_mass_kg)
     }
 
     /// A1 in `f32` arithmetic (no software doubles on the target).
     pub fn rear_area_m2(&self) -> f32 {
-        circle_area_f32(self.geometry.bore_diameter_m as f32)
+        circle_area_f32(math::narrow(self.geometry.bore_diameter_m))
     }
 
     /// A2 = A1 − the rod's area, in `f32` arithmetic.
     pub fn front_area_m2(&self) -> f32 {
-        self.rear_area_m2() - circle_area_f32(self.geometry.rod_diameter_m as f32)
+        self.rear_area_m2() - circle_area_f32(math::narrow(self.geometry.rod_diameter_m))
     }
 
     /// Gravity's force along the axis (forward positive).

@@ -20,9 +20,13 @@ use pass::{Balance, CodeSums, Squares};
 /// Checkpoints per cycle: with one per millisecond, cycles up to 128 ms.
 pub const MAX_CHECKPOINTS: usize = 128;
 
-/// Prefix sums over a cycle's samples since the blanking ended.
+/// Prefix sums over a cycle's samples since the blanking ended. The fit's
+/// sums (`n` to `rr`) leave out the samples at which a pressure sat at a
+/// rail (see [`Left`]); the pressures' sums take every sample, and the
+/// velocity integrals `v`, `w` too, those with the measured acceleration.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct Sums {
+    /// Samples in the fit (at checkpoint i, (i + 1)·k less those at a rail).
     pub n: f32,
     pub e: f32,
     pub ee: f32,
@@ -126,9 +130,6 @@ pub struct Calibration {
 
 /// Gauge pressure below which no chamber can go (absolute vacuum), with margin.
 pub const VACUUM_GAUGE_PA: f32 = -0.9e5;
-/// How far below atmosphere a vented chamber's dip can reach: twice the
-/// deepest the simulator shows (−9 kPa at 4 bar, docs/estimator.md).
-pub const CLIPPED_DIP_BOUND_PA: f32 = 0.2e5;
 
 impl Calibration {
     pub fn new(c: &Config) -> Self {
@@ -157,8 +158,8 @@ impl Watch {
     /// A sample at a rail is a saturated reading, except a pressure at the
     /// bottom rail of a transducer that starts at 0 gauge (`bottom_is_fault`
     /// false): a vented chamber below atmosphere, clipped. That is neither
-    /// saturation nor a stuck sensor; its share of the cycle goes into the
-    /// uncertainty instead (see [`estimate`]).
+    /// saturation nor a stuck sensor; those samples leave the fit instead
+    /// (see [`Left`]).
     #[inline(always)]
     fn check(&mut self, ch: usize, c: u16, full: u16, stuck_limit: u32, bottom_is_fault: bool) {
         const SAT: [Flags; 3] = [Flags::REAR_SATURATED, Flags::FRONT_SATURATED, Flags::ACCEL_SATURATED];
@@ -188,11 +189,62 @@ impl Watch {
     }
 }
 
+/// The samples at which a pressure sat at a rail (a vented chamber's dip
+/// that a 0-based transducer clips, or a saturated one): their pressure
+/// force is wrong, so they leave the friction fit (friction is a constant
+/// per phase: dropping samples costs precision, not truth) and the velocity
+/// integral takes the measured acceleration over them. Sums since the last
+/// checkpoint, `j` the index from the checkpoint; kept only on the slow path
+/// (a piece that touched a rail), so a cycle without rails pays nothing.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+struct Railed {
+    n: u32,
+    e: f32,
+    ee: f32,
+    r: f32,
+    re: f32,
+    rr: f32,
+    /// The pressure force: Σ force, Σ force², Σ r·force.
+    f: f32,
+    ff: f32,
+    rf: f32,
+    /// Σ j, Σ j·e, Σ j·r.
+    j: f32,
+    je: f32,
+    jr: f32,
+}
+
+/// The cycle's totals over the samples that left the fit (j counted from
+/// the first kept sample): where the closure puts back the fitted friction
+/// and zero shift their measured acceleration held (`estimate`), and what
+/// the accelerometer's gain reaches through them.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Left {
+    pub n: f32,
+    /// Σ r and Σ force: Σ m·a over them.
+    pub r: f32,
+    pub f: f32,
+    pub e: f32,
+    pub j: f32,
+    pub je: f32,
+}
+
 /// The running state of the cycle under way.
 #[derive(Debug, Clone)]
 pub struct CycleAcc {
     pub cp: Vec<Sums, MAX_CHECKPOINTS>,
     pub cur: Sums,
+    /// Samples kept so far, in the fit or not.
+    pub samples: f32,
+    /// The zero-shift regressor before the first kept sample (the j-th
+    /// sample's is `e_first·q^(j+1)`).
+    pub e_first: f32,
+    /// Totals over the samples that left the fit, and the interval's.
+    pub left: Left,
+    railed: Railed,
+    /// Σ r·e, Σ r², Σ force², Σ r·force of the samples that left the fit,
+    /// since the cycle began (the running sums they come off).
+    left_sq: [f32; 4],
     since_cp: u32,
     /// Σ j·p1 and Σ j·p2 (j = sample index): with Σp1, Σp2 they give the
     /// pressure integrals the gain sensitivities need.
@@ -296,6 +348,11 @@ impl CycleAcc {
         Self {
             cp: Vec::new(),
             cur: Sums::default(),
+            samples: 0.0,
+            e_first: 0.0,
+            left: Left::default(),
+            railed: Railed::default(),
+            left_sq: [0.0; 4],
             since_cp: 0,
             jp1: 0.0,
             jp2: 0.0,
@@ -328,6 +385,11 @@ impl CycleAcc {
     fn clear(&mut self) {
         self.cp.clear();
         self.cur = Sums::default();
+        self.samples = 0.0;
+        self.e_first = 0.0;
+        self.left = Left::default();
+        self.railed = Railed::default();
+        self.left_sq = [0.0; 4];
         self.since_cp = 0;
         self.jp1 = 0.0;
         self.jp2 = 0.0;
@@ -365,6 +427,7 @@ impl CycleAcc {
             0.0
         };
         self.sq.e = self.e_before;
+        self.e_first = self.e_before;
     }
 
     /// Adds a run of consecutive samples. The hot loop of the estimator, in
@@ -382,7 +445,7 @@ impl CycleAcc {
             return;
         };
         let b = Balance::new(d, cal);
-        if self.pend.n == 0 && self.cur.n <= 0.0 {
+        if self.pend.n == 0 && self.samples <= 0.0 {
             // The cycle's first sample: the integrals start at rest there.
             self.first_force = b.force(first.rear, first.front);
         }
@@ -393,7 +456,11 @@ impl CycleAcc {
             let (t, t_rest) = body.split_at(body.len().min(room - h.len()));
             (head, body) = (h_rest, t_rest);
             let piece = [h, t];
+            let e_before = self.sq.e;
             let c = pass::pass(d, cal, &b, piece, &mut self.sq);
+            if (0..2).any(|ch| c.min[ch] == 0 || c.max[ch] >= cal.full[ch]) {
+                self.leave_fit(d, cal, &b, piece, e_before);
+            }
             self.watch(cal, &c, piece, stuck_limit);
             self.pend.merge(&c);
             self.since_cp += c.n;
@@ -405,6 +472,38 @@ impl CycleAcc {
                     let p2 = (last.front as f32 - cal.zero[1]) * cal.scale[1];
                     self.checkpoint(p1, p2);
                 }
+            }
+        }
+    }
+
+    /// The samples of `piece` at which a pressure sat at a rail, summed
+    /// into [`Railed`] (the slow path: only a piece that touched a rail).
+    /// The regressor e is recomputed from its value before the piece with
+    /// the pass's own arithmetic, so the sums cancel exactly what it added.
+    #[inline(never)]
+    fn leave_fit(&mut self, d: &Derived, cal: &Calibration, b: &Balance, piece: [&[crate::RawSample]; 2], mut e: f32) {
+        // Their pressure sums stay in: the pressures' gain sensitivities are
+        // read as phase means, which the clipped few hardly move.
+        let at_rail = |c: u16, full: u16| c.wrapping_sub(1) >= full.wrapping_sub(1);
+        let x = &mut self.railed;
+        for (j, s) in piece[0].iter().chain(piece[1]).enumerate() {
+            e *= d.q;
+            if at_rail(s.rear, cal.full[0]) || at_rail(s.front, cal.full[1]) {
+                let f = b.force(s.rear, s.front);
+                let r = b.residual(s.accel, f);
+                let j = (self.since_cp as usize + j) as f32;
+                x.n += 1;
+                x.e += e;
+                x.ee += e * e;
+                x.r += r;
+                x.re += r * e;
+                x.rr += r * r;
+                x.f += f;
+                x.ff += f * f;
+                x.rf += r * f;
+                x.j += j;
+                x.je += j * e;
+                x.jr += j * r;
             }
         }
     }
@@ -489,7 +588,8 @@ impl CycleAcc {
         self.peak_p2 = if peak[1] > self.peak_p2 { peak[1] } else { self.peak_p2 };
 
         let n = c.n as f32;
-        let n0 = self.cur.n;
+        let n0 = self.samples;
+        let x = core::mem::take(&mut self.railed);
         // Σ p, Σ (2n−1−2j)·p and Σ j·p of the interval, per channel.
         let nn = c.n;
         let sum = |ch: usize| (c.s[ch] as f32 - cal.zero[ch] * n) * cal.scale[ch];
@@ -514,7 +614,12 @@ impl CycleAcc {
         let v_end = v0 + d.half_dt_over_m * (2.0 * f + f_before - f_last);
         let sum_v = n * v0 + d.half_dt_over_m * (n * f_before + fw);
         self.cur.w += d.half_dt * (2.0 * sum_v - v_end + v0);
-        self.cur.v = v_end;
+        // Over the samples that left the fit the piston's acceleration is
+        // the measured one: (m·a − P)/m = r/m more than the pressures say,
+        // from each such sample j on (Σ r_j·(n − 1 − j) for the displacement).
+        let h = d.dt / d.m;
+        self.cur.v = v_end + h * x.r;
+        self.cur.w += d.dt * h * ((nn - 1) as f32 * x.r - x.jr);
         self.force_before = f_last;
         self.last_force = f_last;
 
@@ -527,21 +632,36 @@ impl CycleAcc {
         };
         let e0 = self.e_before;
         self.e_before = self.sq.e;
+        let r = d.m * a - f;
+        let sq = &mut self.left_sq;
+        for (t, v) in sq.iter_mut().zip([x.re, x.rr, x.ff, x.rf]) {
+            *t += v;
+        }
+        let l = &mut self.left;
+        let xn = x.n as f32;
+        l.n += xn;
+        l.r += x.r;
+        l.f += x.f;
+        l.e += x.e;
+        l.j += n0 * xn + x.j;
+        l.je += n0 * x.e + x.je;
+        self.samples += n;
         let s = &mut self.cur;
-        s.n += n;
-        s.e += e0 * ge;
-        s.ee += e0 * e0 * gee;
-        s.r += d.m * a - f;
-        s.re = self.sq.re;
-        s.rr = self.sq.rr;
+        s.n += n - xn;
+        s.e += e0 * ge - x.e;
+        s.ee += e0 * e0 * gee - x.ee;
+        s.r += r - x.r;
+        s.re = self.sq.re - sq[0];
+        s.rr = self.sq.rr - sq[1];
         s.p1 += p1;
         s.p2 += p2;
+        // The accelerometer's watch leaves them out too: their force is wrong.
         self.slope = SlopeSums {
             n: s.n,
             r: s.r,
-            f: self.slope.f + f,
-            ff: self.sq.ff,
-            rf: self.sq.rf,
+            f: self.slope.f + f - x.f,
+            ff: self.sq.ff - sq[2],
+            rf: self.sq.rf - sq[3],
         };
     }
 
@@ -557,7 +677,7 @@ impl CycleAcc {
                 self.flags.insert(Flags::ACCEL_FAULT);
             }
             if self.flags.intersects(Flags::ACCEL_FAULT | Flags::ACCEL_STUCK) {
-                self.accel_fault_at = Some(self.cur.n as u32);
+                self.accel_fault_at = Some(self.samples as u32);
             }
         }
         self.slope_cp[self.slope_cp_len % SLOPE_WINDOW_CP] = self.slope;

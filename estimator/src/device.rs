@@ -48,9 +48,9 @@ impl From<&Config> for DeviceConfig {
     fn from(c: &Config) -> Self {
         DeviceConfig {
             sample_rate_hz: c.sample_rate_hz,
-            piston_mass_kg: c.geometry.piston_mass_kg as f32,
-            bore_diameter_m: c.geometry.bore_diameter_m as f32,
-            rod_diameter_m: c.geometry.rod_diameter_m as f32,
+            piston_mass_kg: crate::math::narrow(c.geometry.piston_mass_kg),
+            bore_diameter_m: crate::math::narrow(c.geometry.bore_diameter_m),
+            rod_diameter_m: crate::math::narrow(c.geometry.rod_diameter_m),
             inclination_deg: c.inclination_deg,
             rear: cal(&c.rear, &c.rear_spec),
             front: cal(&c.front, &c.front_spec),
@@ -82,9 +82,9 @@ impl Config {
         let mut c = *self;
         c.sample_rate_hz = d.sample_rate_hz;
         c.geometry = Geometry {
-            piston_mass_kg: d.piston_mass_kg as f64,
-            bore_diameter_m: d.bore_diameter_m as f64,
-            rod_diameter_m: d.rod_diameter_m as f64,
+            piston_mass_kg: crate::math::widen(d.piston_mass_kg),
+            bore_diameter_m: crate::math::widen(d.bore_diameter_m),
+            rod_diameter_m: crate::math::widen(d.rod_diameter_m),
         };
         c.inclination_deg = d.inclination_deg;
         c.rear = rear;

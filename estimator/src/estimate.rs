@@ -9,12 +9,17 @@
 //! - velocity from the pressures, `v(t) = v_b + ∫(P ∓ F)/m dt`, its constant
 //!   fixed by the piston returning to the impact position (the displacement
 //!   over a cycle closes); the turning point is where `v` crosses zero;
-//! - impact velocity is `v` at the impact, i.e. the stroke integral from rest.
+//! - impact velocity is `v` at the impact, i.e. the stroke integral from rest;
+//! - samples at which a pressure sat at a rail are out of the fit, and the
+//!   velocity takes their measured acceleration (`left`).
+
+mod left;
 
 use crate::config::Config;
-use crate::cycle::{CycleAcc, Derived, Sums, CLIPPED_DIP_BOUND_PA, VACUUM_GAUGE_PA};
+use crate::cycle::{CycleAcc, Derived, Sums};
 use crate::math;
 use crate::Flags;
+use left::{count, upto, Upto};
 
 /// The numbers of one closed cycle before the wear bookkeeping.
 #[derive(Debug, Clone, Copy, Default)]
@@ -57,6 +62,10 @@ struct Totals {
     w: f32,
     first_accel: f32,
     last_accel: f32,
+    /// The samples that left the fit, over the cycle, and the fitted zero
+    /// shift (m·o) their measured acceleration held.
+    left: Upto,
+    mo: f32,
 }
 
 fn friction_integrals(m: f32, fs: f32, fb: f32, tr: f32, t: f32) -> (f32, f32) {
@@ -70,14 +79,15 @@ fn friction_integrals(m: f32, fs: f32, fb: f32, tr: f32, t: f32) -> (f32, f32) {
 /// Backhaul start velocity from the closure, and the impact velocity.
 fn kinematics(m: f32, tm: &Timing, tot: &Totals, fs: f32, fb: f32, tr: f32) -> (f32, f32) {
     let (f_t, f_int) = friction_integrals(m, fs, fb, tr, tm.t_end);
-    let v_end_rel = tot.v + f_t;
+    let v_end_rel = tot.v + tot.left.dv(m, tot.mo, fs, fb) + f_t;
+    let w = tot.w + tot.left.dw(m, tot.mo, fs, fb);
     let a_last = tot.last_accel - fs / m;
     let a_first = tot.first_accel + fb / m;
     // ∫ v over the cycle = 0. After the contact, through the blanking, the
     // piston moves with v_b − a_b·(t_b − t); then the kept samples; then the
     // tail before the next impact with v(T) + a·t.
     let l = (tm.d - tm.contact).max(0.0);
-    let vb = -(-0.5 * a_first * l * l + tot.w + f_int + v_end_rel * tm.gap + 0.5 * a_last * tm.gap * tm.gap)
+    let vb = -(-0.5 * a_first * l * l + w + f_int + v_end_rel * tm.gap + 0.5 * a_last * tm.gap * tm.gap)
         / (l + tm.t_end + tm.gap);
     let v_imp = vb + v_end_rel + a_last * tm.gap;
     (vb, v_imp)
@@ -86,6 +96,8 @@ fn kinematics(m: f32, tm: &Timing, tot: &Totals, fs: f32, fb: f32, tr: f32) -> (
 struct Split {
     back: Sums,
     stroke: Sums,
+    /// Samples in each phase, in the fit or not (what the pressures' sums hold).
+    all: (f32, f32),
 }
 
 fn split(acc: &CycleAcc, d: &Derived, tr: f32, guard: f32) -> Option<Split> {
@@ -102,15 +114,15 @@ fn split(acc: &CycleAcc, d: &Derived, tr: f32, guard: f32) -> Option<Split> {
             hi = Some(i);
         }
     }
-    let back = cps[lo?];
-    let stroke = match hi {
-        Some(h) => acc.cur.minus(&cps[h]),
-        None => return None,
-    };
+    let (lo, hi) = (lo?, hi?);
+    let back = cps[lo];
+    let stroke = acc.cur.minus(&cps[hi]);
     if back.n < 10.0 || stroke.n < 10.0 {
         return None;
     }
-    Some(Split { back, stroke })
+    let k = d.k as f32;
+    let all = ((lo + 1) as f32 * k, acc.samples - (hi + 1) as f32 * k);
+    Some(Split { back, stroke, all })
 }
 
 /// Least-squares friction fit on a split: returns (F_b, F_s, o·m, var F_b, var F_s, cov, σ²).
@@ -153,7 +165,7 @@ pub fn estimate(
         flags: acc.flags,
         ..Default::default()
     };
-    let n = acc.cur.n;
+    let n = acc.samples;
     if n < 2.0 || acc.cp.len() < 4 {
         out.flags.insert(Flags::NO_REVERSAL);
         return out;
@@ -165,11 +177,13 @@ pub fn estimate(
         t_end: (n - 1.0) * d.dt,
         gap: (tail_samples as f32 + 0.5) * d.dt,
     };
-    let tot = Totals {
+    let mut tot = Totals {
         v: acc.cur.v,
         w: acc.cur.w,
         first_accel: acc.first_force / m,
         last_accel: acc.last_force / m,
+        left: Upto::default(),
+        mo: 0.0,
     };
     let guard = 1.0e-3;
     let zero_shift = d.q > 0.0;
@@ -180,8 +194,9 @@ pub fn estimate(
     let mut tr = 0.5 * tm.t_end;
     let mut result = None;
     for _ in 0..4 {
+        tot.left = upto(acc, d, tr, tm.t_end);
         let (vb, _) = kinematics(m, &tm, &tot, fs, fb, tr);
-        let Some(t_new) = turning_point(acc, d, &tm, vb, fs, fb, tr) else {
+        let Some(t_new) = turning_point(acc, d, &tm, vb, (fs, fb, tr), tot.left.t_b) else {
             out.flags.insert(Flags::NO_REVERSAL);
             return out;
         };
@@ -193,20 +208,32 @@ pub fn estimate(
         let f = fit(&sp, zero_shift, kappa);
         fb = f.0;
         fs = f.1;
+        tot.mo = f.2;
         result = Some((sp, f));
     }
+    tot.left = upto(acc, d, tr, tm.t_end);
     let Some((sp, (_, _, o, var_fb, var_fs, cov, sigma2))) = result else {
         out.flags.insert(Flags::NO_REVERSAL);
         return out;
     };
     let (nb, ns) = (sp.back.n, sp.stroke.n);
+    let (nb_all, ns_all) = sp.all;
+    if 2.0 * nb < nb_all || 2.0 * ns < ns_all {
+        // Most of a phase at a rail: the transducer's range does not fit
+        // this hammer (docs/estimator.md, "Below atmosphere").
+        for (ch, flag) in [Flags::REAR_SATURATED, Flags::FRONT_SATURATED].into_iter().enumerate() {
+            if acc.rail[ch] > 0 {
+                out.flags.insert(flag);
+            }
+        }
+    }
     let (wb, ws) = (nb / (nb + ns), ns / (nb + ns));
     let friction = wb * fb + ws * fs;
 
     // Systematic sensitivities of (F_b, F_s) to each calibration error.
     let mean = |x: f32, k: f32| x / k;
-    let (p1b, p1s) = (mean(sp.back.p1, nb), mean(sp.stroke.p1, ns));
-    let (p2b, p2s) = (mean(sp.back.p2, nb), mean(sp.stroke.p2, ns));
+    let (p1b, p1s) = (mean(sp.back.p1, nb_all), mean(sp.stroke.p1, ns_all));
+    let (p2b, p2s) = (mean(sp.back.p2, nb_all), mean(sp.stroke.p2, ns_all));
     let force_b = d.a1 * p1b - d.a2 * p2b + d.fg;
     let force_s = d.a1 * p1s - d.a2 * p2s + d.fg;
     let ab = (mean(sp.back.r, nb) + force_b) / m;
@@ -223,22 +250,17 @@ pub fn estimate(
         d.a2 / m * d.dt * acc.cur.p2,
         d.a2 / m * d.dt * d.dt * (last * acc.cur.p2 - acc.jp2),
     );
-    // A transducer that starts at 0 gauge clips a vented chamber's dip below
-    // atmosphere: those samples read high by up to the dip's depth. Carried
-    // as an offset uncertainty over the cycle, in proportion to the samples
-    // at the bottom rail (none with the default vacuum-reaching ranges).
-    let clip_u = |cal: &crate::config::ChannelCal, rail: u32| {
-        if rail == 0 || cal.value(0) <= VACUUM_GAUGE_PA {
-            0.0
-        } else {
-            CLIPPED_DIP_BOUND_PA * (rail as f32 / n) / math::sqrt(3.0)
-        }
-    };
-    let (clip_rear, clip_front) = (clip_u(&c.rear, acc.rail[0]), clip_u(&c.front, acc.rail[1]));
-    let sources: [(f32, f32, f32, f32, f32); 8] = [
+    // Over the samples at a rail the velocity is the measured acceleration's:
+    // the accelerometer's gain and offset reach it there. Its gain by the
+    // velocity gained over them, at their mean lag before the cycle's end.
+    let lt = &acc.left;
+    let (t_left, w_left) = tot.left.time_s();
+    let v_left = (lt.r + lt.f) * d.dt / m;
+    let w_gain = if lt.n > 0.0 { v_left * w_left / t_left } else { 0.0 };
+    let sources: [(f32, f32, f32, f32, f32); 6] = [
         (c.rear_spec.gain_rel, -d.a1 * p1b, d.a1 * p1s, v1, w1),
         (c.front_spec.gain_rel, d.a2 * p2b, -d.a2 * p2s, -v2, -w2),
-        (c.accel_spec.gain_rel, m * ab, -m * as_, 0.0, 0.0),
+        (c.accel_spec.gain_rel, m * ab, -m * as_, v_left, w_gain),
         (
             c.rear_spec.offset,
             -d.a1,
@@ -253,15 +275,7 @@ pub fn estimate(
             -d.a2 * t_end / m,
             -d.a2 * 0.5 * t_end * t_end / m,
         ),
-        (c.accel_spec.offset, m, -m, 0.0, 0.0),
-        (clip_rear, -d.a1, d.a1, d.a1 * t_end / m, d.a1 * 0.5 * t_end * t_end / m),
-        (
-            clip_front,
-            d.a2,
-            -d.a2,
-            -d.a2 * t_end / m,
-            -d.a2 * 0.5 * t_end * t_end / m,
-        ),
+        (c.accel_spec.offset, m, -m, t_left, w_left),
     ];
 
     // The impact velocity and its sensitivities (by linearity, one closure each).
@@ -320,7 +334,15 @@ pub fn estimate(
     out.zero_shift_mps2 = o / m;
 
     // Distances: stroke from the turning point to the impact, backhaul from the impact to the turning point.
-    let w_tr = interp_w(acc, d, tr);
+    // The friction their measured acceleration held, off the displacement
+    // to the turning point (its zero shift's few µm are left in).
+    let l = &tot.left;
+    let w_tr = interp_w(acc, d, tr) - fb * (l.t_b * tr - l.at_b * d.dt) / m;
+    let tot = Totals {
+        v: tot.v + tot.left.dv(m, o, fs, fb),
+        w: tot.w + tot.left.dw(m, o, fs, fb),
+        ..tot
+    };
     let (_, f_int_tr) = friction_integrals(m, fs, fb, tr, tr);
     let (_, f_int_t) = friction_integrals(m, fs, fb, tr, tm.t_end);
     let l = (tm.d - tm.contact).max(0.0);
@@ -356,11 +378,27 @@ pub fn estimate(
     out
 }
 
-/// The last upward zero crossing of v(t) = v_b + V(t) + f(t), searched on the checkpoints.
-fn turning_point(acc: &CycleAcc, d: &Derived, tm: &Timing, vb: f32, fs: f32, fb: f32, tr_f: f32) -> Option<f32> {
-    let v_at = |t: f32, v_rel: f32| {
+/// The last upward zero crossing of v(t) = v_b + V(t) + f(t), searched on
+/// the checkpoints; less, over the samples that left the fit (`t_b` of
+/// them before `tr_f`), the friction their acceleration held (their zero
+/// shift's share is left in: it moves the crossing by microseconds).
+fn turning_point(
+    acc: &CycleAcc,
+    d: &Derived,
+    tm: &Timing,
+    vb: f32,
+    (fs, fb, tr_f): (f32, f32, f32),
+    t_b: f32,
+) -> Option<f32> {
+    let v_at = |t: f32, v_rel: f32, i: usize| {
         let (f, _) = friction_integrals(d.m, fs, fb, tr_f, t);
-        vb + v_rel + f
+        let left = if acc.left.n > 0.0 { count(acc, d, i) * d.dt } else { 0.0 };
+        let held = if t < tr_f {
+            fb * left
+        } else {
+            fb * t_b - fs * (left - t_b)
+        };
+        vb + v_rel + f - held / d.m
     };
     let mut prev_t = 0.0;
     let mut prev_v = vb;
@@ -369,9 +407,9 @@ fn turning_point(acc: &CycleAcc, d: &Derived, tm: &Timing, vb: f32, fs: f32, fb:
     for i in 0..=cps.len() {
         let (t, v) = if i < cps.len() {
             let t = CycleAcc::cp_time(d, i);
-            (t, v_at(t, cps[i].v))
+            (t, v_at(t, cps[i].v, i))
         } else {
-            (tm.t_end, v_at(tm.t_end, acc.cur.v))
+            (tm.t_end, v_at(tm.t_end, acc.cur.v, i))
         };
         if prev_v < 0.0 && v >= 0.0 {
             let frac = -prev_v / (v - prev_v);

@@ -17,11 +17,12 @@
 //!   of the codes per checkpoint, the per-sample pass in `cycle::pass`) and the
 //!   sensor watches (rails, stuck channels, the accelerometer's force-balance slope);
 //! - [`estimate`]: what a closed cycle's sums give (friction per phase, zero
-//!   shift, impact velocity and energy, their uncertainties);
+//!   shift, impact velocity and energy, their uncertainties); `estimate::left`
+//!   puts the samples at a pressure's rail, out of the fit, into the closure;
 //! - `run`: the impact scan and the delay line's copies, as plain loops;
 //! - `history`: the neighbour check on period and stroke;
 //! - [`wear`]: the wear index, the drift CUSUM and their saved state;
-//! - [`math`]: the one path for transcendental functions (host = target);
+//! - [`math`]: the one path for transcendental functions and float widths (host = target);
 //! - [`chambers`]: the valve's switching, the fill and the closed phases of
 //!   both chambers from one cycle's samples (host side: not on the board).
 //!
@@ -561,7 +562,7 @@ impl Estimator {
     fn record(&mut self, index: u64, mut flags: Flags) -> CycleReport {
         self.acc.settle(&self.d, &self.cal);
         let period_s = index.wrapping_sub(self.cycle_start) as f32 * self.d.dt;
-        let n = self.acc.cur.n.max(1.0);
+        let n = self.acc.samples.max(1.0);
         if self.acc.rail.iter().any(|&r| r as f32 > 0.9 * n) {
             flags.insert(Flags::DISCONNECTED);
         }
@@ -600,7 +601,7 @@ impl Estimator {
             tail,
             self.friction_guess,
         );
-        let n = self.acc.cur.n.max(1.0);
+        let n = self.acc.samples.max(1.0);
         if self.acc.rail.iter().any(|&r| r as f32 > 0.9 * n) {
             e.flags.insert(Flags::DISCONNECTED);
         }

@@ -1,9 +1,13 @@
-//! The one path for transcendental functions.
+//! The one path for transcendental functions, and for changing float width
+//! (`width`: in integers, as the board has no double-precision unit).
 //!
 //! Under `cargo test` an inherent `f32::sqrt` would resolve to std's exact
 //! method while the target has no std: host and target would then compute
 //! different numbers. Everything goes through `libm` explicitly, so a report
 //! computed on the host is bit-identical to the one the firmware sends.
+
+mod width;
+pub use width::{narrow, widen};
 
 /// `x` limited to `lo ..= hi`, NaN passed through. Unlike `f32::clamp` it
 /// cannot panic (on `lo > hi` or a NaN bound), so no panic message with

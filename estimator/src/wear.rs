@@ -228,7 +228,7 @@ impl WearState {
 /// after the update): exact `f64` arithmetic would cost the board ~1 KB of
 /// software routines for this one conversion. Negative or NaN reads as 0.
 fn f64_joules_to_uj(bits: u64) -> u64 {
-    (f64::from_bits(bits) as f32 * 1e6) as u64
+    (crate::math::narrow(f64::from_bits(bits)) * 1e6) as u64
 }
 
 struct Writer<'a> {

@@ -299,3 +299,77 @@ fn estimate_at(trace: &Path, bar: &str) -> String {
     assert_eq!(code, 0, "{err}");
     out
 }
+
+/// A recorder set to 0–10 bar clipped the rear chamber's dip at 0 gauge
+/// (on a hammer whose rear outlet opens early, ~15 % of the samples): the
+/// clipped value is a rail, so those samples leave the friction fit as the
+/// board's own rail samples do, and friction reads its truth. Left in the
+/// fit (as before issue 29), they read it 1 N high and flagged a zero
+/// shift that was not there.
+#[test]
+fn a_dip_a_recorder_clipped_leaves_the_friction_fit() {
+    let dir = tmp_dir("clipped-fit");
+    let config = write(
+        &dir,
+        "sim.toml",
+        "[hammer]\nrear_outlet_opens_m = 0.022\n[sensors.rear]\nadc_bits = 16\n[sensors.front]\nadc_bits = 16\n",
+    );
+    let sim = dir.join("sim.csv");
+    let (code, _, err) = hammer(&[
+        "simulate",
+        "--config",
+        &config,
+        "--supply-bar",
+        "4",
+        "--duration",
+        "1",
+        "--effect",
+        "coulomb_friction:f0_n=1.7,k_n_per_bar=2.14",
+        "--seed",
+        "1",
+        "--out",
+        sim.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let text = std::fs::read_to_string(&sim).unwrap();
+    let mut clipped = String::from("t_s,p_rear_pa,p_front_pa,accel_mps2\n");
+    let (mut at_zero, mut n) = (0usize, 0usize);
+    for line in text.lines().skip(1) {
+        let f: Vec<&str> = line.split(',').collect();
+        let rear = f[1].parse::<f64>().unwrap().max(0.0);
+        at_zero += usize::from(rear == 0.0);
+        n += 1;
+        clipped.push_str(&format!("{},{rear},{},{}\n", f[0], f[2], f[3]));
+    }
+    assert!(at_zero * 10 >= n, "{at_zero} of {n} rear samples clipped");
+    let trace = write(&dir, "recorder.csv", &clipped);
+    let out = estimate(Path::new(&trace), &[]);
+    let mut rows = out.lines();
+    let head: Vec<&str> = rows.next().unwrap().split(',').collect();
+    let col = |name: &str| head.iter().position(|h| *h == name).unwrap();
+    let (friction, valid, flags) = (col("friction_n"), col("valid"), col("flags"));
+    let cycles: Vec<Vec<String>> = rows
+        .map(|l| l.split(',').map(str::to_string).collect())
+        .filter(|r: &Vec<String>| r[valid] == "true")
+        .collect();
+    assert!(cycles.len() >= 15, "{out}");
+    let mean = cycles.iter().map(|r| r[friction].parse::<f64>().unwrap()).sum::<f64>() / cycles.len() as f64;
+    let side: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("sim.json")).unwrap()).unwrap();
+    let truth: Vec<f64> = side["simulation"]["cycles"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .skip(2)
+        .map(|c| c["friction_cycle_n"].as_f64().unwrap())
+        .collect();
+    let truth = truth.iter().sum::<f64>() / truth.len() as f64;
+    assert!(
+        (mean - truth).abs() <= 0.15,
+        "friction {mean:.3} N against the truth {truth:.3} N"
+    );
+    assert!(
+        cycles.iter().all(|r| !r[flags].contains("accel_zero_shift")),
+        "a clipped stretch read as a zero shift:\n{out}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -7,7 +7,7 @@ use hammer_estimator::{Config, CycleReport, Estimator, RawSample};
 use hammer_trace::config::ConfigError;
 use std::path::Path;
 
-use hammer_trace::import::inspect::ABSOLUTE_MIN_GAUGE_PA;
+use hammer_trace::import::inspect::{RailScan, ABSOLUTE_MIN_GAUGE_PA};
 use hammer_trace::import::{self, Understood};
 use hammer_trace::rows::{Item, Row, Uniform};
 use hammer_trace::trace::{parse_sidecar_as, Gap, Trace, TraceError};
@@ -232,6 +232,12 @@ pub fn open_for_estimation(
         min(&trace.p_front_pa),
         trace.len() as f64 * trace.dt_s,
     )?;
+    let mut scans: [RailScan; 3] = Default::default();
+    for (scan, x) in scans.iter_mut().zip([&trace.p_rear_pa, &trace.p_front_pa, &trace.accel_mps2]) {
+        x.iter().for_each(|&v| scan.push(v));
+    }
+    let mut config = config;
+    at_recorder_rails(&mut config, &scans);
     let codes = to_codes(&trace, &config);
     Ok(EstimationInput {
         trace,
@@ -280,6 +286,45 @@ pub fn sensors_for(sidecar: Option<&Sidecar>, fallback: &SensorModel) -> SensorM
     sidecar
         .and_then(|s| s.simulation.as_ref())
         .map_or_else(|| fallback.clone(), |sim| sim.config.sensors.clone())
+}
+
+/// The rails a recorder clipped each channel to (rear, front, accel), from
+/// a first pass over the file (`inspect::clipped_at`'s rule, streamed).
+fn scan_rails(path: &Path, file: &SimConfig) -> Result<[RailScan; 3], OpenError> {
+    let mut u = Uniform::new(import::open(path, file.import.as_ref(), false)?.source)?;
+    let mut scans: [RailScan; 3] = Default::default();
+    while let Some(item) = u.next_item()? {
+        if let Item::Sample(r) = item {
+            scans[0].push(r.p_rear_pa);
+            scans[1].push(r.p_front_pa);
+            scans[2].push(r.accel_mps2);
+        }
+    }
+    Ok(scans)
+}
+
+/// A value a recorder clipped a channel to is a rail, as the board's ADC
+/// rails are: the channel's range is moved to end there (its step kept), so
+/// that those samples read as code 0 or the top code. The estimator then
+/// treats them as it treats its own: a pressure at a rail leaves the
+/// friction fit (a vented chamber's dip clipped at 0 gauge by a recorder
+/// set to 0–10 bar), an accelerometer at its bottom rail is an impact.
+/// Only a rail inside the configured range moves it; one outside already
+/// reads as a rail.
+pub fn at_recorder_rails(c: &mut Config, scans: &[RailScan; 3]) {
+    for (cal, scan) in [&mut c.rear, &mut c.front, &mut c.accel].into_iter().zip(scans) {
+        let (lo, hi) = cal.range();
+        let [bottom, top] = scan.rails();
+        if let Some(v) = bottom.map(|r| r.value as f32).filter(|&v| v > lo && v < hi) {
+            // value(0) = −zero·scale = v.
+            cal.zero_code = -v / cal.scale;
+        }
+        let (lo, hi) = cal.range();
+        if let Some(v) = top.map(|r| r.value as f32).filter(|&v| v > lo && v < hi) {
+            cal.scale = (v - lo) / cal.full_scale_code as f32;
+            cal.zero_code = -lo / cal.scale;
+        }
+    }
 }
 
 fn row_codes(c: &Config, r: &Row) -> RawSample {
@@ -366,10 +411,12 @@ pub fn stream_estimation(
     supply_bar: Option<f64>,
     mut on_report: impl FnMut(CycleReport),
 ) -> Result<StreamSummary, OpenError> {
+    let scans = scan_rails(path, file)?;
     let opened = import::open(path, file.import.as_ref(), false)?;
     let embedded = opened.embedded_sidecar;
     let mut u = Uniform::new(opened.source)?;
-    let (_, supply_bar, config) = config_for(path, embedded.as_deref(), file, supply_bar, 1.0 / u.dt_s())?;
+    let (_, supply_bar, mut config) = config_for(path, embedded.as_deref(), file, supply_bar, 1.0 / u.dt_s())?;
+    at_recorder_rails(&mut config, &scans);
     let mut est = estimator(config)?;
     let mut block = Vec::with_capacity(STREAM_BLOCK);
     let mut summary = StreamSummary {

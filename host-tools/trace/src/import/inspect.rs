@@ -57,7 +57,9 @@ pub fn stats(t: &Trace) -> Stats {
         let (min, max) = x
             .iter()
             .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
-        let rails = [min, max].into_iter().filter_map(|v| clipped_at(x, v)).collect();
+        let mut scan = RailScan::default();
+        x.iter().for_each(|&v| scan.push(v));
+        let rails = scan.rails().into_iter().flatten().collect();
         ChannelStats {
             name: name.into(),
             min,
@@ -85,50 +87,110 @@ pub fn stats(t: &Trace) -> Stats {
 /// repeated value means something). A vented chamber that rests at exactly
 /// 0 gauge in noise-free data is not a rail as long as it dips below
 /// atmosphere somewhere else in the file (as a running hammer's does): 0 is
-/// then not the channel's extreme.
+/// then not the channel's extreme. [`RailScan`] applies the rule.
 pub fn clipped_at(x: &[f64], v: f64) -> Option<Rail> {
-    if x.len() < 8 {
-        return None;
-    }
-    let (lo, hi) = x
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &y| (a.min(y), b.max(y)));
-    if v != lo && v != hi {
-        return None;
-    }
-    let (mut runs, mut samples, mut equal_elsewhere, mut pairs_elsewhere) = (0usize, 0usize, 0usize, 0usize);
-    let mut i = 0;
-    while i < x.len() {
-        if x[i] == v {
-            let start = i;
-            while i < x.len() && x[i] == v {
-                i += 1;
-            }
-            samples += i - start;
-            if i - start >= RAIL_MIN_RUN {
-                runs += 1;
-            }
-        } else {
-            if i + 1 < x.len() && x[i + 1] != v {
-                pairs_elsewhere += 1;
-                if x[i + 1] == x[i] {
-                    equal_elsewhere += 1;
-                }
-            }
-            i += 1;
+    let mut scan = RailScan::default();
+    x.iter().for_each(|&y| scan.push(y));
+    let [lo, hi] = scan.rails();
+    [lo, hi].into_iter().flatten().find(|r| r.value == v)
+}
+
+/// [`clipped_at`]'s rule over a channel read once, sample by sample: what
+/// `hammer estimate` needs of a file it streams without holding it. A new
+/// extreme has not been seen before, so its counts start from nothing.
+#[derive(Debug, Clone, Default)]
+pub struct RailScan {
+    n: usize,
+    prev: Option<f64>,
+    pairs: usize,
+    equal: usize,
+    lo: Option<Side>,
+    hi: Option<Side>,
+}
+
+/// The counts at one extreme.
+#[derive(Debug, Clone, Copy)]
+struct Side {
+    value: f64,
+    samples: usize,
+    runs: usize,
+    run: usize,
+    /// Neighbour pairs with either sample at the value, and with both.
+    touching: usize,
+    equal: usize,
+}
+
+impl Side {
+    fn new(value: f64) -> Self {
+        Side {
+            value,
+            samples: 0,
+            runs: 0,
+            run: 0,
+            touching: 0,
+            equal: 0,
         }
     }
-    if runs < RAIL_MIN_RUNS || pairs_elsewhere == 0 {
-        return None;
+
+    fn push(&mut self, prev: Option<f64>, x: f64) {
+        let v = self.value;
+        if x == v {
+            self.samples += 1;
+            self.run = if prev == Some(v) { self.run + 1 } else { 1 };
+            if self.run == RAIL_MIN_RUN {
+                self.runs += 1;
+            }
+        }
+        if let Some(p) = prev {
+            if p == v || x == v {
+                self.touching += 1;
+                if p == x {
+                    self.equal += 1;
+                }
+            }
+        }
     }
-    if equal_elsewhere as f64 > RAIL_MAX_EQUAL_ELSEWHERE * pairs_elsewhere as f64 {
-        return None;
+}
+
+impl RailScan {
+    pub fn push(&mut self, x: f64) {
+        self.n += 1;
+        if let Some(p) = self.prev {
+            self.pairs += 1;
+            if p == x {
+                self.equal += 1;
+            }
+        }
+        if self.lo.is_none_or(|s| x < s.value) {
+            self.lo = Some(Side::new(x));
+        }
+        if self.hi.is_none_or(|s| x > s.value) {
+            self.hi = Some(Side::new(x));
+        }
+        for side in [&mut self.lo, &mut self.hi].into_iter().flatten() {
+            side.push(self.prev, x);
+        }
+        self.prev = Some(x);
     }
-    Some(Rail {
-        value: v,
-        samples,
-        runs,
-    })
+
+    /// The bottom and the top rail, where the rule finds one.
+    pub fn rails(&self) -> [Option<Rail>; 2] {
+        let rail = |s: &Option<Side>| {
+            let s = s.as_ref()?;
+            let pairs_elsewhere = self.pairs - s.touching;
+            let equal_elsewhere = self.equal - s.equal;
+            let quantised = equal_elsewhere as f64 > RAIL_MAX_EQUAL_ELSEWHERE * pairs_elsewhere as f64;
+            (self.n >= 8 && s.runs >= RAIL_MIN_RUNS && pairs_elsewhere > 0 && !quantised).then_some(Rail {
+                value: s.value,
+                samples: s.samples,
+                runs: s.runs,
+            })
+        };
+        let (lo, hi) = (rail(&self.lo), rail(&self.hi));
+        // A channel flat at one value has one extreme, not two rails.
+        let lo_value = lo.as_ref().map(|l| l.value);
+        [lo, hi.filter(|h| lo_value != Some(h.value))]
+    }
 }
 
 #[cfg(test)]
