@@ -354,7 +354,8 @@ fn a_dip_a_recorder_clipped_leaves_the_friction_fit() {
         .collect();
     assert!(cycles.len() >= 15, "{out}");
     let mean = cycles.iter().map(|r| r[friction].parse::<f64>().unwrap()).sum::<f64>() / cycles.len() as f64;
-    let side: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("sim.json")).unwrap()).unwrap();
+    let side: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("sim.json")).unwrap()).unwrap();
     let truth: Vec<f64> = side["simulation"]["cycles"]
         .as_array()
         .unwrap()

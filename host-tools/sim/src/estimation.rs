@@ -233,7 +233,10 @@ pub fn open_for_estimation(
         trace.len() as f64 * trace.dt_s,
     )?;
     let mut scans: [RailScan; 3] = Default::default();
-    for (scan, x) in scans.iter_mut().zip([&trace.p_rear_pa, &trace.p_front_pa, &trace.accel_mps2]) {
+    for (scan, x) in scans
+        .iter_mut()
+        .zip([&trace.p_rear_pa, &trace.p_front_pa, &trace.accel_mps2])
+    {
         x.iter().for_each(|&v| scan.push(v));
     }
     let mut config = config;
