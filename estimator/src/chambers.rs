@@ -22,12 +22,15 @@
 //!   [`characterise`], which finds each chamber's closed phase in a cycle;
 //! - `track`: the piston's position from the force balance, closed over the cycle;
 //! - `closed`: the closed phase's polytropic fit and the feed onset after it;
-//! - `fill`: the effective feed area from the energy equation.
+//! - `fill`: the effective feed area from the energy equation;
+//! - `charge`: the air each chamber draws per cycle (an estimate).
 
+mod charge;
 mod closed;
 mod fill;
 pub mod track;
 
+pub use charge::Charge;
 pub use closed::P_ATM_PA;
 
 use crate::math;
@@ -125,6 +128,8 @@ pub struct Feed {
 pub struct Characteristics {
     pub front: Option<Feed>,
     pub rear: Option<Feed>,
+    /// The air the chambers drew, where both feeds were found.
+    pub charge: Option<Charge>,
 }
 
 impl Feed {
@@ -157,6 +162,7 @@ impl Characteristics {
         Characteristics {
             front: w(self.front, other.front),
             rear: w(self.rear, other.rear),
+            charge: self.charge,
         }
     }
 }
@@ -212,7 +218,15 @@ pub fn characterise(w: &Window, geo: &ChamberGeometry, supply_abs_pa: f32) -> Ch
         let x = &w.x_m[start..end];
         feed(w, p, x, |x| geo.rear_volume_m3(x), start, w.open, supply_abs_pa)
     });
-    Characteristics { front, rear }
+    let found = Characteristics {
+        front,
+        rear,
+        charge: None,
+    };
+    Characteristics {
+        charge: charge::charge(w, geo, &found, supply_abs_pa),
+        ..found
+    }
 }
 
 /// One chamber: the closed fit, the onset, the state there and the fill.

@@ -5,7 +5,11 @@
 //! friction work share); the friction law F0 + k·p is fitted over the
 //! points; the simulator gives the model's curves, nominal (no friction) and
 //! with the fitted law; the energy friction costs is tabulated (the paper's
-//! Table 3). Output: CSV, PNG and an HTML page (`docs/bench-sheet.md`).
+//! Table 3). Per point also an estimate of the air drawn per blow, from the
+//! chamber states where each feed starts and its port closes (the
+//! characteristics of `hammer_estimator::chambers`), and of the impact
+//! efficiency it gives. Output: CSV, PNG and an HTML page
+//! (`docs/bench-sheet.md`, with the formulas).
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -13,8 +17,11 @@ use std::path::{Path, PathBuf};
 use anyhow::{anyhow, bail, Context, Result};
 use clap::Args;
 
+use hammer_estimator::chambers::P_ATM_PA;
 use hammer_estimator::CycleReport;
+use hammer_sim::characteristics::{characterise_cycles, Signals};
 use hammer_sim::estimation::open_for_estimation;
+use hammer_sim::gas::R_AIR;
 use hammer_sim::{simulate_truth, SimConfig};
 
 use crate::chart::render::figure_png;
@@ -59,8 +66,22 @@ pub struct Point {
     pub frequency_hz: f64,
     pub stroke_m: f64,
     pub friction_work_ratio: f64,
-    /// The simulator's truth when the trace is simulated: (friction, energy).
-    pub truth: Option<(f64, f64)>,
+    /// Free air drawn per blow (at atmosphere and the supply's
+    /// temperature), m³, over the cycles whose two feeds were read
+    /// (`air_cycles`); an estimate (`docs/bench-sheet.md`).
+    pub air_m3: f64,
+    pub air_cycles: usize,
+    /// The simulator's truth when the trace is simulated.
+    pub truth: Option<Truth>,
+}
+
+/// The simulator's means over the cycles the estimator reported valid.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Truth {
+    pub friction_n: f64,
+    pub impact_energy_j: f64,
+    /// The air the source gave per cycle, as free air at the supply's temperature, m³.
+    pub air_m3: f64,
 }
 
 impl Point {
@@ -75,6 +96,19 @@ impl Point {
     /// The energy friction takes from each blow (the paper's Table 3).
     pub fn friction_energy_loss_j(&self) -> f64 {
         self.impact_energy_frictionless_j - self.impact_energy_j
+    }
+
+    /// Free air per minute, m³/min.
+    pub fn air_per_min_m3(&self) -> f64 {
+        self.air_m3 * self.blows_per_min()
+    }
+
+    /// Impact energy over the work the drawn air could do expanding
+    /// isothermally from the supply to atmosphere: p_atm·V·ln(p_s,abs/p_atm).
+    pub fn impact_efficiency(&self) -> f64 {
+        let p_atm = P_ATM_PA as f64;
+        let available = p_atm * self.air_m3 * ((self.supply_bar * 1e5 + p_atm) / p_atm).ln();
+        self.impact_energy_j / available
     }
 }
 
@@ -102,6 +136,25 @@ pub fn point(path: &Path, file: &SimConfig, supply_bar: Option<f64>) -> Result<P
             cycles.len()
         );
     }
+    // The air per blow, from the chambers' states (every report: a cycle's
+    // characteristics need the valid ones either side of it).
+    let hammer = input
+        .sidecar
+        .as_ref()
+        .and_then(|s| s.simulation.as_ref())
+        .map_or(&file.hammer, |s| &s.config.hammer);
+    let signals = Signals {
+        dt_s: input.trace.dt_s,
+        p_rear_pa: &input.trace.p_rear_pa,
+        p_front_pa: &input.trace.p_front_pa,
+        accel_mps2: &input.trace.accel_mps2,
+        x_m: None,
+    };
+    let air: Vec<f64> = characterise_cycles(&signals, &reports, &input.config, &hammer.chambers())
+        .iter()
+        .filter_map(|c| c.feeds.charge)
+        .map(|c| c.free_air_m3() as f64)
+        .collect();
     let truth = input.sidecar.as_ref().and_then(|s| s.simulation.as_ref()).map(|sim| {
         // The truth of the cycles estimated (matched by impact time).
         let matched: Vec<_> = valid
@@ -114,10 +167,12 @@ pub fn point(path: &Path, file: &SimConfig, supply_bar: Option<f64>) -> Result<P
             })
             .collect();
         let n = matched.len().max(1) as f64;
-        (
-            matched.iter().map(|c| c.friction_cycle_n).sum::<f64>() / n,
-            matched.iter().map(|c| c.impact_energy_j).sum::<f64>() / n,
-        )
+        let t_supply = sim.config.supply.temperature_k;
+        Truth {
+            friction_n: matched.iter().map(|c| c.friction_cycle_n).sum::<f64>() / n,
+            impact_energy_j: matched.iter().map(|c| c.impact_energy_j).sum::<f64>() / n,
+            air_m3: matched.iter().map(|c| c.air_drawn_kg).sum::<f64>() / n * R_AIR * t_supply / P_ATM_PA as f64,
+        }
     });
     Ok(Point {
         trace: path.display().to_string(),
@@ -134,6 +189,8 @@ pub fn point(path: &Path, file: &SimConfig, supply_bar: Option<f64>) -> Result<P
         frequency_hz: mean(&valid, |r| r.frequency_hz),
         stroke_m: mean(&valid, |r| r.stroke_m),
         friction_work_ratio: mean(&valid, |r| r.friction_work_ratio),
+        air_m3: air.iter().sum::<f64>() / air.len() as f64,
+        air_cycles: air.len(),
         truth,
     })
 }
@@ -252,13 +309,15 @@ pub fn run(args: &BenchSheetArgs) -> Result<Vec<PathBuf>> {
     let out = |name: &str| args.out.join(name);
 
     let mut csv = String::from(
-        "supply_bar,cycles,cycles_used,friction_n,friction_u_n,friction_stroke_n,friction_backhaul_n,impact_energy_j,impact_energy_u_j,impact_energy_frictionless_j,friction_energy_loss_j,frequency_hz,blows_per_min,impact_power_w,stroke_m,friction_work_ratio,truth_friction_n,truth_impact_energy_j,trace\n",
+        "supply_bar,cycles,cycles_used,friction_n,friction_u_n,friction_stroke_n,friction_backhaul_n,impact_energy_j,impact_energy_u_j,impact_energy_frictionless_j,friction_energy_loss_j,frequency_hz,blows_per_min,impact_power_w,stroke_m,friction_work_ratio,air_per_blow_l,air_cycles,air_l_per_min,impact_efficiency,truth_friction_n,truth_impact_energy_j,truth_air_per_blow_l,trace\n",
     );
     for p in &sheet.points {
-        let (tf, te) = p.truth.unwrap_or((f64::NAN, f64::NAN));
+        let (tf, te, ta) = p.truth.map_or((f64::NAN, f64::NAN, f64::NAN), |t| {
+            (t.friction_n, t.impact_energy_j, t.air_m3)
+        });
         let _ = writeln!(
             csv,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
             p.supply_bar,
             p.cycles,
             p.cycles_used,
@@ -275,8 +334,13 @@ pub fn run(args: &BenchSheetArgs) -> Result<Vec<PathBuf>> {
             p.impact_power_w(),
             p.stroke_m,
             p.friction_work_ratio,
+            p.air_m3 * 1e3,
+            p.air_cycles,
+            p.air_per_min_m3() * 1e3,
+            p.impact_efficiency(),
             tf,
             te,
+            ta * 1e3,
             p.trace.replace(',', "_")
         );
     }
@@ -465,6 +529,20 @@ fn html(sheet: &Sheet) -> String {
             100.0 * p.friction_work_ratio,
             p.cycles_used,
             p.cycles
+        );
+    }
+    h.push_str("</table>\n<h2>Air per blow and impact efficiency (estimates)</h2>\n<p><b>Estimates</b>, not measurements: the air each chamber draws from its feed's onset to the valve's switch, from the measured pressure and the volume on the piston's track: while the chamber is closed, the energy equation γ·R·T<sub>s</sub>·Δm = Δ(p·V) + (γ − 1)·∫p dV; once its outlet is uncovered with the feed still open, the orifice law with the feed's area read from its fill, R·T<sub>s</sub>·ṁ = A·p<sub>s</sub>·Ψ(p/p<sub>s</sub>)·√(R·T<sub>s</sub>). Given as free air (at atmosphere and 20 °C). The impact efficiency is the impact energy over the work that air could do expanding isothermally from the supply to atmosphere, p<sub>atm</sub>·V<sub>free</sub>·ln(p<sub>s,abs</sub>/p<sub>atm</sub>). Wall heat exchange, leakage and a feed area that changes over the feed are not in it (docs/bench-sheet.md).</p>\n<table>\n<tr><th>supply, bar</th><th>free air per blow, l</th><th>free air, l/min</th><th>impact efficiency</th><th>cycles read</th><th>simulator's air per blow, l</th></tr>\n");
+    for p in &sheet.points {
+        let _ = writeln!(
+            h,
+            "<tr><td>{:.2}</td><td>{:.4}</td><td>{:.1}</td><td>{:.1} %</td><td>{} of {}</td><td>{}</td></tr>",
+            p.supply_bar,
+            p.air_m3 * 1e3,
+            p.air_per_min_m3() * 1e3,
+            100.0 * p.impact_efficiency(),
+            p.air_cycles,
+            p.cycles_used,
+            p.truth.map_or("–".to_string(), |t| format!("{:.4}", t.air_m3 * 1e3))
         );
     }
     h.push_str("</table>\n<h2>The energy friction costs (the paper's Table 3)</h2>\n<table>\n<tr><th>supply, bar</th><th>measured with friction, J</th><th>measured without friction, J</th><th>difference, J</th><th>difference, %</th><th>model without friction, J</th><th>model with fitted friction, J</th><th>model difference, J</th></tr>\n");

@@ -17,9 +17,13 @@ pub const FILL_S: f32 = 1e-3;
 /// Samples averaged either side of each end of the window (the ends carry
 /// the Δ(p·V) term, where the pressure's noise would otherwise count whole).
 const END_HALF_S: f32 = 1e-4;
-const GAMMA: f32 = 1.4;
+pub(super) const GAMMA: f32 = 1.4;
 const R_AIR: f32 = 287.05;
 const T_SUPPLY_K: f32 = 293.15;
+/// √(R·T_s) of the supply's air: the orifice law's R·T_s·ṁ = A·p_s·Ψ·√(R·T_s).
+pub(super) fn sqrt_rt_supply() -> f32 {
+    math::sqrt(R_AIR * T_SUPPLY_K)
+}
 
 /// The area and its standard uncertainty from the pressure's noise.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -35,7 +39,7 @@ const NONE: FillArea = FillArea {
 
 /// Isentropic flow function Ψ(p_down/p_up) for air: choked below the
 /// critical ratio 0.528.
-fn psi(ratio: f32) -> f32 {
+pub(super) fn psi(ratio: f32) -> f32 {
     const CRITICAL: f32 = 0.528_28;
     const CHOKED: f32 = 0.684_7;
     if ratio <= CRITICAL {

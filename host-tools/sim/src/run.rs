@@ -186,6 +186,10 @@ pub struct CycleTruth {
     pub energy_residual_j: f64,
     pub peak_rear_pa: f64,
     pub peak_front_pa: f64,
+    /// Air drawn from the source over the cycle (absent in sidecars written
+    /// before it was recorded).
+    #[serde(default)]
+    pub air_drawn_kg: f64,
 }
 
 /// Air mass bookkeeping over the run.
@@ -618,6 +622,7 @@ impl CycleTracker {
                 energy_residual_j: residual,
                 peak_rear_pa: self.peak_rear_pa,
                 peak_front_pa: self.peak_front_pa,
+                air_drawn_kg: d(model::M_IN),
             });
         }
         self.prev_impact = Some(*imp);
