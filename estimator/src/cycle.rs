@@ -6,7 +6,9 @@
 //! and stroke (with a guard band around the turning point) without a second
 //! pass. Memory is bounded by [`MAX_CHECKPOINTS`].
 //!
-//! What a closed cycle makes of these sums is [`crate::estimate`].
+//! Modules: `pass` (the per-sample pass, the hot loop), `rails` (the
+//! samples at a pressure's rail, out of the fit: the slow path). What a
+//! closed cycle makes of these sums is [`crate::estimate`].
 
 use heapless::Vec;
 
@@ -15,7 +17,10 @@ use crate::math;
 use crate::Flags;
 
 mod pass;
+mod rails;
 use pass::{Balance, CodeSums, Squares};
+pub use rails::Left;
+use rails::Railed;
 
 /// Checkpoints per cycle: with one per millisecond, cycles up to 128 ms.
 pub const MAX_CHECKPOINTS: usize = 128;
@@ -187,46 +192,6 @@ impl Watch {
             self.last[ch] = c;
         }
     }
-}
-
-/// The samples at which a pressure sat at a rail (a vented chamber's dip
-/// that a 0-based transducer clips, or a saturated one): their pressure
-/// force is wrong, so they leave the friction fit (friction is a constant
-/// per phase: dropping samples costs precision, not truth) and the velocity
-/// integral takes the measured acceleration over them. Sums since the last
-/// checkpoint, `j` the index from the checkpoint; kept only on the slow path
-/// (a piece that touched a rail), so a cycle without rails pays nothing.
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
-struct Railed {
-    n: u32,
-    e: f32,
-    ee: f32,
-    r: f32,
-    re: f32,
-    rr: f32,
-    /// The pressure force: Σ force, Σ force², Σ r·force.
-    f: f32,
-    ff: f32,
-    rf: f32,
-    /// Σ j, Σ j·e, Σ j·r.
-    j: f32,
-    je: f32,
-    jr: f32,
-}
-
-/// The cycle's totals over the samples that left the fit (j counted from
-/// the first kept sample): where the closure puts back the fitted friction
-/// and zero shift their measured acceleration held (`estimate`), and what
-/// the accelerometer's gain reaches through them.
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub struct Left {
-    pub n: f32,
-    /// Σ r and Σ force: Σ m·a over them.
-    pub r: f32,
-    pub f: f32,
-    pub e: f32,
-    pub j: f32,
-    pub je: f32,
 }
 
 /// The running state of the cycle under way.
@@ -472,38 +437,6 @@ impl CycleAcc {
                     let p2 = (last.front as f32 - cal.zero[1]) * cal.scale[1];
                     self.checkpoint(p1, p2);
                 }
-            }
-        }
-    }
-
-    /// The samples of `piece` at which a pressure sat at a rail, summed
-    /// into [`Railed`] (the slow path: only a piece that touched a rail).
-    /// The regressor e is recomputed from its value before the piece with
-    /// the pass's own arithmetic, so the sums cancel exactly what it added.
-    #[inline(never)]
-    fn leave_fit(&mut self, d: &Derived, cal: &Calibration, b: &Balance, piece: [&[crate::RawSample]; 2], mut e: f32) {
-        // Their pressure sums stay in: the pressures' gain sensitivities are
-        // read as phase means, which the clipped few hardly move.
-        let at_rail = |c: u16, full: u16| c.wrapping_sub(1) >= full.wrapping_sub(1);
-        let x = &mut self.railed;
-        for (j, s) in piece[0].iter().chain(piece[1]).enumerate() {
-            e *= d.q;
-            if at_rail(s.rear, cal.full[0]) || at_rail(s.front, cal.full[1]) {
-                let f = b.force(s.rear, s.front);
-                let r = b.residual(s.accel, f);
-                let j = (self.since_cp as usize + j) as f32;
-                x.n += 1;
-                x.e += e;
-                x.ee += e * e;
-                x.r += r;
-                x.re += r * e;
-                x.rr += r * r;
-                x.f += f;
-                x.ff += f * f;
-                x.rf += r * f;
-                x.j += j;
-                x.je += j * e;
-                x.jr += j * r;
             }
         }
     }

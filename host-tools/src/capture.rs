@@ -76,6 +76,18 @@ pub fn record<S: std::io::Read + std::io::Write>(
     cycles: u8,
     timeout: std::time::Duration,
 ) -> anyhow::Result<(Vec<[u16; 3]>, Config)> {
+    record_armed(client, cycles, timeout, || {})
+}
+
+/// [`record`], calling `on_armed` once the device has acknowledged the
+/// capture: a demo board's hammer is fed from then on, so that the samples
+/// the capture needs never reach the board before the request does.
+pub fn record_armed<S: std::io::Read + std::io::Write>(
+    client: &mut crate::client::Client<S>,
+    cycles: u8,
+    timeout: std::time::Duration,
+    mut on_armed: impl FnMut(),
+) -> anyhow::Result<(Vec<[u16; 3]>, Config)> {
     use crate::client::reply_to;
     use hammer_wire::{CommandKind, DeviceMsg, HostMsg};
     let cfg = client.request(&HostMsg::GetConfig, timeout, |m| {
@@ -104,7 +116,12 @@ pub fn record<S: std::io::Read + std::io::Write>(
         }
         let Some(m) = client.recv(left)? else { continue };
         match reply_to(CommandKind::StartCapture, &m) {
-            Some(Ok(())) => acked = true,
+            Some(Ok(())) => {
+                if !acked {
+                    on_armed();
+                }
+                acked = true;
+            }
             Some(Err(reason)) => anyhow::bail!("the device refused the capture: {reason:?}"),
             None => {}
         }

@@ -119,12 +119,26 @@ fn point_dir(bar: f64) -> String {
     format!("{bar:.1}bar")
 }
 
-/// A board to capture from, kept open across captures (with a demo
-/// board, the board itself and its hammer's feeder, running on).
+/// A board to capture from, kept open across captures.
 struct Session {
     link: Client<Box<dyn crate::monitor::Port>>,
     info: hammer_wire::DeviceInfo,
-    _demo: Option<(crate::demo::Board, std::thread::JoinHandle<()>)>,
+    demo: Option<Demo>,
+}
+
+/// A demo board and the rest of its simulated hammer, fed a capture's
+/// stretch at a time once that capture is armed: the request is never
+/// queued behind samples (the emulated board's UART takes them slower
+/// than the hammer makes them, and a paced feed ahead of the request held
+/// it back until the capture timed out).
+struct Demo {
+    _board: crate::demo::Board,
+    writer: Arc<Mutex<Box<dyn std::io::Write + Send>>>,
+    codes: std::vec::IntoIter<hammer_estimator::RawSample>,
+    /// The stretch being fed: the next one follows it.
+    feeding: Option<std::thread::JoinHandle<()>>,
+    /// The next stretch's first block number (the numbering runs on).
+    next_block: u32,
 }
 
 pub fn run(args: &CommissionArgs) -> Result<()> {
@@ -218,10 +232,10 @@ pub fn run(args: &CommissionArgs) -> Result<()> {
     Ok(())
 }
 
-/// Seconds of simulated hammer a demo board is fed per capture: an
-/// impact to start on, a full cycle and its tail, the streaming of the
-/// capture at the hammer's pace, with margin.
-const DEMO_PER_CAPTURE_S: f64 = 0.4;
+/// Seconds of simulated hammer a demo board is fed per capture, after the
+/// capture is armed: an impact to start on, a full cycle (under 50 ms at
+/// 4–7 bar) and its tail, with margin.
+const DEMO_PER_CAPTURE_S: f64 = 0.15;
 const DEMO_SETTLE_S: f64 = 0.5;
 
 /// Opens the board: a device, or a demo board whose simulated hammer runs
@@ -231,18 +245,30 @@ fn open(args: &CommissionArgs, bar: f64) -> Result<Session> {
     if args.demo {
         let mut demo = crate::demo::DemoArgs::for_capture(bar);
         demo.effects = args.effects.clone();
-        let codes = crate::demo::hammer_codes(&demo, DEMO_SETTLE_S + DEMO_PER_CAPTURE_S * args.cycles as f64)?;
+        // (A block's rounding per stretch on top.)
+        let codes = crate::demo::hammer_codes(
+            &demo,
+            DEMO_SETTLE_S + (DEMO_PER_CAPTURE_S + 0.01) * (args.cycles + 1) as f64,
+        )?;
         let (board, read, write) = crate::demo::start_board(args.native, None, false)?;
         let writer = Arc::new(Mutex::new(write));
         let port: Box<dyn crate::monitor::Port> = Box::new(crate::demo::SharedPort::new(read, writer.clone()));
         let mut link = Client::new(port);
         let (info, _) = link.handshake(handshake)?;
-        let rate = hammer_estimator::Config::default().sample_rate_hz as f64;
-        let feeder = std::thread::spawn(move || crate::demo::feed(codes, writer, true, rate));
+        let mut demo = Demo {
+            _board: board,
+            writer,
+            codes: codes.into_iter(),
+            feeding: None,
+            next_block: 0,
+        };
+        // The hammer settles before the first capture (fed while the link
+        // is read: a board whose reports nobody reads stops taking samples).
+        demo.feed(DEMO_SETTLE_S);
         return Ok(Session {
             link,
             info,
-            _demo: Some((board, feeder)),
+            demo: Some(demo),
         });
     }
     let mut connector = crate::monitor::connector_for(&args.port)?;
@@ -251,14 +277,36 @@ fn open(args: &CommissionArgs, bar: f64) -> Result<Session> {
         .with_context(|| format!("opening {}", connector.describe()))?;
     let mut link = Client::new(port);
     let (info, _) = link.handshake(handshake)?;
-    Ok(Session {
-        link,
-        info,
-        _demo: None,
-    })
+    Ok(Session { link, info, demo: None })
+}
+
+impl Demo {
+    /// Feeds the next `seconds` of the hammer from a thread, once the
+    /// stretch before it is fed, as fast as the board takes them.
+    fn feed(&mut self, seconds: f64) {
+        let rate = hammer_estimator::Config::default().sample_rate_hz as f64;
+        // Whole blocks: a short one inside the stream is not a block the
+        // board expects.
+        let blocks = (seconds * rate / hammer_wire::BLOCK_SAMPLES as f64).ceil() as usize;
+        let stretch: Vec<_> = self.codes.by_ref().take(blocks * hammer_wire::BLOCK_SAMPLES).collect();
+        let first = self.next_block;
+        self.next_block = first.wrapping_add(blocks as u32);
+        let writer = self.writer.clone();
+        let before = self.feeding.take();
+        self.feeding = Some(std::thread::spawn(move || {
+            if let Some(b) = before {
+                let _ = b.join();
+            }
+            crate::demo::feed_from(first, stretch, writer, false, rate)
+        }));
+    }
 }
 
 /// One capture of the next whole cycle.
 fn capture_one(s: &mut Session, timeout: Duration) -> Result<(Vec<[u16; 3]>, hammer_estimator::Config)> {
-    crate::capture::record(&mut s.link, 1, timeout)
+    let Some(demo) = s.demo.as_mut() else {
+        return crate::capture::record(&mut s.link, 1, timeout);
+    };
+    // The hammer's next stretch follows the board's acknowledgement.
+    crate::capture::record_armed(&mut s.link, 1, timeout, || demo.feed(DEMO_PER_CAPTURE_S))
 }

@@ -343,6 +343,18 @@ pub fn start_board(
 
 /// Streams `codes` as numbered sample blocks; paced to real time when `paced`.
 pub fn feed(codes: Vec<RawSample>, writer: Arc<Mutex<Box<dyn Write + Send>>>, paced: bool, sample_rate_hz: f64) {
+    feed_from(0, codes, writer, paced, sample_rate_hz)
+}
+
+/// [`feed`] for a stream fed in stretches: its blocks numbered on from
+/// `first_block` (a number that goes back reads as lost samples on the board).
+pub fn feed_from(
+    first_block: u32,
+    codes: Vec<RawSample>,
+    writer: Arc<Mutex<Box<dyn Write + Send>>>,
+    paced: bool,
+    sample_rate_hz: f64,
+) {
     let start = Instant::now();
     for (i, chunk) in codes.chunks(BLOCK_SAMPLES).enumerate() {
         if paced {
@@ -352,7 +364,7 @@ pub fn feed(codes: Vec<RawSample>, writer: Arc<Mutex<Box<dyn Write + Send>>>, pa
             }
         }
         let block = SampleBlock {
-            seq: i as u32,
+            seq: first_block.wrapping_add(i as u32),
             samples: chunk.iter().map(|s| [s.rear, s.front, s.accel]).collect(),
         };
         let Ok(mut w) = writer.lock() else { return };
