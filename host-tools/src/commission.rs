@@ -39,8 +39,8 @@ pub struct CommissionArgs {
     #[arg(long = "effect", value_name = "SPEC", requires = "demo")]
     pub effects: Vec<String>,
     /// Run the demo board's firmware app natively instead of on QEMU
-    /// (its samples then arrive at the host's pace: under QEMU, fed over
-    /// the emulated UART at the hammer's pace, captures time out today).
+    /// (faster: under QEMU the emulated UART takes the samples at a few
+    /// percent of the hammer's rate, about 6 s a capture).
     #[arg(long, requires = "demo")]
     pub native: bool,
     /// Gauge supply pressure of an operating point, bar (repeatable). On a

@@ -2,8 +2,8 @@
 //! them: `hammer commission --demo --native` records the firmware's app at
 //! 4 and 7 bar, the same board is recorded again with a hidden valve delay,
 //! and `hammer diagnose --reference DIR` names it from the front chamber's
-//! feed. (On QEMU, whose board takes the demo's samples over its emulated
-//! UART, the paced captures time out today: docs/diagnosis.md.)
+//! feed. (The same runs on QEMU's emulated board in about 5 minutes,
+//! measured in docs/diagnosis.md; the test takes the native app.)
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
