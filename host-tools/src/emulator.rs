@@ -90,6 +90,17 @@ impl Emulator {
     /// guest timing no longer depends on the host's speed or on QEMU
     /// translating code; without, it is the host's clock.
     pub fn start_with(elf: &Path, icount: Option<Icount>, stimulus: Option<&Stimulus>) -> io::Result<Self> {
+        Self::start_with_args(elf, icount, stimulus, &[])
+    }
+
+    /// [`Emulator::start_with`] with more QEMU arguments (a profiling
+    /// plugin, say), each one argument whatever its spaces.
+    pub fn start_with_args(
+        elf: &Path,
+        icount: Option<Icount>,
+        stimulus: Option<&Stimulus>,
+        extra: &[String],
+    ) -> io::Result<Self> {
         if !elf.exists() {
             return Err(io::Error::new(
                 io::ErrorKind::NotFound,
@@ -121,6 +132,7 @@ impl Emulator {
         if let Ok(extra) = std::env::var("HAMMER_QEMU_ARGS") {
             cmd.args(extra.split_whitespace());
         }
+        cmd.args(extra);
         cmd.arg("-kernel")
             .arg(elf)
             .stdin(Stdio::null())
@@ -169,6 +181,21 @@ impl Emulator {
 
     pub fn is_running(&mut self) -> bool {
         matches!(self.child.try_wait(), Ok(None))
+    }
+
+    /// Waits for QEMU to end by itself (the board's semihosting exit), at
+    /// most `timeout`; `Ok(None)` if it still runs then.
+    pub fn wait_exit(&mut self, timeout: Duration) -> io::Result<Option<std::process::ExitStatus>> {
+        let deadline = Instant::now() + timeout;
+        loop {
+            if let Some(status) = self.child.try_wait()? {
+                return Ok(Some(status));
+            }
+            if Instant::now() >= deadline {
+                return Ok(None);
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
     }
 }
 

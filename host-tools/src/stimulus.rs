@@ -31,6 +31,7 @@ pub struct Counters {
     pub busy_us: u32,
     pub stack_used_bytes: u32,
     pub stack_reserved_bytes: u32,
+    pub loop_cycles: u32,
 }
 
 /// The shared file and its mapping; removed when dropped.
@@ -168,6 +169,14 @@ impl Stimulus {
         self.header().end_of_stream.store(1, Ordering::Release);
     }
 
+    /// Asks the board to end QEMU (exit status 0) once the stream has ended
+    /// and its sampling loop has processed every sample-set written (see
+    /// `Header::exit_when_drained`). Only whole DMA halves are ever
+    /// processed, so the stream must be a whole number of `BLOCK_SETS`.
+    pub fn exit_when_drained(&self) {
+        self.header().exit_when_drained.store(1, Ordering::Release);
+    }
+
     /// Fault injection: the board's sampling task stalls `us` µs of guest
     /// time the next time it asks for samples (see `Header::stall_us`).
     pub fn stall(&self, us: u32) {
@@ -203,6 +212,7 @@ impl Stimulus {
             busy_us: l(&h.busy_us),
             stack_used_bytes: l(&h.stack_used_bytes),
             stack_reserved_bytes: l(&h.stack_reserved_bytes),
+            loop_cycles: l(&h.loop_cycles),
         }
     }
 }

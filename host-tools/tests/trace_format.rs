@@ -5,7 +5,9 @@ use std::path::PathBuf;
 use hammer_sim::simulate::simulate;
 use hammer_sim::SimConfig;
 use hammer_trace::rows::MAX_LINE_BYTES;
-use hammer_trace::trace::{read_csv, read_sidecar, sidecar_path, write_csv, write_sidecar, Gap, Sidecar, TraceError};
+use hammer_trace::trace::{
+    read_csv, read_sidecar, sidecar_path, write_csv, write_sidecar, Gap, Sidecar, TraceError, SIDECAR_VERSION,
+};
 
 fn tmp(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("hammer-trace-test-{}", std::process::id()));
@@ -122,13 +124,17 @@ fn sidecars_of_another_format_or_a_newer_version_are_refused() {
     assert!(e.contains("format is `other`"), "{e}");
     std::fs::write(sidecar_path(&path), "{not json").unwrap();
     assert!(read_sidecar(&path).is_err());
-    // What an outside user writes by hand: the operating point alone.
+    // What an outside user writes by hand: the operating point alone (the
+    // version is then this tool's).
     std::fs::write(sidecar_path(&path), "{\"supply_pressure_bar\": 4}").unwrap();
     let s = read_sidecar(&path).unwrap().unwrap();
     assert_eq!(
         (s.format.as_str(), s.version, s.supply_pressure_bar),
-        ("hammer-trace", 1, Some(4.0))
+        ("hammer-trace", SIDECAR_VERSION, Some(4.0))
     );
+    // A version-1 sidecar (Box–Muller noise, `SIDECAR_VERSION`'s history) still reads.
+    std::fs::write(sidecar_path(&path), "{\"version\": 1, \"supply_pressure_bar\": 4}").unwrap();
+    assert_eq!(read_sidecar(&path).unwrap().unwrap().version, 1);
     assert_eq!(s.source, "import");
 }
 

@@ -83,6 +83,76 @@ fn wire_bytes(r: &CycleReport) -> Vec<u8> {
     postcard::to_allocvec(r).unwrap()
 }
 
+/// One run of `samples` (whole DMA halves) that the board ends itself once
+/// drained, at one instruction per ns of guest time: the board's counters
+/// and every report, as postcard bytes. `disturbed`: the host reads late
+/// and a thread burns a core meanwhile.
+fn drained_run(samples: &[RawSample], disturbed: bool) -> (hammer_host::stimulus::Counters, Vec<Vec<u8>>) {
+    let stimulus = Stimulus::create().unwrap();
+    assert!(stimulus.push(samples, &std::sync::atomic::AtomicBool::new(false)));
+    stimulus.exit_when_drained();
+    stimulus.finish();
+    let mut emu = Emulator::start_with(&firmware_elf(), Some(Icount::COUNT), Some(&stimulus))
+        .expect("QEMU and the emulated firmware");
+    let mut link = Client::new(emu.connect(T).unwrap());
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let burner = disturbed.then(|| {
+        let stop = stop.clone();
+        std::thread::spawn(move || {
+            let mut x = 0u64;
+            while !stop.load(std::sync::atomic::Ordering::Relaxed) {
+                x = std::hint::black_box(x.wrapping_mul(6364136223846793005).wrapping_add(1));
+            }
+        })
+    });
+    if disturbed {
+        std::thread::sleep(Duration::from_millis(300));
+    }
+    let mut reports = vec![];
+    // Until QEMU closes the link: the board ended the run.
+    while let Ok(m) = link.recv(T) {
+        match m {
+            Some(DeviceMsg::Report(r)) => reports.push(wire_bytes(&r)),
+            Some(_) => {}
+            None => panic!("the board neither reported nor ended for {T:?}"),
+        }
+    }
+    stop.store(true, std::sync::atomic::Ordering::Relaxed);
+    if let Some(b) = burner {
+        b.join().unwrap();
+    }
+    let status = emu.wait_exit(T).unwrap();
+    assert!(status.is_some_and(|s| s.success()), "the board ended QEMU: {status:?}");
+    (stimulus.counters(), reports)
+}
+
+/// The firmware bench's run (`cargo xtask bench-firmware`): with nothing
+/// sent to the board and the board ending QEMU itself, every interrupt and
+/// the end fall on the same guest instruction, so the sampling loop's count
+/// is the same however the host is loaded.
+#[test]
+fn a_run_the_board_ends_when_drained_counts_the_same_instructions_every_time() {
+    let mut samples = codes(5.0, 0.4, 2);
+    samples.truncate(samples.len() / BLOCK_SETS as usize * BLOCK_SETS as usize);
+    let (quiet, quiet_reports) = drained_run(&samples, false);
+    let (busy, busy_reports) = drained_run(&samples, true);
+    assert_eq!(
+        quiet.consumed_sets,
+        samples.len() as u32,
+        "every sample-set processed: {quiet:?}"
+    );
+    assert_eq!((quiet.lost_sets, quiet.starved_blocks), (0, 0), "{quiet:?}");
+    assert!(quiet.loop_cycles > 0, "{quiet:?}");
+    assert!(
+        quiet_reports.len() >= 5,
+        "{} reports in 0.4 s at 5 bar",
+        quiet_reports.len()
+    );
+    // The whole header: loop and board cycles, uptime, latency, stack.
+    assert_eq!(quiet, busy, "the same run, instruction for instruction");
+    assert_eq!(quiet_reports, busy_reports);
+}
+
 #[test]
 fn a_late_firmware_loses_whole_halves_counted_to_the_sample_as_the_reference_board_would() {
     let samples = codes(6.0, 2.0, 11);

@@ -41,12 +41,17 @@ pub const SET_BYTES: usize = 6;
 /// "HSTM", little-endian.
 pub const MAGIC: u32 = u32::from_le_bytes(*b"HSTM");
 /// Bumped on any change of the header's layout or meaning.
-pub const VERSION: u32 = 2;
+pub const VERSION: u32 = 3;
 /// The reference board's DMA half-buffer (firmware/src/sampler.rs), so the
 /// emulated board sees the same block size and has the same slack.
 pub const BLOCK_SETS: u32 = 256;
 /// The reference board's sample rate.
 pub const RATE_HZ: u32 = 100_000;
+/// The emulated board's core clock (the mps2-an386's SYSCLK), which its
+/// SysTick and TIMER0 count: the unit of [`Header::loop_cycles`]. Under
+/// QEMU's `-icount shift=0` (1 ns of guest time per instruction) one cycle
+/// is 40 instructions.
+pub const SYSCLK_HZ: u32 = 25_000_000;
 
 /// The emulated board's non-volatile area, past the ring: QEMU keeps RAM
 /// through a board reset, and the host's backing file keeps it beyond QEMU.
@@ -112,6 +117,18 @@ pub struct Header {
     /// code: the host's model of the board's analog supply (VDDA =
     /// 3.0 V · [`VREFINT_CAL`] / code). 0: no reference, not measured.
     pub vrefint_code: AtomicU32,
+    /// Board: core cycles ([`SYSCLK_HZ`]) the sampling loop spent on the
+    /// sample blocks it was handed, each from its hand-over to the loop's
+    /// next read (the app's processing, the plumbing around it and whatever
+    /// interrupt fell in between); wraps. Over the blocks only, so the
+    /// loop's idle turns (no samples, a command) are not in it.
+    pub loop_cycles: AtomicU32,
+    /// Host: non-zero asks the board to end QEMU (semihosting exit, status
+    /// 0) as soon as the stream has ended (`end_of_stream`) and the sampling
+    /// loop has processed every sample-set written: under `-icount` such a
+    /// run ends at the same guest instruction every time, whatever the host
+    /// does meanwhile (the firmware bench).
+    pub exit_when_drained: AtomicU32,
     /// Host: fault injection. Non-zero: the board's sampling task, the next
     /// time it asks for samples, clears it and executes an undefined
     /// instruction, to show the fault record a real fault leaves.

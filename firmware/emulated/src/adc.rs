@@ -138,6 +138,9 @@ pub struct StimulusAdc {
     next: u32,
     /// The half whose processing ends when the app next asks for samples.
     finished: Option<u32>,
+    /// When the last block was handed over (core cycles, low 32 bits), until
+    /// the app next asks: its processing time goes to `Header::loop_cycles`.
+    handed_at: Option<u32>,
 }
 
 /// `a` is after `b` in wrapping position order.
@@ -173,7 +176,11 @@ impl StimulusAdc {
         // SAFETY: the handler only touches the header, DMA and WAKER, all
         // interrupt-safe.
         unsafe { NVIC::unmask(Interrupt::Timer0) };
-        Ok(Self { next, finished: None })
+        Ok(Self {
+            next,
+            finished: None,
+            handed_at: None,
+        })
     }
 
     fn overrun(&mut self, h: &Header, oldest: u32) -> Overrun {
@@ -215,6 +222,17 @@ impl StimulusAdc {
         }
     }
 
+    /// The bench's end (see `Header::exit_when_drained`): QEMU exits once the
+    /// loop asks for more after the stream's last sample-set, `next`.
+    fn exit_if_drained(h: &Header, next: u32) {
+        if h.exit_when_drained.load(Ordering::Acquire) != 0
+            && h.end_of_stream.load(Ordering::Acquire) != 0
+            && next == h.written_sets.load(Ordering::Acquire)
+        {
+            crate::exit_qemu(cortex_m_semihosting::debug::EXIT_SUCCESS);
+        }
+    }
+
     /// Fault injection (see `Header::stall_us`): a late firmware.
     fn stall_if_asked(h: &Header) {
         let us = h.stall_us.swap(0, Ordering::AcqRel);
@@ -228,9 +246,14 @@ impl StimulusAdc {
 impl SampleSource for StimulusAdc {
     async fn read(&mut self, buf: &mut [RawSample]) -> Result<usize, Overrun> {
         let h = header();
+        if let Some(at) = self.handed_at.take() {
+            h.loop_cycles
+                .fetch_add(clock::cycles32().wrapping_sub(at), Ordering::Relaxed);
+        }
         if let Some(half) = self.finished.take() {
             self.processed(h, half);
         }
+        Self::exit_if_drained(h, self.next);
         Self::stall_if_asked(h);
         Self::fault_if_asked(h);
         // Cancel-safe: nothing below the wait is interrupted by an await.
@@ -263,6 +286,9 @@ impl SampleSource for StimulusAdc {
         h.consumed_sets.fetch_add(n as u32, Ordering::Relaxed);
         if self.next == half_end {
             self.finished = Some((half_end / BLOCK_SETS).wrapping_sub(1));
+        }
+        if n > 0 {
+            self.handed_at = Some(clock::cycles32());
         }
         Ok(n)
     }

@@ -16,8 +16,9 @@ use cortex_m_rt::exception;
 use embassy_sync::waitqueue::AtomicWaker;
 
 /// The mps2-an386's SYSCLK, which clocks the core, SysTick and the APB
-/// peripherals (hw/arm/mps2.c: `SYSCLK_FRQ 25000000`).
-pub const SYSCLK_HZ: u32 = 25_000_000;
+/// peripherals (hw/arm/mps2.c: `SYSCLK_FRQ 25000000`); the host reads the
+/// board's cycle counts in it, hence its place in `hammer_wire::stimulus`.
+pub use hammer_wire::stimulus::SYSCLK_HZ;
 
 /// Core cycles per SysTick period: 100 ms. Shorter than the 24-bit maximum
 /// (0.67 s) because the wrap also serves as the idle tick ([`next_tick`]),

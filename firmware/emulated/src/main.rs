@@ -176,7 +176,12 @@ unsafe fn HardFault(frame: &ExceptionFrame) -> ! {
 }
 
 fn exit_failure() -> ! {
-    debug::exit(debug::EXIT_FAILURE);
+    exit_qemu(debug::EXIT_FAILURE)
+}
+
+/// Ends QEMU with `status` through semihosting.
+pub(crate) fn exit_qemu(status: debug::ExitStatus) -> ! {
+    debug::exit(status);
     // Returns only if a debugger took the semihosting request and let the
     // core run on; then stop here.
     loop {

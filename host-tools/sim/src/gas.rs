@@ -44,8 +44,15 @@ fn unit_flow(p_up: f64, t_up: f64, p_down: f64) -> f64 {
     } else if ratio < LAMINAR_RATIO {
         scale * subsonic_psi(ratio)
     } else {
-        scale * subsonic_psi(LAMINAR_RATIO) * (1.0 - ratio) / (1.0 - LAMINAR_RATIO)
+        scale * laminar_psi() * (1.0 - ratio) / (1.0 - LAMINAR_RATIO)
     }
+}
+
+/// ψ at [`LAMINAR_RATIO`], computed once (the laminar branch took a `powf`
+/// per call for this constant).
+fn laminar_psi() -> f64 {
+    static PSI: std::sync::LazyLock<f64> = std::sync::LazyLock::new(|| subsonic_psi(LAMINAR_RATIO));
+    *PSI
 }
 
 /// ψ(r) = sqrt(2γ/(γ−1)·(r^(2/γ) − r^((γ+1)/γ))), one `powf` per call.
@@ -85,6 +92,10 @@ pub fn annular_leak_mass_flow(
 /// Area of a circular hole of diameter `d_m` uncovered by a straight edge over
 /// a width `u_m` measured from the hole's rim.
 pub fn circular_port_area_m2(d_m: f64, u_m: f64) -> f64 {
+    // Covered (most of a stroke): the formula's 0, without its `acos`.
+    if u_m <= 0.0 {
+        return 0.0;
+    }
     let r = 0.5 * d_m;
     let u = u_m.clamp(0.0, d_m);
     let c = r - u;

@@ -7,6 +7,7 @@
 //! - [`effects`]: the effect catalogue, all off in the nominal model;
 //! - [`gas`], [`model`]: the equations (`docs/model.md`), [`solver`]: Dormand–Prince 5(4);
 //! - [`run`]: one solution with events, per-cycle truth and balances, handed to a sink as it is produced;
+//! - [`rng`]: the seeded random numbers (xoshiro256++, ziggurat normal deviates);
 //! - [`sensor`]: bandwidth, noise, clipping, quantisation and the sensor-side effects;
 //! - [`simulate`]: a complete simulated measurement as a trace plus sidecar, kept in memory or streamed to disk;
 //! - [`estimation`]: the one path from any trace to the estimator's ADC codes and calibration;
@@ -20,6 +21,7 @@ pub mod estimation;
 pub mod gas;
 pub mod model;
 pub mod params;
+pub mod rng;
 pub mod run;
 pub mod sensor;
 pub mod simulate;

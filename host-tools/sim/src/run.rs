@@ -361,9 +361,11 @@ pub fn run_model<S: TruthSink>(cfg: &SimConfig, sink: &mut S) -> Result<RunSumma
             }
             // Only the states the output needs.
             let mut y = [0.0; N];
-            for c in [model::X, model::V, model::P1, model::P2, model::XV, model::PS] {
-                y[c] = dense.at(t, c);
-            }
+            dense.at_into(
+                t,
+                &[model::X, model::V, model::P1, model::P2, model::XV, model::PS],
+                &mut y,
+            );
             emit(&mut cycles, sink, next_out, t, &y)?;
             next_out += 1;
         }

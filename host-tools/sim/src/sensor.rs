@@ -187,60 +187,7 @@ pub struct Measured {
     pub clipped: [usize; 3],
 }
 
-/// Deterministic xoshiro256++ so a seed reproduces a trace on every machine.
-pub struct Rng {
-    s: [u64; 4],
-    /// Box–Muller makes deviates in pairs; the second waits here.
-    spare: Option<f64>,
-}
-
-impl Rng {
-    pub fn new(seed: u64) -> Self {
-        let mut z = seed;
-        let mut next = || {
-            z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
-            let mut x = z;
-            x = (x ^ (x >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-            x = (x ^ (x >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-            x ^ (x >> 31)
-        };
-        Rng {
-            s: [next(), next(), next(), next()],
-            spare: None,
-        }
-    }
-
-    pub fn next_u64(&mut self) -> u64 {
-        let s = &mut self.s;
-        let r = (s[0].wrapping_add(s[3])).rotate_left(23).wrapping_add(s[0]);
-        let t = s[1] << 17;
-        s[2] ^= s[0];
-        s[3] ^= s[1];
-        s[1] ^= s[2];
-        s[0] ^= s[3];
-        s[2] ^= t;
-        s[3] = s[3].rotate_left(45);
-        r
-    }
-
-    /// Uniform in [0, 1).
-    pub fn uniform(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
-    }
-
-    /// Standard normal (Box–Muller).
-    pub fn normal(&mut self) -> f64 {
-        if let Some(z) = self.spare.take() {
-            return z;
-        }
-        let u1 = 1.0 - self.uniform();
-        let u2 = self.uniform();
-        let r = (-2.0 * u1.ln()).sqrt();
-        let (sin, cos) = (2.0 * std::f64::consts::PI * u2).sin_cos();
-        self.spare = Some(r * sin);
-        r * cos
-    }
-}
+pub use crate::rng::Rng;
 
 /// Offset left on the accelerometer by an impact: random sign, magnitude
 /// between 0.5 and 1.5 times the configured amplitude.
@@ -251,13 +198,20 @@ pub fn zero_shift_offset(amplitude: f64, rng: &mut Rng) -> f64 {
 
 /// One channel's state from sample to sample: its own noise stream, so a
 /// channel's noise does not depend on how long the others ran (a streamed
-/// run draws sample by sample, channel after channel).
+/// run draws sample by sample, channel after channel), and its constants,
+/// taken out of the per-sample work.
 struct ChannelState {
     alpha: f64,
     /// Filter output; `None` until the first sample starts it at rest.
     state: Option<f64>,
     rng: Rng,
     clipped: usize,
+    offset: f64,
+    noise_std: f64,
+    range_min: f64,
+    lsb: f64,
+    per_lsb: f64,
+    full_scale_code: u32,
 }
 
 impl ChannelState {
@@ -272,20 +226,37 @@ impl ChannelState {
             state: None,
             rng: Rng::new(seed),
             clipped: 0,
+            offset: ch.offset,
+            noise_std: ch.noise_std,
+            range_min: ch.range_min,
+            lsb: ch.lsb(),
+            per_lsb: 1.0 / ch.lsb(),
+            full_scale_code: ch.full_scale_code(),
         }
     }
 
-    fn measure(&mut self, ch: &SensorChannel, enabled: bool, x: f64) -> f64 {
-        if !enabled {
-            return x;
-        }
-        let state = self.state.get_or_insert(x + ch.offset);
-        *state += self.alpha * (x + ch.offset - *state);
-        let code = ch.code(*state + ch.noise_std * self.rng.normal());
-        if code == 0 || code == ch.full_scale_code() {
+    /// Filter, noise, clipping and quantisation in one pass: the ADC's code
+    /// and the value it stands for. The code rounds half up, as
+    /// [`SensorChannel::code`] does for the converter's range.
+    #[inline]
+    fn measure(&mut self, x: f64) -> (f64, u16) {
+        let x = x + self.offset;
+        let state = self.state.get_or_insert(x);
+        *state += self.alpha * (x - *state);
+        let c = (*state + self.noise_std * self.rng.normal() - self.range_min) * self.per_lsb;
+        // NaN compares false both ways: code 0, as `SensorChannel::code` gives.
+        let code = if c >= self.full_scale_code as f64 {
+            self.full_scale_code
+        } else if c > 0.0 {
+            (c + 0.5) as u32
+        } else {
+            0
+        };
+        if code == 0 || code == self.full_scale_code {
             self.clipped += 1;
         }
-        ch.value(code)
+        // adc_bits ≤ 16 (validated), so the code fits.
+        (self.range_min + code as f64 * self.lsb, code as u16)
     }
 }
 
@@ -368,20 +339,34 @@ impl SensorChain {
                 accel += z.offset_mps2 * (-(s.t_s - z.t_impact_s) / tau_s).exp();
             }
         }
-        let m = &self.model;
-        let [rear, front, acc] = &mut self.channels;
-        let values = [
-            rear.measure(&m.rear, m.enabled, s.p_rear_pa * (1.0 + self.gain_rear)),
-            front.measure(&m.front, m.enabled, s.p_front_pa * (1.0 + self.gain_front)),
-            acc.measure(&m.accel, m.enabled, accel),
+        let inputs = [
+            s.p_rear_pa * (1.0 + self.gain_rear),
+            s.p_front_pa * (1.0 + self.gain_front),
+            accel,
         ];
-        let [r, f, a] = &self.cals;
+        if !self.model.enabled {
+            let [r, f, a] = &self.cals;
+            return ChainSample {
+                values: inputs,
+                codes: RawSample {
+                    rear: r.code(inputs[0]),
+                    front: f.code(inputs[1]),
+                    accel: a.code(inputs[2]),
+                },
+            };
+        }
+        // The converter's own codes: the board's calibration reads each
+        // back as itself (`calibration_reads_every_code_as_itself`).
+        let [rear, front, acc] = &mut self.channels;
+        let (r, rear_code) = rear.measure(inputs[0]);
+        let (f, front_code) = front.measure(inputs[1]);
+        let (a, accel_code) = acc.measure(inputs[2]);
         ChainSample {
-            values,
+            values: [r, f, a],
             codes: RawSample {
-                rear: r.code(values[0]),
-                front: f.code(values[1]),
-                accel: a.code(values[2]),
+                rear: rear_code,
+                front: front_code,
+                accel: accel_code,
             },
         }
     }
@@ -393,6 +378,17 @@ impl SensorChain {
 }
 
 impl Measured {
+    /// Empty, with room for `n` samples: a run's vectors then never move.
+    pub fn with_capacity(n: usize) -> Self {
+        Self {
+            p_rear_pa: Vec::with_capacity(n),
+            p_front_pa: Vec::with_capacity(n),
+            accel_mps2: Vec::with_capacity(n),
+            codes: Vec::with_capacity(n),
+            clipped: [0; 3],
+        }
+    }
+
     pub fn push(&mut self, m: ChainSample) {
         self.p_rear_pa.push(m.values[0]);
         self.p_front_pa.push(m.values[1]);
@@ -415,7 +411,7 @@ pub fn measure(
     for e in impacts {
         chain.impact(e.t_s);
     }
-    let mut m = Measured::default();
+    let mut m = Measured::with_capacity(truth.len());
     for i in 0..truth.len() {
         m.push(chain.measure(&truth.sample(i)));
     }
@@ -472,14 +468,54 @@ mod tests {
         }
     }
 
+    /// The chain hands the estimator the converter's codes directly; the
+    /// board reads them through the channel's calibration (`f32`), which
+    /// must give every code back, at every resolution and for ranges that
+    /// do not start at zero.
     #[test]
-    fn normal_deviates_have_unit_variance() {
-        let mut r = Rng::new(7);
-        let n = 200_000;
-        let xs: Vec<f64> = (0..n).map(|_| r.normal()).collect();
-        let mean = xs.iter().sum::<f64>() / n as f64;
-        let var = xs.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / n as f64;
-        assert!(mean.abs() < 0.01 && (var - 1.0).abs() < 0.02, "{mean} {var}");
+    fn calibration_reads_every_code_as_itself() {
+        for bits in 8..=16 {
+            for (min, max) in [(-1e5, 10e5), (-2000.0, 2000.0), (0.0, 1e6), (-12_345.678, 987_654.321)] {
+                let ch = SensorChannel {
+                    range_min: min,
+                    range_max: max,
+                    adc_bits: bits,
+                    ..SensorModel::default().rear
+                };
+                let cal = ch.calibration();
+                for code in 0..=ch.full_scale_code() {
+                    assert_eq!(u32::from(cal.code(ch.value(code))), code, "{bits} bits, {min}..{max}");
+                }
+            }
+        }
+    }
+
+    /// One pass of the chain quantises as the converter's `code` does (half
+    /// up, clipped at both ends, NaN to 0).
+    #[test]
+    fn the_chain_quantises_as_the_converter_does() {
+        let ch = SensorChannel {
+            noise_std: 0.0,
+            bandwidth_hz: 0.0,
+            ..SensorModel::default().rear
+        };
+        let lsb = ch.lsb();
+        for x in [
+            -2e5,
+            -1e5,
+            -1e5 + 0.49 * lsb,
+            0.0,
+            3.21e5,
+            3.21e5 + 0.51 * lsb,
+            1e6 - 0.2 * lsb,
+            2e6,
+            f64::NAN,
+        ] {
+            let mut st = ChannelState::new(&ch, 1e-5, 1);
+            let (value, code) = st.measure(x);
+            assert_eq!(u32::from(code), ch.code(x), "{x}");
+            assert_eq!(value, ch.value(ch.code(x)), "{x}");
+        }
     }
 }
 

@@ -151,7 +151,7 @@ fn run_measured<O: MeasuredSink>(
 pub fn simulate(config: &SimConfig) -> Result<Simulation, SolverError> {
     let out = InMemory {
         truth: TruthTrace::with_capacity_for(config),
-        measured: Measured::default(),
+        measured: Measured::with_capacity(crate::run::output_len(config)),
     };
     let (summary, out, clipped) = run_measured(config, out).map_err(|e| match e {
         RunError::Solver(e) => e,

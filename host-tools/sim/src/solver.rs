@@ -82,6 +82,19 @@ impl<const N: usize> Dense<N> {
         r[0][i] + s * (r[1][i] + s1 * (r[2][i] + s * (r[3][i] + s1 * r[4][i])))
     }
 
+    /// The components `which` at time `t` into `out` (the others left as
+    /// they are): [`Dense::at`]'s arithmetic, with the step fraction
+    /// computed once for all of them.
+    #[inline]
+    pub fn at_into(&self, t: f64, which: &[usize], out: &mut [f64; N]) {
+        let s = (t - self.t0) / self.h;
+        let s1 = 1.0 - s;
+        let r = &self.r;
+        for &i in which {
+            out[i] = r[0][i] + s * (r[1][i] + s1 * (r[2][i] + s * (r[3][i] + s1 * r[4][i])));
+        }
+    }
+
     pub fn all(&self, t: f64, out: &mut [f64; N]) {
         for (i, o) in out.iter_mut().enumerate() {
             *o = self.at(t, i);
