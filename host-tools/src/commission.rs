@@ -139,6 +139,10 @@ struct Demo {
     feeding: Option<std::thread::JoinHandle<()>>,
     /// The next stretch's first block number (the numbering runs on).
     next_block: u32,
+    /// Fed at the hammer's pace (the native app, which takes samples
+    /// faster than they are made and would drop them), else as fast as the
+    /// board takes them (QEMU's emulated UART is slower than the hammer).
+    paced: bool,
 }
 
 pub fn run(args: &CommissionArgs) -> Result<()> {
@@ -235,7 +239,7 @@ pub fn run(args: &CommissionArgs) -> Result<()> {
 /// Seconds of simulated hammer a demo board is fed per capture, after the
 /// capture is armed: an impact to start on, a full cycle (under 50 ms at
 /// 4–7 bar) and its tail, with margin.
-const DEMO_PER_CAPTURE_S: f64 = 0.15;
+const DEMO_PER_CAPTURE_S: f64 = 0.2;
 const DEMO_SETTLE_S: f64 = 0.5;
 
 /// Opens the board: a device, or a demo board whose simulated hammer runs
@@ -261,6 +265,7 @@ fn open(args: &CommissionArgs, bar: f64) -> Result<Session> {
             codes: codes.into_iter(),
             feeding: None,
             next_block: 0,
+            paced: !crate::demo::emulated_board_available(args.native),
         };
         // The hammer settles before the first capture (fed while the link
         // is read: a board whose reports nobody reads stops taking samples).
@@ -293,11 +298,12 @@ impl Demo {
         self.next_block = first.wrapping_add(blocks as u32);
         let writer = self.writer.clone();
         let before = self.feeding.take();
+        let paced = self.paced;
         self.feeding = Some(std::thread::spawn(move || {
             if let Some(b) = before {
                 let _ = b.join();
             }
-            crate::demo::feed_from(first, stretch, writer, false, rate)
+            crate::demo::feed_from(first, stretch, writer, paced, rate)
         }));
     }
 }
