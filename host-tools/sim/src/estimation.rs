@@ -233,11 +233,11 @@ pub fn open_for_estimation(
         trace.len() as f64 * trace.dt_s,
     )?;
     let mut scans: [RailScan; 3] = Default::default();
-    for (scan, x) in scans
-        .iter_mut()
-        .zip([&trace.p_rear_pa, &trace.p_front_pa, &trace.accel_mps2])
-    {
-        x.iter().for_each(|&v| scan.push(v));
+    for i in 0..trace.len() {
+        scan_row(
+            &mut scans,
+            [trace.p_rear_pa[i], trace.p_front_pa[i], trace.accel_mps2[i]],
+        );
     }
     let mut config = config;
     at_recorder_rails(&mut config, &scans);
@@ -298,12 +298,17 @@ fn scan_rails(path: &Path, file: &SimConfig) -> Result<[RailScan; 3], OpenError>
     let mut scans: [RailScan; 3] = Default::default();
     while let Some(item) = u.next_item()? {
         if let Item::Sample(r) = item {
-            scans[0].push(r.p_rear_pa);
-            scans[1].push(r.p_front_pa);
-            scans[2].push(r.accel_mps2);
+            scan_row(&mut scans, [r.p_rear_pa, r.p_front_pa, r.accel_mps2]);
         }
     }
     Ok(scans)
+}
+
+/// One sample-set into the three channels' scans (rear, front, accel).
+fn scan_row(scans: &mut [RailScan; 3], row: [f64; 3]) {
+    for (scan, v) in scans.iter_mut().zip(row) {
+        scan.push(v);
+    }
 }
 
 /// A value a recorder clipped a channel to is a rail, as the board's ADC
