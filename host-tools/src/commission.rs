@@ -9,21 +9,17 @@
 //! recalibration makes the record stale) and the supply pressure.
 
 use std::io::IsTerminal;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use serde::{Deserialize, Serialize};
 
 use crate::client::Client;
+pub use crate::reference_record::{is_record, PointRecord, Record, RECORD_FILE};
+use crate::reference_record::{RECORD_FORMAT, RECORD_VERSION};
 use hammer_trace::trace::{write_csv, write_sidecar};
-
-/// The record's file in a commissioning folder.
-pub const RECORD_FILE: &str = "commission.json";
-const RECORD_FORMAT: &str = "hammer-commission";
-const RECORD_VERSION: u32 = 1;
 
 #[derive(Args, Debug)]
 pub struct CommissionArgs {
@@ -55,63 +51,6 @@ pub struct CommissionArgs {
     /// and calibration gets the points added or replaced).
     #[arg(long)]
     pub out: PathBuf,
-}
-
-/// What `commission.json` holds.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Record {
-    pub format: String,
-    pub version: u32,
-    /// `major.minor.patch` as the board reports it.
-    pub firmware_version: String,
-    pub board: String,
-    /// CRC-32 of the channel calibrations the captures were read with.
-    pub calibration_hash: u32,
-    pub points: Vec<PointRecord>,
-}
-
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct PointRecord {
-    pub supply_bar: f64,
-    /// Trace files, relative to the folder.
-    pub traces: Vec<String>,
-}
-
-impl Record {
-    /// The record of `dir`, if it is a commissioning folder.
-    pub fn load(dir: &Path) -> Result<Record> {
-        let path = dir.join(RECORD_FILE);
-        let text = std::fs::read_to_string(&path).with_context(|| {
-            format!(
-                "{}: not a commissioning folder (no readable {RECORD_FILE})",
-                dir.display()
-            )
-        })?;
-        let r: Record =
-            serde_json::from_str(&text).with_context(|| format!("{}: not a commissioning record", path.display()))?;
-        if r.format != RECORD_FORMAT || r.version > RECORD_VERSION {
-            bail!(
-                "{}: format {} version {}, this tool reads {RECORD_FORMAT} up to version {RECORD_VERSION}",
-                path.display(),
-                r.format,
-                r.version
-            );
-        }
-        Ok(r)
-    }
-
-    /// Every trace of the record with its supply pressure.
-    pub fn traces(&self, dir: &Path) -> Vec<(PathBuf, f64)> {
-        self.points
-            .iter()
-            .flat_map(|p| p.traces.iter().map(|t| (dir.join(t), p.supply_bar)))
-            .collect()
-    }
-}
-
-/// Whether `path` is a commissioning folder.
-pub fn is_record(path: &Path) -> bool {
-    path.is_dir() && path.join(RECORD_FILE).is_file()
 }
 
 /// The folder name of an operating point.

@@ -62,6 +62,8 @@ pub struct DemoArgs {
     pub devices: u8,
     #[command(flatten)]
     pub export: crate::monitor::export::ExportArgs,
+    #[command(flatten)]
+    pub drift: crate::drift::DriftArgs,
 }
 
 /// Where the firmware runs.
@@ -98,6 +100,7 @@ impl DemoArgs {
             real_time: false,
             devices: 1,
             export: Default::default(),
+            drift: Default::default(),
         }
     }
 
@@ -428,14 +431,17 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         read,
         write: writer.clone(),
     };
+    // The drift's captures need the native app fed at the hammer's pace:
+    // fed faster, it drops samples and a capture never completes.
+    let drift = args.drift.reference.is_some();
     let feeder = feeder.map(|codes| {
-        let (writer, paced) = (writer.clone(), !headless);
+        let (writer, paced) = (writer.clone(), !headless || drift);
         std::thread::spawn(move || feed(codes, writer, paced, 1e5))
     });
-    let result = if headless {
+    let result = if headless && !drift {
         headless_loop(port, args, full_rate.as_ref().map(|f| &*f.stimulus))
     } else {
-        dashboard(port, &board, &args.export, &args.member_name(0))
+        dashboard(port, &board, args, headless)
     };
     drop(board); // stops QEMU
     let produced = full_rate.as_mut().map_or(Ok(()), FullRate::stop);
@@ -483,6 +489,7 @@ fn run_fleet(args: &DemoArgs, headless: bool) -> Result<()> {
         headless,
         exit_after_reports: headless.then_some(args.cycles as u64),
         export: args.export.clone(),
+        drift: args.drift.clone(),
         ..Default::default()
     };
     let result = crate::monitor::run_fleet(devices, &margs);
@@ -595,10 +602,19 @@ impl crate::monitor::Connector for DemoConnector {
     }
 }
 
-fn dashboard(port: SharedPort, board: &Board, export: &crate::monitor::export::ExportArgs, name: &str) -> Result<()> {
+/// The monitor on the demo board: its dashboard, or headless (with
+/// `--reference`, whose drift the monitor reads) until `--cycles` reports.
+fn dashboard(port: SharedPort, board: &Board, demo: &DemoArgs, headless: bool) -> Result<()> {
     let args = crate::monitor::MonitorArgs {
-        device: Some(name.into()),
-        export: export.clone(),
+        device: Some(demo.member_name(0)),
+        export: demo.export.clone(),
+        headless,
+        exit_after_reports: headless.then_some(demo.cycles as u64),
+        drift: crate::drift::DriftArgs {
+            // The demo's board holds no supply pressure; its hammer's is known.
+            point_bar: demo.drift.point_bar.or(Some(demo.supply_bar)),
+            ..demo.drift.clone()
+        },
         ..Default::default()
     };
     let describe = match board {

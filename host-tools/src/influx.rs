@@ -85,6 +85,38 @@ pub fn line(device: &str, site: Option<&str>, supply_bar: Option<f64>, r: &Cycle
     s
 }
 
+/// Measurement of the drift since commissioning (`hammer monitor --reference`).
+pub const DRIFT_MEASUREMENT: &str = "hammer_drift";
+
+/// One drift reading as a line: `hammer_drift,device=<d>[,site=<s>],supply_bar=<p>`
+/// then its numeric fields (non-finite ones left out), `alarm` (boolean)
+/// and `alarms` (string, the alarming characteristics joined by `|`, `-`
+/// when none), stamped `t_ns` (the host's time of the reading).
+pub fn drift_line(
+    device: &str,
+    site: Option<&str>,
+    supply_bar: f64,
+    fields: &[(String, f64)],
+    alarms: &[&str],
+    t_ns: i64,
+) -> String {
+    let mut s = format!("{DRIFT_MEASUREMENT},device={}", tag(device));
+    if let Some(site) = site {
+        s += &format!(",site={}", tag(site));
+    }
+    s += &format!(",supply_bar={supply_bar} ");
+    for (name, v) in fields.iter().filter(|(_, v)| v.is_finite()) {
+        s += &format!("{name}={v},");
+    }
+    let list = if alarms.is_empty() {
+        "-".to_string()
+    } else {
+        alarms.join("|")
+    };
+    s += &format!("alarm={},alarms=\"{list}\" {t_ns}", !alarms.is_empty());
+    s
+}
+
 /// Device time → host time, anchored per connection.
 #[derive(Debug, Default, Clone, Copy)]
 pub struct Anchor {

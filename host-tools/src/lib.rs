@@ -18,6 +18,8 @@
 //!   performance sheet over supply pressure, the effect figures;
 //! - [`chambers`]: the chamber characteristics against their truth on both model families;
 //! - [`diagnose`]: the sim-to-real gap diagnosis and its benchmarks;
+//! - [`reference_record`], [`drift`]: the hammer's commissioning record, and
+//!   the chamber characteristics of live captures read against it;
 //! - [`flash`], [`capture`], [`calibrate`], [`selftest`], [`demo`], [`soak`], [`monitor`]: live: raw captures, calibration, the
 //!   no-hardware demo, the full-rate soak, the dashboard, logs and replay;
 //! - [`commission`]: the hammer's reference record, from the board's raw captures;
@@ -37,6 +39,7 @@ pub mod client;
 pub mod commission;
 pub mod demo;
 pub mod diagnose;
+pub mod drift;
 pub mod emulator;
 pub mod estimate;
 pub mod flash;
@@ -49,6 +52,7 @@ pub mod parquet_files;
 pub mod plot;
 pub mod private_files;
 pub mod records;
+pub mod reference_record;
 pub mod report;
 pub mod selftest;
 pub mod soak;

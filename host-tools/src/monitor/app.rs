@@ -83,6 +83,8 @@ pub struct View {
     pub alarm: Option<Banner>,
     pub events: VecDeque<EventLine>,
     pub captures: u64,
+    /// The latest drift since commissioning (`--reference`), when read.
+    pub drift: Option<(u64, crate::drift::Drift)>,
 }
 
 pub struct App {
@@ -231,6 +233,26 @@ impl View {
             }
             Event::VersionMismatch { device } => self.mismatch = Some(*device),
             Event::Msg(m) => self.message(t, m),
+            Event::Drift(d) => {
+                if d.alarm() {
+                    let named: Vec<&str> = d
+                        .characteristics
+                        .iter()
+                        .filter(|c| c.alarm)
+                        .map(|c| c.name.as_str())
+                        .collect();
+                    self.raise(
+                        t,
+                        format!(
+                            "CHANGE SINCE COMMISSIONING: {} beyond its uncertainty",
+                            named.join(", ")
+                        ),
+                    );
+                } else if self.alarm.as_ref().is_some_and(|b| b.text.starts_with("CHANGE")) {
+                    self.alarm = None;
+                }
+                self.drift = Some((t, (**d).clone()));
+            }
             _ => {}
         }
     }

@@ -78,6 +78,9 @@ pub enum Event {
         got: u32,
     },
     Stats(LinkStats),
+    /// A window of raw captures read against the commissioning record
+    /// (`--reference`: [`crate::drift`]).
+    Drift(Box<crate::drift::Drift>),
     /// Anything else worth a line: handshake retries, logging trouble, replay notes.
     Note(String),
     /// A replay reached the end of its file.
@@ -211,6 +214,7 @@ pub fn describe(ev: &Event) -> Option<(Severity, String)> {
                 config_hash(c)
             ),
         ),
+        Event::Drift(d) => (if d.alarm() { Error } else { Info }, d.line()),
         Event::Note(s) => (Info, s.clone()),
         Event::End => (Info, "end of recording".into()),
         Event::Msg(_) | Event::Stats(_) => return None,

@@ -246,6 +246,16 @@ impl DeviceExport {
             Event::Msg(DeviceMsg::Report(r)) => (mqtt::Kind::Cycle, crate::records::json_record(r)),
             Event::Msg(DeviceMsg::Status(s)) => (mqtt::Kind::Status, serde_json::to_value(s).unwrap_or_default()),
             Event::Msg(DeviceMsg::Alarm(a)) => (mqtt::Kind::Alarm, serde_json::to_value(a).unwrap_or_default()),
+            Event::Drift(d) => {
+                let mut body = serde_json::Map::new();
+                for (k, v) in d.fields() {
+                    body.insert(k, serde_json::Value::from(v));
+                }
+                body.insert("supply_bar".into(), d.supply_bar.into());
+                body.insert("alarm".into(), d.alarm().into());
+                body.insert("alarms".into(), d.alarms().into());
+                (mqtt::Kind::Drift, serde_json::Value::Object(body))
+            }
             Event::Stats(_) | Event::Msg(_) => return,
             e => match describe(e) {
                 Some((severity, text)) => (
@@ -295,6 +305,21 @@ impl DeviceExport {
                     None => Ok(()),
                 };
                 p.and(i)
+            }
+            Event::Drift(d) => {
+                let mut x = self.exports.lock().unwrap_or_else(|e| e.into_inner());
+                let site = x.site.clone();
+                match x.influx.as_mut() {
+                    Some(w) => w.push(influx::drift_line(
+                        &self.device,
+                        site.as_deref(),
+                        d.supply_bar,
+                        &d.fields(),
+                        &d.alarms(),
+                        (ev.t_us as i64).saturating_mul(1_000),
+                    )),
+                    None => Ok(()),
+                }
             }
             _ => Ok(()),
         };

@@ -45,6 +45,7 @@ pub fn run(devices: Vec<(String, Box<dyn Connector>)>, args: &MonitorArgs, headl
     let max_bytes = (args.log_max_mb * 1e6) as u64;
     let exports = Exports::open(&args.export)?;
     let stop = Arc::new(AtomicBool::new(false));
+    let reference = super::commissioned(&args.drift)?;
     let mut members = vec![];
     let mut readers = vec![];
     for (name, connector) in devices {
@@ -58,7 +59,8 @@ pub fn run(devices: Vec<(String, Box<dyn Connector>)>, args: &MonitorArgs, headl
         let export = exports.clone().map(|x| DeviceExport::new(&name, x));
         let (tx, rx) = mpsc::sync_channel(EVENT_QUEUE);
         let title = connector.describe();
-        readers.push(reader::spawn(connector, logger, export, tx, stop.clone())?);
+        let watch = reference.clone().map(|c| super::drift::Watch::new(c, &args.drift));
+        readers.push(reader::spawn(connector, logger, export, watch, tx, stop.clone())?);
         members.push(Member {
             name,
             app: App::new(title, true, args.history_s),

@@ -12,6 +12,8 @@
 
 pub mod app;
 pub mod connect;
+pub mod drift;
+pub mod drift_panel;
 pub mod event;
 pub mod export;
 pub mod fleet;
@@ -81,6 +83,8 @@ pub struct MonitorArgs {
     pub device: Option<String>,
     #[command(flatten)]
     pub export: export::ExportArgs,
+    #[command(flatten)]
+    pub drift: crate::drift::DriftArgs,
 }
 
 impl Default for MonitorArgs {
@@ -94,6 +98,7 @@ impl Default for MonitorArgs {
             exit_after_reports: None,
             device: None,
             export: export::ExportArgs::default(),
+            drift: crate::drift::DriftArgs::default(),
         }
     }
 }
@@ -217,9 +222,10 @@ pub fn run_with(connector: Box<dyn Connector>, args: &MonitorArgs) -> Result<()>
         .clone()
         .unwrap_or_else(|| device_name(&connector.describe()));
     let device_export = exports.clone().map(|x| export::DeviceExport::new(&device, x));
+    let watch = commissioned(&args.drift)?.map(|c| drift::Watch::new(c, &args.drift));
     let (tx, rx) = mpsc::sync_channel(EVENT_QUEUE);
     let stop = Arc::new(AtomicBool::new(false));
-    let reader = reader::spawn(connector, logger, device_export, tx, stop.clone())?;
+    let reader = reader::spawn(connector, logger, device_export, watch, tx, stop.clone())?;
     let mut app = app::App::new(title, true, args.history_s);
     let opts = UiOptions {
         headless,
@@ -235,6 +241,21 @@ pub fn run_with(connector: Box<dyn Connector>, args: &MonitorArgs) -> Result<()>
     }
     let closed = close_exports(exports);
     result.and(closed)
+}
+
+/// The commissioning record `--reference` names, read once for every
+/// device watched (each matches its own supply pressure to its points).
+pub(crate) fn commissioned(args: &crate::drift::DriftArgs) -> Result<Option<Arc<crate::drift::Commissioned>>> {
+    let Some(dir) = &args.reference else {
+        return Ok(None);
+    };
+    let config: hammer_sim::SimConfig = match &args.hammer_config {
+        Some(p) => hammer_trace::config::load_toml(p)?,
+        None => hammer_sim::SimConfig::default(),
+    };
+    config.validate()?;
+    let c = crate::drift::Commissioned::load(dir, &config).with_context(|| format!("--reference {}", dir.display()))?;
+    Ok(Some(Arc::new(c)))
 }
 
 /// Writes what the exports still hold and says what they did; an error

@@ -13,6 +13,7 @@ use hammer_wire::{DecodeError, DeviceMsg, HostMsg};
 
 use crate::client::{hello, hello_reply, write_frame, Inbound, Incoming, SeqCheck};
 
+use super::drift::Watch;
 use super::event::{now_us, Event, LinkStats, Stamped};
 use super::export::DeviceExport;
 use super::log::{Logger, Marker};
@@ -237,6 +238,7 @@ pub fn spawn(
     connector: Box<dyn Connector>,
     logger: Option<Logger>,
     export: Option<DeviceExport>,
+    drift: Option<Watch>,
     tx: SyncSender<Stamped>,
     stop: Arc<AtomicBool>,
 ) -> io::Result<JoinHandle<()>> {
@@ -247,6 +249,7 @@ pub fn spawn(
         stop,
         ingest: Ingest::new(),
         ui_dropped: 0,
+        drift,
     };
     std::thread::Builder::new()
         .name("monitor-reader".into())
@@ -266,6 +269,8 @@ struct Reader {
     stop: Arc<AtomicBool>,
     ingest: Ingest,
     ui_dropped: u64,
+    /// The drift since commissioning (`--reference`): its captures.
+    drift: Option<Watch>,
 }
 
 /// The logs and exports first (they must not miss anything), then the
@@ -380,6 +385,26 @@ impl Reader {
         }
     }
 
+    /// Asks the board for a raw cycle when the drift is due one; returns
+    /// why the link ended if the request could not be written.
+    fn ask_capture(&mut self, port: &mut Box<dyn Port>) -> Option<String> {
+        let w = self.drift.as_mut()?;
+        let now = Instant::now();
+        let (due, note) = w.due(now);
+        let mut ended = None;
+        if due {
+            match write_frame(port, &HostMsg::StartCapture { cycles: 1 }) {
+                Ok(()) => w.asked(now),
+                Err(e) if matches!(e.kind(), io::ErrorKind::TimedOut | io::ErrorKind::WouldBlock) => {}
+                Err(e) => ended = Some(format!("cannot send StartCapture: {e}")),
+            }
+        }
+        if let Some(n) = note {
+            self.emit(Stamped::now(n));
+        }
+        ended
+    }
+
     /// Reads until the port goes away; returns why it ended.
     fn session(&mut self, mut port: Box<dyn Port>) -> String {
         let mut buf = vec![0u8; 4096];
@@ -387,6 +412,9 @@ impl Reader {
         let mut hellos = 0u32;
         let mut config_asked = false;
         let mut reported_drops = 0u64;
+        if let Some(w) = self.drift.as_mut() {
+            w.reconnected();
+        }
         loop {
             if self.stopped() {
                 return "monitor stopped".into();
@@ -418,6 +446,11 @@ impl Reader {
                         Err(e) => return format!("cannot send GetConfig: {e}"),
                     }
                 }
+                Handshake::Done => {
+                    if let Some(reason) = self.ask_capture(&mut port) {
+                        return reason;
+                    }
+                }
                 _ => {}
             }
             match port.read(&mut buf) {
@@ -430,7 +463,16 @@ impl Reader {
                         }
                     }
                     let (out, tx, dropped) = (&mut self.out, &self.tx, &mut self.ui_dropped);
-                    self.ingest.feed(t, &buf[..n], &mut |ev| deliver(out, tx, dropped, ev));
+                    let watch = &mut self.drift;
+                    self.ingest.feed(t, &buf[..n], &mut |ev| {
+                        // What the drift reads of an event follows it.
+                        let follow = watch.as_mut().map(|w| w.see(&ev)).unwrap_or_default();
+                        let t_us = ev.t_us;
+                        deliver(out, tx, dropped, ev);
+                        for event in follow {
+                            deliver(out, tx, dropped, Stamped { t_us, event });
+                        }
+                    });
                 }
                 Err(e) if matches!(e.kind(), io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut) => {}
                 Err(e) if e.kind() == io::ErrorKind::Interrupted => {}

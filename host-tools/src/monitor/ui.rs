@@ -123,7 +123,15 @@ pub fn ui_in(f: &mut Frame, area: Rect, app: &App) {
         Layout::vertical([Constraint::Length(14), Constraint::Length(11), Constraint::Min(4)]).areas(left);
     f.render_widget(cycle_panel(app, v), cycle);
     f.render_widget(link_panel(app, v), link);
-    f.render_widget(device_panel(v), device);
+    match &v.drift {
+        Some((t, d)) => {
+            let rows = d.characteristics.len() as u16 + 3;
+            let [device, drift] = Layout::vertical([Constraint::Min(4), Constraint::Length(rows)]).areas(device);
+            f.render_widget(device_panel(v), device);
+            f.render_widget(super::drift_panel::drift_panel(app.now_us, *t, d), drift);
+        }
+        None => f.render_widget(device_panel(v), device),
+    }
     charts(f, app, v, right);
     f.render_widget(events_panel(v, events.height.saturating_sub(2) as usize), events);
     f.render_widget(footer_line(app), footer);
@@ -747,6 +755,31 @@ mod tests {
         for (w, h) in [(80, 24), (40, 10), (10, 5), (1, 1)] {
             screen(&app, w, h);
         }
+        // A drift reading gets its panel, and an alarm its banner.
+        app.toggle_pause();
+        let mut w = crate::drift::Window::new(
+            crate::drift::Baseline {
+                supply_bar: 4.0,
+                mean: [1e-3, 2e-3, 1.3, 1.3, 5e-6, 5e-6],
+                sd: [1e-4, 1e-4, 0.02, 0.02, 2e-7, 2e-7],
+                cycles: [30; 6],
+            },
+            1,
+            2,
+        );
+        let moved = [1.5e-3, 2e-3, 1.3, 1.3, 5e-6, 5e-6];
+        for _ in 0..2 {
+            let d = w.push(moved).unwrap();
+            app.on_event(&Stamped {
+                t_us: t,
+                event: Event::Drift(Box::new(d)),
+            });
+        }
+        app.show_help = false;
+        let s = screen(&app, 160, 50);
+        assert!(s.contains("Since commissioning (4 bar)"), "{s}");
+        assert!(s.contains("front_feed_s") && s.contains("+0.500 ± 0.203 ms"), "{s}");
+        assert!(s.contains("CHANGE SINCE COMMISSIONING: front_feed_s"), "{s}");
         // A full history draws in well under a frame's time.
         let mut app = App::new("x".into(), false, 1e9);
         for seq in 0..crate::monitor::app::HISTORY_CAP as u64 {

@@ -76,6 +76,8 @@ pub enum Kind {
     Status,
     Alarm,
     Link,
+    /// The drift since commissioning (`hammer monitor --reference`).
+    Drift,
 }
 
 impl Kind {
@@ -86,6 +88,7 @@ impl Kind {
             Kind::Status => "status",
             Kind::Alarm => "alarm",
             Kind::Link => "link",
+            Kind::Drift => "drift",
         }
     }
 
@@ -97,7 +100,7 @@ impl Kind {
     }
 
     fn retain(self) -> bool {
-        matches!(self, Kind::State | Kind::Status | Kind::Alarm)
+        matches!(self, Kind::State | Kind::Status | Kind::Alarm | Kind::Drift)
     }
 }
 

@@ -1,0 +1,500 @@
+//! Drift since commissioning: each chamber characteristic of the cycles a
+//! board is capturing now, against the same characteristic of the hammer's
+//! own reference record (`hammer commission`), with the uncertainty of the
+//! difference and an alarm when it stays beyond it.
+//!
+//! The characteristics are the diagnosis' model-free ones (feed onsets,
+//! closed-phase exponents, feed areas: `hammer_estimator::chambers`), read
+//! by the same extractor from the record's traces and from the live
+//! captures, so whatever the extractor reads slightly wrong it reads wrong
+//! on both sides, and the model's form error never enters. The board cannot
+//! compute them (its flash is full and the checkpoint sums do not keep the
+//! samples around an impact: docs/estimator.md), so the host reads them
+//! from the board's raw captures.
+//!
+//! A window of `k` captured cycles gives one reading per characteristic:
+//! drift = window mean − record mean, with the expanded uncertainty (k = 2)
+//! of that difference from the record's cycle-to-cycle spread,
+//! U = 2·s·√(1/m + 1/n) (m cycles in the window, n in the record): under no
+//! change the window's cycles scatter as the record's did. One window beyond
+//! its U happens by chance (about 1 in 20 per characteristic), so the alarm
+//! needs `--drift-confirm` windows in a row beyond it (3 by default: about
+//! 1 in 10 000 per characteristic and window by chance), the way a
+//! condition monitor confirms a change before it calls someone.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use hammer_sim::SimConfig;
+use hammer_trace::trace::Trace;
+use serde::Serialize;
+
+use crate::diagnose::engine::extractor_for;
+use crate::diagnose::features::{
+    feature_name, steady_from, summarize, CycleFeatures, Extractor, Signals, CHAMBER_FEATURES,
+};
+use crate::reference_record::Record;
+
+/// Characteristics read, in [`CHAMBER_FEATURES`] order.
+pub const N_CHARACTERISTICS: usize = CHAMBER_FEATURES.len();
+
+/// A record's operating point within this of the board's configured supply
+/// pressure is the one a capture is read against.
+pub const POINT_MATCH_BAR: f64 = 0.05;
+
+/// The monitor's options for the drift since commissioning.
+#[derive(clap::Args, Debug, Clone)]
+pub struct DriftArgs {
+    /// The hammer's commissioning folder (`hammer commission --out DIR`):
+    /// the monitor then takes raw captures from the board, reads each
+    /// cycle's chamber characteristics and shows their drift from the
+    /// record at the board's supply pressure, with an alarm when one stays
+    /// beyond its uncertainty (docs/fleet.md, "Drift since commissioning").
+    #[arg(long, value_name = "DIR")]
+    pub reference: Option<PathBuf>,
+    /// Captured cycles per drift reading.
+    #[arg(long, value_name = "N", default_value_t = 10, requires = "reference",
+          value_parser = clap::value_parser!(u32).range(2..=200))]
+    pub drift_cycles: u32,
+    /// Windows in a row beyond the uncertainty that raise the alarm.
+    #[arg(long, value_name = "N", default_value_t = 3, requires = "reference",
+          value_parser = clap::value_parser!(u32).range(1..=100))]
+    pub drift_confirm: u32,
+    /// Read the drift against a record made with another calibration of
+    /// the board (the drift then includes the recalibration's change).
+    #[arg(long, requires = "reference")]
+    pub allow_stale_reference: bool,
+    /// The hammer's configuration (`hammer simulate --config`'s TOML): its
+    /// chambers' geometry and transducers; default the paper's hammer.
+    #[arg(long, value_name = "FILE", requires = "reference")]
+    pub hammer_config: Option<PathBuf>,
+    /// The record's operating point (gauge supply, bar) to read the
+    /// captures against when the board's configuration holds no supply
+    /// pressure (a record of one point needs none).
+    #[arg(long, value_name = "BAR", requires = "reference")]
+    pub point_bar: Option<f64>,
+}
+
+impl Default for DriftArgs {
+    fn default() -> Self {
+        Self {
+            reference: None,
+            drift_cycles: 10,
+            drift_confirm: 3,
+            allow_stale_reference: false,
+            hammer_config: None,
+            point_bar: None,
+        }
+    }
+}
+
+/// One operating point of the record: each characteristic's mean, its
+/// cycle-to-cycle standard deviation and how many cycles gave it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Baseline {
+    pub supply_bar: f64,
+    pub mean: [f64; N_CHARACTERISTICS],
+    pub sd: [f64; N_CHARACTERISTICS],
+    pub cycles: [usize; N_CHARACTERISTICS],
+}
+
+/// A commissioning record read for drift: its baselines and the extractor
+/// that read them (and reads the captures).
+#[derive(Debug, Clone)]
+pub struct Commissioned {
+    pub dir: PathBuf,
+    pub record: Record,
+    pub baselines: Vec<Baseline>,
+    extractor: Extractor,
+}
+
+/// The chamber characteristics of one cycle, NaN where not read.
+pub type Reading = [f64; N_CHARACTERISTICS];
+
+fn reading(c: &CycleFeatures) -> Reading {
+    CHAMBER_FEATURES.map(|j| c.values[j])
+}
+
+impl Commissioned {
+    /// Reads the record in `dir` and every trace in it, with the hammer
+    /// `config` describes (its chambers, its transducers' ranges).
+    pub fn load(dir: &Path, config: &SimConfig) -> Result<Self> {
+        let record = Record::load(dir)?;
+        let extractor = extractor_for(config);
+        let mut baselines = Vec::new();
+        for point in &record.points {
+            let mut cycles = Vec::new();
+            for t in &point.traces {
+                let path = dir.join(t);
+                let (trace, _, _) = hammer_trace::import::read_trace(&path, None)
+                    .with_context(|| format!("reading {}", path.display()))?;
+                cycles.extend(cycles_of(&extractor, &trace, point.supply_bar));
+            }
+            let summary = summarize(&cycles);
+            let count = |j: usize| cycles.iter().filter(|c| c.values[j].is_finite()).count();
+            let b = Baseline {
+                supply_bar: point.supply_bar,
+                mean: CHAMBER_FEATURES.map(|j| summary.mean[j]),
+                sd: CHAMBER_FEATURES.map(|j| summary.sd[j]),
+                cycles: CHAMBER_FEATURES.map(count),
+            };
+            if b.cycles.iter().all(|&n| n < 2) {
+                bail!(
+                    "{}: the record's cycles at {} bar give no chamber characteristic twice: nothing to read a drift against",
+                    dir.display(),
+                    point.supply_bar
+                );
+            }
+            baselines.push(b);
+        }
+        if baselines.is_empty() {
+            bail!("{}: the record holds no operating point", dir.display());
+        }
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            record,
+            baselines,
+            extractor,
+        })
+    }
+
+    /// The point a board is read at: its configured supply pressure, else
+    /// `point_bar`, else the record's only point.
+    pub fn point_for(&self, configured_bar: f64, point_bar: Option<f64>) -> Result<&Baseline, String> {
+        if configured_bar.is_finite() {
+            return self.point(configured_bar);
+        }
+        match (point_bar, self.baselines.as_slice()) {
+            (Some(bar), _) => self.point(bar),
+            (None, [only]) => Ok(only),
+            (None, _) => Err(format!(
+                "drift: the board's configuration holds no supply pressure and {} has several operating points: give --point-bar BAR",
+                self.dir.display()
+            )),
+        }
+    }
+
+    /// The record's point at `supply_bar`, or why there is none.
+    pub fn point(&self, supply_bar: f64) -> Result<&Baseline, String> {
+        self.baselines
+            .iter()
+            .find(|b| (b.supply_bar - supply_bar).abs() <= POINT_MATCH_BAR)
+            .ok_or_else(|| {
+                let have: Vec<String> = self.baselines.iter().map(|b| format!("{} bar", b.supply_bar)).collect();
+                format!(
+                    "{} has no operating point at {supply_bar:.2} bar (it has {}): commission this point to read its drift",
+                    self.dir.display(),
+                    have.join(", ")
+                )
+            })
+    }
+
+    /// Whether a board with calibration `hash` may be read against the
+    /// record: an error when it was recalibrated since and `allow_stale`
+    /// is not given, else `Some(warning)` for a stale record.
+    pub fn check_calibration(&self, hash: u32, allow_stale: bool) -> Result<Option<String>, String> {
+        if hash == self.record.calibration_hash {
+            return Ok(None);
+        }
+        let what = format!(
+            "{} was commissioned with calibration {:08x}; the board now has {hash:08x}: it was recalibrated since, so the record is stale",
+            self.dir.display(),
+            self.record.calibration_hash
+        );
+        if allow_stale {
+            Ok(Some(format!(
+                "{what}; its drift includes the recalibration's change (--allow-stale-reference)"
+            )))
+        } else {
+            Err(format!(
+                "{what}: no drift is read. Commission again, or pass --allow-stale-reference"
+            ))
+        }
+    }
+
+    /// The characteristics of each whole cycle in `trace` (a capture) at
+    /// `supply_bar`.
+    pub fn readings(&self, trace: &Trace, supply_bar: f64) -> Vec<Reading> {
+        cycles_of(&self.extractor, trace, supply_bar)
+            .iter()
+            .map(reading)
+            .collect()
+    }
+}
+
+/// The steady cycles of a trace, as the diagnosis reads a record's.
+fn cycles_of(extractor: &Extractor, trace: &Trace, supply_bar: f64) -> Vec<CycleFeatures> {
+    let s = Signals {
+        dt_s: trace.dt_s,
+        p_rear_pa: &trace.p_rear_pa,
+        p_front_pa: &trace.p_front_pa,
+        accel_mps2: &trace.accel_mps2,
+        supply_pa: supply_bar * 1e5,
+    };
+    let all = extractor.cycles(&s);
+    let from = steady_from(&all);
+    all[from..].to_vec()
+}
+
+/// One characteristic's drift in one window.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Characteristic {
+    /// The diagnosis' feature name, with its unit (`front_feed_s`, …).
+    pub name: String,
+    /// Window mean; NaN where the window read it in no cycle.
+    pub measured: f64,
+    /// The record's mean at this operating point.
+    pub reference: f64,
+    /// measured − reference.
+    pub drift: f64,
+    /// Expanded uncertainty (k = 2) of the drift.
+    pub uncertainty: f64,
+    /// Cycles of the window that read it.
+    pub cycles: usize,
+    /// |drift| > uncertainty in this window.
+    pub beyond: bool,
+    /// Beyond in this window and the ones before it, as many as confirm.
+    pub alarm: bool,
+}
+
+/// One window's drift readings.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Drift {
+    pub supply_bar: f64,
+    /// Cycles captured in the window.
+    pub cycles: usize,
+    /// Windows read so far (this one included).
+    pub window: u64,
+    pub characteristics: Vec<Characteristic>,
+}
+
+impl Drift {
+    pub fn alarm(&self) -> bool {
+        self.characteristics.iter().any(|c| c.alarm)
+    }
+
+    /// The characteristic named `name`.
+    pub fn get(&self, name: &str) -> Option<&Characteristic> {
+        self.characteristics.iter().find(|c| c.name == name)
+    }
+
+    /// The characteristics whose alarm is on.
+    pub fn alarms(&self) -> Vec<&str> {
+        self.characteristics
+            .iter()
+            .filter(|c| c.alarm)
+            .map(|c| c.name.as_str())
+            .collect()
+    }
+
+    /// The reading as named numbers for the fleet (MQTT, line protocol):
+    /// per characteristic `<name>` (window mean) and, its unit kept last,
+    /// `<stem>_reference<unit>`, `<stem>_drift<unit>`,
+    /// `<stem>_drift_uncertainty<unit>` (`front_feed_s`,
+    /// `front_feed_drift_s`, …); then `cycles` and `window`.
+    pub fn fields(&self) -> Vec<(String, f64)> {
+        let mut out = Vec::new();
+        for c in &self.characteristics {
+            let (stem, unit) = split_unit(&c.name);
+            out.push((c.name.clone(), c.measured));
+            out.push((format!("{stem}_reference{unit}"), c.reference));
+            out.push((format!("{stem}_drift{unit}"), c.drift));
+            out.push((format!("{stem}_drift_uncertainty{unit}"), c.uncertainty));
+        }
+        out.push(("cycles".into(), self.cycles as f64));
+        out.push(("window".into(), self.window as f64));
+        out
+    }
+
+    /// One line for people: every characteristic read, drift ± U, in
+    /// milliseconds for times, alarms named.
+    pub fn line(&self) -> String {
+        let parts: Vec<String> = self
+            .characteristics
+            .iter()
+            .filter(|c| c.drift.is_finite())
+            .map(|c| {
+                let (scale, unit) = unit_of(&c.name);
+                format!(
+                    "{} {:+.3}±{:.3}{unit}{}",
+                    c.name,
+                    c.drift * scale,
+                    c.uncertainty * scale,
+                    if c.alarm {
+                        " ALARM"
+                    } else if c.beyond {
+                        " (beyond)"
+                    } else {
+                        ""
+                    }
+                )
+            })
+            .collect();
+        format!(
+            "drift since commissioning at {} bar ({} cycles, window {}): {}",
+            self.supply_bar,
+            self.cycles,
+            self.window,
+            if parts.is_empty() {
+                "no characteristic read".into()
+            } else {
+                parts.join(", ")
+            }
+        )
+    }
+}
+
+/// A name's stem and its unit suffix (`front_feed_s` → `front_feed`, `_s`).
+fn split_unit(name: &str) -> (&str, &str) {
+    ["_s", "_m2"]
+        .iter()
+        .find_map(|u| name.strip_suffix(u).map(|stem| (stem, *u)))
+        .unwrap_or((name, ""))
+}
+
+/// A characteristic's display scale and unit from its name's suffix.
+pub fn unit_of(name: &str) -> (f64, &'static str) {
+    if name.ends_with("_s") {
+        (1e3, " ms")
+    } else if name.ends_with("_m2") {
+        (1e6, " mm²")
+    } else {
+        (1.0, "")
+    }
+}
+
+/// The windows of captured cycles at one operating point.
+#[derive(Debug, Clone)]
+pub struct Window {
+    baseline: Baseline,
+    k: usize,
+    confirm: usize,
+    readings: Vec<Reading>,
+    windows: u64,
+    /// Windows in a row each characteristic has been beyond.
+    beyond_run: [usize; N_CHARACTERISTICS],
+}
+
+impl Window {
+    /// Windows of `k` cycles; `confirm` windows in a row beyond raise the alarm.
+    pub fn new(baseline: Baseline, k: usize, confirm: usize) -> Self {
+        Self {
+            baseline,
+            k: k.max(1),
+            confirm: confirm.max(1),
+            readings: Vec::new(),
+            windows: 0,
+            beyond_run: [0; N_CHARACTERISTICS],
+        }
+    }
+
+    pub fn baseline(&self) -> &Baseline {
+        &self.baseline
+    }
+
+    /// Takes one captured cycle; a full window gives its drift.
+    pub fn push(&mut self, r: Reading) -> Option<Drift> {
+        self.readings.push(r);
+        if self.readings.len() < self.k {
+            return None;
+        }
+        let readings = std::mem::take(&mut self.readings);
+        self.windows += 1;
+        let b = &self.baseline;
+        let characteristics = (0..N_CHARACTERISTICS)
+            .map(|i| {
+                let xs: Vec<f64> = readings.iter().map(|r| r[i]).filter(|x| x.is_finite()).collect();
+                let (m, n) = (xs.len(), b.cycles[i]);
+                let measured = if m > 0 {
+                    xs.iter().sum::<f64>() / m as f64
+                } else {
+                    f64::NAN
+                };
+                let drift = measured - b.mean[i];
+                let uncertainty = if m > 0 && n > 1 {
+                    2.0 * b.sd[i] * (1.0 / m as f64 + 1.0 / n as f64).sqrt()
+                } else {
+                    f64::NAN
+                };
+                let beyond = drift.is_finite() && uncertainty.is_finite() && drift.abs() > uncertainty;
+                self.beyond_run[i] = if beyond { self.beyond_run[i] + 1 } else { 0 };
+                let alarm = self.beyond_run[i] >= self.confirm;
+                Characteristic {
+                    name: feature_name(CHAMBER_FEATURES[i]),
+                    measured,
+                    reference: b.mean[i],
+                    drift,
+                    uncertainty,
+                    cycles: m,
+                    beyond,
+                    alarm,
+                }
+            })
+            .collect();
+        Some(Drift {
+            supply_bar: b.supply_bar,
+            cycles: readings.len(),
+            window: self.windows,
+            characteristics,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn baseline() -> Baseline {
+        Baseline {
+            supply_bar: 4.0,
+            mean: [1e-3, 2e-3, 1.3, 1.35, 5e-6, 6e-6],
+            sd: [1e-4, 1e-4, 0.02, 0.02, 2e-7, 2e-7],
+            cycles: [30; N_CHARACTERISTICS],
+        }
+    }
+
+    /// A window at the record's mean reads no drift; one moved by ten
+    /// record spreads is beyond at once and alarms on the second window;
+    /// the uncertainty is 2·s·√(1/m + 1/n).
+    #[test]
+    fn a_move_beyond_the_uncertainty_alarms_on_the_second_window() {
+        let b = baseline();
+        let mut w = Window::new(b.clone(), 4, 2);
+        for _ in 0..3 {
+            assert!(w.push(b.mean).is_none());
+        }
+        let d = w.push(b.mean).expect("a full window");
+        assert!(!d.alarm());
+        let u = 2.0 * 1e-4 * (1.0 / 4.0 + 1.0 / 30.0f64).sqrt();
+        let f = d.get("front_feed_s").unwrap();
+        assert!((f.uncertainty - u).abs() < 1e-12 && f.drift.abs() < 1e-15);
+        let mut moved = b.mean;
+        moved[0] += 10.0 * b.sd[0];
+        let first = (0..4).filter_map(|_| w.push(moved)).last().unwrap();
+        let f = first.get("front_feed_s").unwrap();
+        assert!(f.beyond && !f.alarm, "{f:?}");
+        let second = (0..4).filter_map(|_| w.push(moved)).last().unwrap();
+        assert!(second.get("front_feed_s").unwrap().alarm);
+        assert!(!second.get("rear_feed_s").unwrap().beyond);
+        assert!(second.line().contains("front_feed_s +1.000±"), "{}", second.line());
+        assert_eq!(second.alarms(), ["front_feed_s"]);
+        let fields = second.fields();
+        let get = |n: &str| fields.iter().find(|(k, _)| k == n).map(|(_, v)| *v);
+        assert_eq!(get("front_feed_drift_s"), Some(10.0 * b.sd[0]));
+        assert!(get("front_closed_exponent_drift_uncertainty").is_some());
+        assert!(get("rear_feed_area_reference_m2").is_some());
+    }
+
+    /// A characteristic no cycle of the window read is NaN, never beyond.
+    #[test]
+    fn an_unread_characteristic_is_not_a_drift() {
+        let b = baseline();
+        let mut w = Window::new(b.clone(), 2, 2);
+        let mut r = b.mean;
+        r[4] = f64::NAN;
+        w.push(r);
+        let d = w.push(r).unwrap();
+        let a = d.get("front_feed_area_m2").unwrap();
+        assert!(a.measured.is_nan() && !a.beyond && a.cycles == 0);
+    }
+}
