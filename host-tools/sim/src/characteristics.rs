@@ -160,11 +160,9 @@ fn tracks(
     let mut x_acc = vec![f32::NAN; p1.len()];
     let mut x_force = vec![f32::NAN; p1.len()];
     let close = index(cur.close_s) - base;
-    if next.is_none() {
-        let a_end = shock_end(s.accel_mps2, close + base, r.impact_threshold_mps2, s.dt_s) - base;
-        tail_track(&accel, p2, dt, chambers, close, a_end, &mut x_acc);
-        x_force[close..].copy_from_slice(&x_acc[close..]);
-    }
+    // Each track's rebound from the span's opening impact (its velocity
+    // where the contact has ended), for a tail after the closing one.
+    let mut rebound = [None; 2];
     for span in [Some(cur), next].into_iter().flatten() {
         let (a, b) = (index(span.open_s), index(span.close_s));
         // The tracks start where the contact has ended; during it the
@@ -178,6 +176,14 @@ fn tracks(
         let source = track::accelerometer(&accel, span.zero_shift_mps2, tau, dt, a, a + blank, balance());
         track::closed(dt, impact, a_end, b, &mut x_acc, source);
         track::closed(dt, impact, a_end, b, &mut x_force, balance());
+        if rebound[0].is_none() && a_end + 1 < b {
+            rebound = [&x_acc, &x_force].map(|x| Some((x[a_end + 1] - x[a_end]) / dt).filter(|v| v.is_finite()));
+        }
+    }
+    if next.is_none() {
+        let a_end = shock_end(s.accel_mps2, close + base, r.impact_threshold_mps2, s.dt_s) - base;
+        tail_track(&accel, p2, dt, chambers, close, a_end, rebound[0], &mut x_acc);
+        tail_track(&accel, p2, dt, chambers, close, a_end, rebound[1], &mut x_force);
     }
     (x_acc, x_force)
 }
@@ -188,11 +194,15 @@ const REBOUND_FIT_S: f64 = 0.5e-3;
 
 /// The track after an impact that no later impact closes (a device's
 /// one-cycle capture, a trace's last cycle): the accelerometer integrated
-/// from the end of the shock, its start velocity (the rebound) fitted to the
-/// front chamber's first half millisecond, when it is still closed on the
-/// model's valve timing and its p·V^1.4 gives the position by itself. On a
-/// hammer whose valve feeds the front chamber before the impact the fit is
-/// off, and so is the tail; its feed's onset lies before the impact there.
+/// from the end of the shock, its start velocity the `rebound` the closed
+/// track of the cycle's own opening impact gave (a steady hammer rebounds
+/// alike from each impact; this reads the front feed's onset about as
+/// closely as a closed track: docs/estimator.md). Without one, the rebound
+/// is fitted to the front chamber's first half millisecond, when it is
+/// still closed on the model's valve timing and its p·V^1.4 gives the
+/// position by itself; on a hammer whose valve feeds the front chamber
+/// before the impact that fit is off, and so is the tail.
+#[allow(clippy::too_many_arguments)]
 fn tail_track(
     accel: &[f32],
     p2: &[f32],
@@ -200,6 +210,7 @@ fn tail_track(
     chambers: &ChamberGeometry,
     close: usize,
     a_end: usize,
+    rebound: Option<f32>,
     x: &mut [f32],
 ) {
     let n = accel.len().min(p2.len()).min(x.len());
@@ -218,6 +229,12 @@ fn tail_track(
         let v_next = v + 0.5 * dt * (accel[i - 1] + accel[i]);
         u[k] = u[k - 1] + 0.5 * dt * (v + v_next);
         v = v_next;
+    }
+    if let Some(v0) = rebound {
+        for (k, uk) in u.iter().enumerate() {
+            x[a_end + k] = (impact + v0 * k as f32 * dt + uk).min(impact);
+        }
+        return;
     }
     // The closed chamber's position: V = V_dead·(p0/p)^(1/1.4).
     let p_abs = |i: usize| p2[i] + P_ATM_PA;
