@@ -11,6 +11,7 @@
 //! | `status` | the device's status, every second | 0 | yes (the latest) |
 //! | `alarm` | drift on/off, sensor faults | 1 | yes (the current state) |
 //! | `link` | connects, disconnects, gaps, errors, as the monitor words them | 1 | no |
+//! | `drift` | the drift since commissioning (`--reference`), per window | 1 | yes (the latest) |
 //!
 //! Every payload carries `device`, `host_time` (RFC 3339), `publish_seq`
 //! (this publisher's count, gap-free per device and run: a subscriber sees
