@@ -25,7 +25,7 @@
 //! or `DeviceMsg` (never reorder; see `docs/wire-protocol.md` for when to
 //! bump `PROTOCOL_VERSION`), add its golden bytes in `wire/tests`, handle it
 //! in [`Monitor::on_command`] or emit it from [`monitor`], and let the host's
-//! one client (`host-tools/src/client.rs`) name it in `command_kind`.
+//! one client (`host-tools/link/src/client.rs`) name it in `command_kind`.
 #![no_std]
 #![forbid(unsafe_code)]
 #![allow(async_fn_in_trait)]

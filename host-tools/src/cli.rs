@@ -226,27 +226,16 @@ impl SimulateArgs {
             Some(p) => load_toml(p)?,
             None => SimConfig::default(),
         };
-        if let Some(v) = self.supply_bar {
-            cfg.supply.pressure_bar = v;
+        hammer_sim::params::RunOverrides {
+            supply_bar: self.supply_bar,
+            duration_s: self.duration,
+            seed: self.seed,
+            output_step_s: self.dt,
+            rtol: self.rtol,
+            ideal_sensors: self.ideal_sensors,
+            effects: self.effects.clone(),
         }
-        if let Some(v) = self.duration {
-            cfg.solver.duration_s = v;
-        }
-        if let Some(v) = self.seed {
-            cfg.seed = v;
-        }
-        if let Some(v) = self.dt {
-            cfg.solver.output_step_s = v;
-        }
-        if let Some(v) = self.rtol {
-            cfg.solver.rtol = v;
-        }
-        if self.ideal_sensors {
-            cfg.sensors.enabled = false;
-        }
-        for spec in &self.effects {
-            cfg.effects.apply_spec(spec)?;
-        }
+        .apply(&mut cfg)?;
         cfg.validate().map_err(|e| self.in_user_terms(e))?;
         Ok(cfg)
     }

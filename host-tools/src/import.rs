@@ -6,13 +6,12 @@
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use clap::Args;
 
 use hammer_sim::SimConfig;
-use hammer_trace::config::load_toml;
 use hammer_trace::import::inspect::{stats, Stats};
-use hammer_trace::import::{read_trace, ImportMap, Understood};
+use hammer_trace::import::{read_trace, Understood};
 use hammer_trace::trace::{sidecar_path, write_csv, write_sidecar, Sidecar};
 
 #[derive(Args, Debug)]
@@ -42,31 +41,13 @@ pub struct MapArgs {
     pub config: Option<PathBuf>,
 }
 
-/// A `--map` file holds the table either at its top level or under `[import]`.
-#[derive(serde::Deserialize)]
-#[serde(untagged)]
-enum MapFile {
-    Wrapped { import: ImportMap },
-    Bare(ImportMap),
-}
-
 impl MapArgs {
     /// The configuration with `--map`'s table in place of the config's `[import]`.
     pub fn load(&self) -> Result<SimConfig> {
-        let mut cfg: SimConfig = match &self.config {
-            Some(p) => load_toml(p)?,
-            None => SimConfig::default(),
-        };
-        if let Some(p) = &self.map {
-            let map = match load_toml::<MapFile>(p) {
-                Ok(MapFile::Wrapped { import } | MapFile::Bare(import)) => import,
-                // Untagged errors say nothing: read it as the bare table for the message.
-                Err(_) => load_toml::<ImportMap>(p)?,
-            };
-            map.validate().with_context(|| p.display().to_string())?;
-            cfg.import = Some(map);
-        }
-        Ok(cfg)
+        Ok(hammer_sim::estimation::config_with_map(
+            self.config.as_deref(),
+            self.map.as_deref(),
+        )?)
     }
 }
 

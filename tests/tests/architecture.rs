@@ -4,7 +4,11 @@
 //! - no function of the diagnosis longer than 120 lines, and no source file
 //!   longer than 700 lines of code (its test module excluded);
 //! - the wire crate does not depend on the estimator; the app's tests do not
-//!   pull in the host's terminal, plotting or serial-port crates.
+//!   pull in the host's terminal, plotting or serial-port crates;
+//! - the `hammer` binary sits on the library crates (issue 32): no crate's
+//!   `src` holds more than 25 % of the project's lines of Rust, the
+//!   diagnosis library has no argument parser, terminal or plotting, and its
+//!   stages do not import the engine that runs them.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -128,7 +132,8 @@ fn the_diagnosis_has_no_function_over_120_lines_and_no_file_over_700() {
         if n > 700 {
             long.push(format!("{}: {n} lines", rel(&path)));
         }
-        if rel(&path).starts_with("host-tools/src/diagnose") {
+        let r = rel(&path);
+        if r.starts_with("host-tools/diagnose/src") || r.starts_with("host-tools/src/diagnose") {
             for (len, name) in functions(&text) {
                 if len > 120 {
                     long.push(format!("{}: fn {name} has {len} lines", rel(&path)));
@@ -190,4 +195,114 @@ fn the_wire_stands_apart_from_the_estimator_and_the_app_from_the_host() {
             "hammer-app's tests pull in {host_only}"
         );
     }
+}
+
+/// Every tracked `.rs` file of the repository with its line count, counted as
+/// `git ls-files '*.rs' | xargs cat | wc -l` counts them.
+fn rust_lines() -> Vec<(String, usize)> {
+    let out = Command::new("git")
+        .args(["ls-files", "-z", "*.rs"])
+        .current_dir(root())
+        .output()
+        .expect("git runs");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    String::from_utf8_lossy(&out.stdout)
+        .split('\0')
+        .filter(|p| !p.is_empty())
+        .map(|p| {
+            let text = std::fs::read_to_string(root().join(p)).unwrap_or_default();
+            (p.to_string(), text.lines().count())
+        })
+        .collect()
+}
+
+#[test]
+fn no_crate_source_holds_more_than_a_quarter_of_the_rust() {
+    let files = rust_lines();
+    let total: usize = files.iter().map(|(_, n)| n).sum();
+    assert!(total > 10_000, "counted {total} lines of Rust");
+    let mut per_src = std::collections::BTreeMap::<String, usize>::new();
+    for (path, n) in &files {
+        // A crate's sources: the path up to its `src` folder.
+        let src = if path.starts_with("src/") {
+            Some("src".to_string())
+        } else {
+            path.find("/src/").map(|at| path[..at + 4].to_string())
+        };
+        if let Some(src) = src {
+            *per_src.entry(src).or_default() += n;
+        }
+    }
+    assert!(per_src.contains_key("host-tools/src"), "{per_src:?}");
+    assert!(per_src.contains_key("host-tools/diagnose/src"), "{per_src:?}");
+    let over: Vec<String> = per_src
+        .iter()
+        .filter(|(_, &n)| 4 * n > total)
+        .map(|(src, n)| {
+            format!(
+                "{src}: {n} of {total} lines ({:.1} %)",
+                100.0 * *n as f64 / total as f64
+            )
+        })
+        .collect();
+    assert!(over.is_empty(), "over a quarter of the Rust:\n{}", over.join("\n"));
+}
+
+#[test]
+fn the_binary_sits_on_the_library_crates_and_the_diagnosis_has_no_interface() {
+    let host = dependencies("hammer-host", false);
+    for lib in [
+        "hammer-diagnose",
+        "hammer-fleet",
+        "hammer-link",
+        "hammer-sim",
+        "hammer-trace",
+    ] {
+        assert!(
+            host.iter().any(|d| d == lib),
+            "hammer-host does not use {lib}: {host:?}"
+        );
+    }
+    let diagnose = dependencies("hammer-diagnose", false);
+    assert!(diagnose.iter().any(|d| d == "hammer-sim"), "{diagnose:?}");
+    for ui in ["clap", "ratatui", "plotters", "indicatif", "hammer-host"] {
+        assert!(!diagnose.iter().any(|d| d == ui), "hammer-diagnose depends on {ui}");
+    }
+    for lib in ["hammer-fleet", "hammer-link"] {
+        let deps = dependencies(lib, false);
+        for ui in ["ratatui", "plotters", "hammer-host", "hammer-diagnose"] {
+            assert!(!deps.iter().any(|d| d == ui), "{lib} depends on {ui}");
+        }
+    }
+}
+
+#[test]
+fn the_diagnosis_stages_do_not_import_the_engine() {
+    let dir = root().join("host-tools/diagnose/src");
+    let mut found = vec![];
+    for path in sources().into_iter().filter(|p| p.starts_with(&dir)) {
+        let r = rel(&path);
+        let name = path.file_stem().unwrap().to_string_lossy().to_string();
+        // Imports, not the doc comments' links.
+        let text: String = code(&path)
+            .lines()
+            .filter(|l| !l.trim_start().starts_with("//"))
+            .collect::<Vec<_>>()
+            .join("\n");
+        // Everything but the engine and what proves it (the benchmarks) sits below the engine.
+        if !matches!(name.as_str(), "engine" | "bench" | "isolability" | "lib")
+            && (text.contains("crate::engine") || text.contains("super::engine"))
+        {
+            found.push(format!("{r} imports the engine"));
+        }
+        // The bottom rows import no stage, statistics or model.
+        if matches!(name.as_str(), "report" | "options" | "input" | "stages" | "fit") {
+            for above in ["pipeline", "fitset", "model", "effects", "features", "gap"] {
+                if text.contains(&format!("super::{above}")) || text.contains(&format!("crate::{above}")) {
+                    found.push(format!("{r} imports {above}"));
+                }
+            }
+        }
+    }
+    assert!(found.is_empty(), "imports against the layers:\n{}", found.join("\n"));
 }

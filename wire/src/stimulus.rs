@@ -12,7 +12,7 @@
 //! reading it later is an overrun, counted as lost samples.
 //!
 //! The layout is here, once, for the board (`firmware/emulated/src/adc.rs`)
-//! and the host (`host-tools/src/stimulus.rs`). Positions are free-running
+//! and the host (`host-tools/link/src/stimulus.rs`). Positions are free-running
 //! `u32` counts of sample-sets that wrap (11.9 h at 100 kS/s); only their
 //! differences are used, and [`CAPACITY_SETS`] divides 2^32, so a position
 //! modulo the capacity is its slot in the ring.

@@ -3,6 +3,7 @@
 
 mod elf;
 mod ninth_effect;
+mod python;
 
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
@@ -258,6 +259,7 @@ fn ci() -> Result<(), String> {
     run(&root, "cargo", &["fmt", "--all", "--", "--check"])?;
     run(&root.join("firmware"), "cargo", &["fmt", "--all", "--", "--check"])?;
     run(&root.join("fuzz"), "cargo", &["fmt", "--all", "--", "--check"])?;
+    run(&root.join("python"), "cargo", &["fmt", "--all", "--", "--check"])?;
     // The estimator must stay no_std and build for the Cortex-M4F.
     run(
         &root,
@@ -271,6 +273,11 @@ fn ci() -> Result<(), String> {
     // would wrap on bad input must not hide behind release mode.
     if result.is_ok() {
         result = cargo_test(&root, &["test", "-p", "hammer-estimator"], &mut totals);
+    }
+    // The Python package: its wheel built once into a fresh virtualenv,
+    // imported, and pytest against it (python/tests, docs/python.md).
+    if result.is_ok() {
+        result = python::run(&root, &mut totals);
     }
     // A ninth effect through the registry alone (a copy of the workspace).
     if result.is_ok() {
@@ -395,7 +402,8 @@ fn afl(target: &str, minutes: u64) -> Result<(), String> {
 }
 
 const USAGE: &str = "usage: cargo xtask <command>
-  ci              every test: formatting, firmware build, host and emulator tests
+  ci              every test: formatting, firmware build, host and emulator tests, the Python package
+  python          the Python package: the wheel built into a fresh virtualenv, imported, pytest against it
   firmware        build both firmware binaries and print their flash and RAM
   size            flash and static RAM of the built firmware binaries, each board's stack region and high-water mark (a 20 s soak)
   bench-firmware  the sampling loop's instructions per sample-set on the Cortex-M4 ISA under QEMU (-icount),
@@ -414,6 +422,7 @@ fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let result = match args.first().map(String::as_str) {
         Some("ci") => ci(),
+        Some("python") => python::run(&root(), &mut (0, 0)),
         Some("fuzz") => fuzz(&args[1..].iter().map(String::as_str).collect::<Vec<_>>()),
         Some("firmware") => build_firmware(),
         Some("size") => size_and_stack(),

@@ -114,7 +114,7 @@ pub fn run(root: &Path, totals: &mut (u64, u64)) -> Result<(), String> {
         &read(&fixtures.join("sim.rs"))?,
     )?;
     write(
-        &ws.join(format!("host-tools/src/diagnose/effects/{NAME}.rs")),
+        &ws.join(format!("host-tools/diagnose/src/effects/{NAME}.rs")),
         &read(&fixtures.join("diagnose.rs"))?,
     )?;
     write(

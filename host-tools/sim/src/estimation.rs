@@ -225,23 +225,7 @@ pub fn open_for_estimation(
 ) -> Result<EstimationInput, OpenError> {
     let (trace, understood, embedded) = import::read_trace(path, file.import.as_ref())?;
     let (sidecar, supply_bar, config) = config_for(path, embedded.as_deref(), file, supply_bar, 1.0 / trace.dt_s)?;
-    let min = |x: &[f64]| x.iter().copied().fold(f64::INFINITY, f64::min);
-    check_gauge(
-        path,
-        min(&trace.p_rear_pa),
-        min(&trace.p_front_pa),
-        trace.len() as f64 * trace.dt_s,
-    )?;
-    let mut scans: [RailScan; 3] = Default::default();
-    for i in 0..trace.len() {
-        scan_row(
-            &mut scans,
-            [trace.p_rear_pa[i], trace.p_front_pa[i], trace.accel_mps2[i]],
-        );
-    }
-    let mut config = config;
-    at_recorder_rails(&mut config, &scans);
-    let codes = to_codes(&trace, &config);
+    let (config, codes) = checked_codes(&trace, config, path)?;
     Ok(EstimationInput {
         trace,
         sidecar,
@@ -463,6 +447,97 @@ pub fn stream_estimation(
         summary.samples as f64 / summary.sample_rate_hz,
     )?;
     Ok(summary)
+}
+
+/// A `--map` file holds the table either at its top level or under `[import]`.
+#[derive(serde::Deserialize)]
+#[serde(untagged)]
+enum MapFile {
+    Wrapped { import: import::ImportMap },
+    Bare(import::ImportMap),
+}
+
+/// Why a configuration or a recorder's mapping was refused.
+#[derive(Debug, thiserror::Error)]
+pub enum MapError {
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+    /// The mapping file at `path` holds a value out of its range.
+    #[error("{path}: {error}")]
+    Map { path: String, error: ConfigError },
+}
+
+/// The project configuration at `config` (the defaults without one) with
+/// the `[import]` table of the mapping file at `map` in place of its own:
+/// what `hammer estimate --config --map` and the Python package read.
+pub fn config_with_map(config: Option<&Path>, map: Option<&Path>) -> Result<SimConfig, MapError> {
+    let mut cfg: SimConfig = match config {
+        Some(p) => hammer_trace::config::load_toml(p)?,
+        None => SimConfig::default(),
+    };
+    if let Some(p) = map {
+        let map = match hammer_trace::config::load_toml::<MapFile>(p) {
+            Ok(MapFile::Wrapped { import } | MapFile::Bare(import)) => import,
+            // Untagged errors say nothing: read it as the bare table for the message.
+            Err(_) => hammer_trace::config::load_toml::<import::ImportMap>(p)?,
+        };
+        map.validate().map_err(|error| MapError::Map {
+            path: p.display().to_string(),
+            error,
+        })?;
+        cfg.import = Some(map);
+    }
+    Ok(cfg)
+}
+
+/// The estimator over a trace held in memory (a script's arrays), read with
+/// `file`'s hammer, sensors and estimator table and the rules of
+/// [`open_for_estimation`] (gauge check, the recorder's rails); `label`
+/// names it in messages.
+pub fn estimate_trace(
+    trace: &Trace,
+    file: &SimConfig,
+    supply_bar: Option<f64>,
+    label: &str,
+) -> Result<Vec<CycleReport>, OpenError> {
+    if trace.len() < 2 || !(trace.dt_s > 0.0) {
+        return Err(OpenError::Refused(format!(
+            "{label}: {} samples: a trace needs at least two, evenly spaced in time",
+            trace.len()
+        )));
+    }
+    let supply_bar = supply_bar.or(file.import.as_ref().and_then(|m| m.supply_pressure_bar));
+    let config = estimator_config(
+        &file.hammer,
+        &file.sensors,
+        &file.estimator,
+        1.0 / trace.dt_s,
+        supply_bar,
+    )?;
+    let (config, codes) = checked_codes(trace, config, Path::new(label))?;
+    Ok(run_with_gaps(&codes, &trace.gaps, config)?)
+}
+
+/// A trace in memory checked for gauge pressures, `config` set to the
+/// recorder's rails it shows, and its samples as that configuration's codes.
+fn checked_codes(trace: &Trace, mut config: Config, path: &Path) -> Result<(Config, Vec<RawSample>), OpenError> {
+    let min = |x: &[f64]| x.iter().copied().fold(f64::INFINITY, f64::min);
+    check_gauge(
+        path,
+        min(&trace.p_rear_pa),
+        min(&trace.p_front_pa),
+        trace.len() as f64 * trace.dt_s,
+    )?;
+    let mut scans: [RailScan; 3] = Default::default();
+    for i in 0..trace.len() {
+        scan_row(
+            &mut scans,
+            [trace.p_rear_pa[i], trace.p_front_pa[i], trace.accel_mps2[i]],
+        );
+    }
+    at_recorder_rails(&mut config, &scans);
+    let codes = to_codes(trace, &config);
+    Ok((config, codes))
 }
 
 #[cfg(test)]

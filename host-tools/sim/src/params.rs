@@ -345,3 +345,53 @@ impl SimConfig {
         Ok(())
     }
 }
+
+/// What a run changes on top of its configuration file: `hammer
+/// simulate`'s flags and the Python package's `simulate` arguments, applied
+/// the same way by both.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct RunOverrides {
+    /// Gauge supply pressure, bar (`supply.pressure_bar`).
+    pub supply_bar: Option<f64>,
+    /// Simulated time, s (`solver.duration_s`).
+    pub duration_s: Option<f64>,
+    /// Seed of the sensor noise.
+    pub seed: Option<u64>,
+    /// Output grid step, s (`solver.output_step_s`).
+    pub output_step_s: Option<f64>,
+    /// Relative tolerance of the integrator (`solver.rtol`).
+    pub rtol: Option<f64>,
+    /// No noise, bandwidth, clipping or quantisation.
+    pub ideal_sensors: bool,
+    /// Effects switched on: `NAME` or `NAME:key=value,...`.
+    pub effects: Vec<String>,
+}
+
+impl RunOverrides {
+    /// Writes the overrides into `cfg`; an unknown effect or key is refused.
+    /// The caller validates the result (naming a refused value its own way).
+    pub fn apply(&self, cfg: &mut SimConfig) -> Result<(), ConfigError> {
+        if let Some(v) = self.supply_bar {
+            cfg.supply.pressure_bar = v;
+        }
+        if let Some(v) = self.duration_s {
+            cfg.solver.duration_s = v;
+        }
+        if let Some(v) = self.seed {
+            cfg.seed = v;
+        }
+        if let Some(v) = self.output_step_s {
+            cfg.solver.output_step_s = v;
+        }
+        if let Some(v) = self.rtol {
+            cfg.solver.rtol = v;
+        }
+        if self.ideal_sensors {
+            cfg.sensors.enabled = false;
+        }
+        for spec in &self.effects {
+            cfg.effects.apply_spec(spec)?;
+        }
+        Ok(())
+    }
+}

@@ -9,10 +9,10 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use super::bench::{render, run_case, summarize, BenchOptions};
 use super::engine::{diagnose_against, MeasuredInput, Options};
+use super::input::read_input;
 use super::output::{summary, write_all};
 use crate::commission;
 use hammer_sim::estimation::sensors_for;
-use hammer_sim::simulate::{read_simulated_sidecar, Sidecar};
 use hammer_sim::SimConfig;
 use hammer_trace::config::load_toml;
 
@@ -233,36 +233,6 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
         outcome.report.elapsed_s
     );
     Ok(())
-}
-
-/// One trace (any format `hammer_trace::import` reads, through the
-/// config's `[import]`) with its sidecar; its supply pressure from `bar`
-/// (the command line), the sidecar, or the mapping.
-fn read_input(
-    path: &Path,
-    bar: Option<f64>,
-    map: Option<&hammer_trace::import::ImportMap>,
-) -> Result<(MeasuredInput, Option<Sidecar>)> {
-    let (trace, _, _) =
-        hammer_trace::import::read_trace(path, map).with_context(|| format!("reading {}", path.display()))?;
-    let sidecar = read_simulated_sidecar(path).with_context(|| format!("reading the sidecar of {}", path.display()))?;
-    let supply_bar = bar
-        .or_else(|| sidecar.as_ref().and_then(|s| s.supply_pressure_bar))
-        .or_else(|| map.and_then(|m| m.supply_pressure_bar))
-        .with_context(|| {
-            format!(
-                "{}: supply pressure unknown: not in its sidecar; give --supply-bar BAR right after it",
-                path.display()
-            )
-        })?;
-    hammer_trace::config::check_range("--supply-bar", supply_bar, 0.5, 20.0)?;
-    let input = MeasuredInput {
-        label: path.display().to_string(),
-        supply_bar,
-        trace,
-        fit: false,
-    };
-    Ok((input, sidecar))
 }
 
 pub fn bench(args: &BenchArgs) -> Result<()> {

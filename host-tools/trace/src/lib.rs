@@ -11,10 +11,13 @@
 //!   WAV, Parquet) as row sources; the one place a trace file is opened.
 //! - [`config`]: configuration errors that name the field and its range, TOML loading.
 //! - [`estimator_params`]: the `[estimator]` table of the project configuration.
+//! - [`numfmt`]: numbers for people, the formatting rules every report shares
+//!   (the diagnosis' text, the report page, the dashboard).
 
 pub mod config;
 pub mod estimator_params;
 pub mod import;
+pub mod numfmt;
 pub mod rows;
 pub mod trace;
 

@@ -378,6 +378,20 @@ pub fn collect<S: RowSource>(mut u: Uniform<S>, extra_names: Vec<String>) -> Res
     Ok(trace)
 }
 
+/// A trace from channels held in memory (a script's arrays), read by `map`
+/// (none: the project's column names, SI units, gauge) through the same
+/// time-base layer as a file: gaps found, irregular timing refused, each
+/// refusal naming `label`.
+pub fn trace_from_channels(
+    label: &str,
+    channels: Vec<columns::Channel>,
+    map: Option<&ImportMap>,
+) -> Result<Trace, TraceError> {
+    let default = ImportMap::default();
+    let source = columns::Columns::new(label, channels, map.unwrap_or(&default), None)?;
+    collect(Uniform::new(source)?, Vec::new())
+}
+
 /// Reads any trace file whole: the samples, and what was understood.
 pub fn read_trace(path: &Path, map: Option<&ImportMap>) -> Result<(Trace, Understood, Option<String>), TraceError> {
     let opened = open(path, map, true)?;

@@ -1,0 +1,622 @@
+//! The blind benchmark: measurements with a hidden effect (or none, or two)
+//! at a random magnitude, made by a generator that is *not* the diagnosis'
+//! model — nominal parameters jittered, a finer solver tolerance, a random
+//! sensor bandwidth, noise and quantisation — then diagnosed without a hint.
+
+use std::collections::BTreeMap;
+
+use serde::{Deserialize, Serialize};
+
+use super::effects::diagnosis;
+use super::engine::{diagnose_against, MeasuredInput, Options};
+use hammer_sim::effects::{Effects, EFFECT_NAMES};
+use hammer_sim::sensor::Rng;
+use hammer_sim::simulate::simulate;
+use hammer_sim::SimConfig;
+use hammer_trace::numfmt::fraction;
+use hammer_trace::trace::Trace;
+use hammer_variants::{generate, Structure, VariantParams};
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct BenchOptions {
+    pub cases: usize,
+    pub seed: u64,
+    /// Operating points of every case, bar; the first and last are fitted.
+    pub points: Vec<f64>,
+    pub duration_s: f64,
+    /// Relative half-width of the uniform jitter of the nominal parameters.
+    pub jitter: f64,
+    /// Measurements from the second model family (`hammer-variants`): one or
+    /// two structural variants per case, its parameters jittered by `jitter`.
+    #[serde(default)]
+    pub structural: bool,
+    /// Each case also records its hammer with no effect hidden (same
+    /// structure and parameters, its own noise) at every point, and the
+    /// diagnosis reads the case as a change from it
+    /// ([`super::engine::diagnose_against`]).
+    #[serde(default)]
+    pub reference: bool,
+}
+
+impl Default for BenchOptions {
+    fn default() -> Self {
+        Self {
+            cases: 24,
+            seed: 1,
+            points: vec![4.0, 5.5, 7.0],
+            duration_s: 1.0,
+            jitter: 0.03,
+            structural: false,
+            reference: false,
+        }
+    }
+}
+
+/// What a case hides.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Hidden {
+    None,
+    One(String),
+    Two(String, String),
+}
+
+impl Hidden {
+    pub fn names(&self) -> Vec<String> {
+        match self {
+            Hidden::None => vec![],
+            Hidden::One(a) => vec![a.clone()],
+            Hidden::Two(a, b) => vec![a.clone(), b.clone()],
+        }
+    }
+
+    pub fn label(&self) -> String {
+        match self {
+            Hidden::None => "none".into(),
+            Hidden::One(a) => a.clone(),
+            Hidden::Two(..) => "pair".into(),
+        }
+    }
+}
+
+/// The case plan: every single effect of the catalogue, two controls and two
+/// pairs in every `EFFECT_NAMES.len() + 4` cases (twelve for the eight
+/// effects), so a short run still covers the catalogue.
+pub fn hidden_for(index: usize, rng: &mut Rng) -> Hidden {
+    let n = EFFECT_NAMES.len();
+    let period = n + 4;
+    match index % period {
+        k if k < n => Hidden::One(EFFECT_NAMES[(k + index / period) % n].to_string()),
+        k if k < n + 2 => Hidden::None,
+        _ => {
+            let a = (rng.next_u64() % n as u64) as usize;
+            let b = (a + 1 + (rng.next_u64() % (n as u64 - 1)) as usize) % n;
+            let (a, b) = (a.min(b), a.max(b));
+            Hidden::Two(EFFECT_NAMES[a].to_string(), EFFECT_NAMES[b].to_string())
+        }
+    }
+}
+
+/// A random magnitude over the range a bench would meet (see [`super::effects`]).
+pub fn draw_effect(effects: &mut Effects, name: &str, rng: &mut Rng) {
+    if let Some(d) = diagnosis(name) {
+        d.draw(effects, rng);
+    }
+}
+
+/// The generator's hammer: the nominal one with its uncertain parameters
+/// (valve, ports, dead volumes, contact) jittered, a finer solver tolerance
+/// and a random sensor bandwidth. Mass and areas stay: the estimator and the
+/// force balance rely on them, and they are measured to better than 0.1 %.
+pub fn generator_config(base: &SimConfig, jitter: f64, rng: &mut Rng) -> SimConfig {
+    let mut c = base.clone();
+    for (_, field) in super::model::NUISANCE {
+        *field(&mut c) *= 1.0 + jitter * (2.0 * rng.uniform() - 1.0);
+    }
+    c.solver.rtol = 1e-8;
+    let bw = 10e3 + 30e3 * rng.uniform();
+    for ch in [&mut c.sensors.rear, &mut c.sensors.front, &mut c.sensors.accel] {
+        ch.bandwidth_hz = bw;
+    }
+    c
+}
+
+/// The second family's hammer for a case: one or two of its structural
+/// variants (never none: the base variant still differs from the model in
+/// its flow law and spool) and its uncertain parameters jittered. Mass and
+/// geometry stay, as in [`generator_config`].
+pub fn structural_generator(jitter: f64, rng: &mut Rng) -> (Structure, VariantParams) {
+    let singles = Structure::singles();
+    let first = (rng.next_u64() % singles.len() as u64) as usize;
+    let mut structure = singles[first];
+    if rng.next_u64() % 2 == 0 {
+        let second = (first + 1 + (rng.next_u64() % (singles.len() as u64 - 1)) as usize) % singles.len();
+        structure = structure.with(&singles[second]);
+    }
+    let mut p = VariantParams::default();
+    for field in [
+        &mut p.port_conductance,
+        &mut p.port_critical_ratio,
+        &mut p.port_ramp_m,
+        &mut p.rear_dead_m3,
+        &mut p.front_dead_m3,
+        &mut p.valve_conductance,
+        &mut p.valve_critical_ratio,
+        &mut p.spool_tau_s,
+        &mut p.pilot_rear_m2,
+        &mut p.pilot_front_m2,
+        &mut p.pilot_hysteresis_n,
+        &mut p.polytropic_n,
+        &mut p.hose_length_m,
+        &mut p.inlet_volume_m3,
+        &mut p.contact_stiffness_n_per_m,
+        &mut p.contact_damping_ratio,
+        &mut p.tool_mass_kg,
+        &mut p.feed_force_n,
+        &mut p.workpiece_stiffness_n_per_m,
+    ] {
+        *field *= 1.0 + jitter * (2.0 * rng.uniform() - 1.0);
+    }
+    (structure, p)
+}
+
+/// One effect's standing in a case's ranking.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Ranked {
+    pub name: String,
+    pub score: f64,
+    pub explained_fraction: f64,
+    pub model_free_z: Option<f64>,
+}
+
+impl Ranked {
+    fn of(e: &super::report::EffectResult) -> Self {
+        Self {
+            name: e.name.clone(),
+            score: e.score,
+            explained_fraction: e.explained_fraction,
+            model_free_z: e.model_free_z,
+        }
+    }
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct CaseResult {
+    pub index: usize,
+    /// The generator's structural variants (structural benchmark only).
+    #[serde(default)]
+    pub variants: Vec<String>,
+    pub hidden: Hidden,
+    pub hidden_params: serde_json::Value,
+    pub named: Vec<String>,
+    /// What the verdict flagged the named effect confusable with.
+    #[serde(default)]
+    pub confusable_with: Vec<String>,
+    pub correct: bool,
+    /// Relative error of each named-right effect's magnitude.
+    pub param_errors: BTreeMap<String, f64>,
+    pub score: f64,
+    pub energy_error_before: f64,
+    pub energy_error_after: f64,
+    pub frequency_error_before: f64,
+    pub frequency_error_after: f64,
+    /// The report warned that its refitted model predicts the held-out
+    /// data worse than nominal ([`super::report::Shrink::caution`]).
+    #[serde(default)]
+    pub cautioned: bool,
+    pub diagnose_s: f64,
+    /// Every single effect as the ranking left it, best first: what a
+    /// threshold was weighed against.
+    #[serde(default)]
+    pub ranking: Vec<Ranked>,
+    /// The pairs with the best single, when they were tried, best first
+    /// (`explained_fraction` of the nominal gap, as for the singles).
+    #[serde(default)]
+    pub pairs: Vec<Ranked>,
+    /// The force balance against nominal, and the model-form factors.
+    #[serde(default)]
+    pub model_free: Vec<super::report::ModelFreeStat>,
+    #[serde(default)]
+    pub model_form: Vec<super::report::ModelForm>,
+    /// How large each unseen effect would have had to be to be named.
+    #[serde(default)]
+    pub detection_floors: Vec<super::report::DetectionFloor>,
+    #[serde(skip)]
+    pub report: Option<super::engine::Report>,
+}
+
+/// Runs case `index` of the plan.
+pub fn run_case(opts: &BenchOptions, index: usize, diag: &Options) -> anyhow::Result<CaseResult> {
+    let mut rng = Rng::new(opts.seed.wrapping_mul(0x9E37_79B9).wrapping_add(index as u64));
+    let hidden = hidden_for(index, &mut rng);
+    let base = SimConfig::default();
+    let mut gen = generator_config(&base, opts.jitter, &mut rng);
+    for name in hidden.names() {
+        draw_effect(&mut gen.effects, &name, &mut rng);
+    }
+    gen.solver.duration_s = opts.duration_s;
+    let structural = opts.structural.then(|| structural_generator(opts.jitter, &mut rng));
+    let mut inputs = Vec::new();
+    let mut references = Vec::new();
+    let last = opts.points.len().saturating_sub(1);
+    let record = |effects: &Effects, bar: f64, seed: u64| -> anyhow::Result<Trace> {
+        Ok(match &structural {
+            Some((structure, params)) => generate(params, *structure, effects, bar, opts.duration_s, seed).trace,
+            None => {
+                let mut c = gen.clone();
+                c.effects = effects.clone();
+                c.supply.pressure_bar = bar;
+                c.seed = seed;
+                simulate(&c)?.trace()
+            }
+        })
+    };
+    for (k, &bar) in opts.points.iter().enumerate() {
+        let seed = rng.next_u64();
+        inputs.push(MeasuredInput {
+            label: format!("case {index} at {bar} bar"),
+            supply_bar: bar,
+            trace: record(&gen.effects, bar, seed)?,
+            fit: k == 0 || k == last,
+        });
+        if opts.reference {
+            // Its own noise, without drawing from the case's generator:
+            // the cases stay those of the benchmark without references.
+            references.push(MeasuredInput {
+                label: format!("case {index} reference at {bar} bar"),
+                supply_bar: bar,
+                trace: record(&Effects::default(), bar, seed ^ 0x5EED_5EED_5EED_5EED)?,
+                fit: false,
+            });
+        }
+    }
+    let t = std::time::Instant::now();
+    let out = diagnose_against(&inputs, &references, &base, diag, &|_, _, _| {})?;
+    let diagnose_s = t.elapsed().as_secs_f64();
+    let r = &out.report;
+    let named: Vec<String> = r.verdict.effects.iter().filter(|e| *e != "none").cloned().collect();
+    let mut want = hidden.names();
+    want.sort();
+    let mut got = named.clone();
+    got.sort();
+    let correct = want == got;
+    let mut param_errors = BTreeMap::new();
+    if correct {
+        for name in &want {
+            let fitted = if named.len() == 1 {
+                r.verdict.params.clone()
+            } else {
+                r.verdict.params.get(name).cloned().unwrap_or_default()
+            };
+            if let Some(e) = magnitude_error(&gen.effects, name, &fitted, &opts.points) {
+                param_errors.insert(name.clone(), e);
+            }
+        }
+    }
+    let s = &r.shrink;
+    Ok(CaseResult {
+        index,
+        variants: structural.map_or_else(Vec::new, |(st, _)| {
+            st.variants().into_iter().map(String::from).collect()
+        }),
+        hidden_params: serde_json::to_value(&gen.effects).unwrap_or_default(),
+        hidden,
+        named,
+        confusable_with: r.verdict.confusable_with.clone(),
+        correct,
+        param_errors,
+        score: r.verdict.score,
+        energy_error_before: s.impact_energy_error_before,
+        energy_error_after: s.impact_energy_error_after,
+        frequency_error_before: s.frequency_error_before,
+        frequency_error_after: s.frequency_error_after,
+        cautioned: s.caution().is_some(),
+        diagnose_s,
+        ranking: r.effects.iter().map(Ranked::of).collect(),
+        pairs: r.pairs.iter().map(Ranked::of).collect(),
+        model_free: r.model_free.clone(),
+        model_form: r.model_form.clone(),
+        detection_floors: r.detection_floors.clone(),
+        report: Some(out.report),
+    })
+}
+
+/// Relative error of the fitted magnitude: friction force over the points,
+/// the one parameter otherwise, the worse of the two gains (see [`super::effects`]).
+fn magnitude_error(truth: &Effects, name: &str, fitted: &serde_json::Value, points: &[f64]) -> Option<f64> {
+    diagnosis(name)?.magnitude_error(truth, fitted, points)
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct BenchSummary {
+    pub options: BenchOptions,
+    pub cases: Vec<CaseResult>,
+    /// Rows: what was hidden (an effect, `none`, `pair`); columns: what was named.
+    pub confusion: BTreeMap<String, BTreeMap<String, usize>>,
+    pub single_right: (usize, usize),
+    pub none_flagged: (usize, usize),
+    pub pair_right: (usize, usize),
+    pub params_within_10pct: (usize, usize),
+    #[serde(default)]
+    pub params_within_15pct: (usize, usize),
+    pub median_param_error: BTreeMap<String, f64>,
+    pub max_param_error: BTreeMap<String, f64>,
+    /// Mean over cases with an effect, %.
+    pub energy_error_before: f64,
+    pub energy_error_after: f64,
+    /// Median over cases with an effect, %.
+    #[serde(default)]
+    pub energy_error_after_median: f64,
+    pub frequency_error_before: f64,
+    pub frequency_error_after: f64,
+    pub mean_diagnose_s: f64,
+    /// Cases that named an effect that was not hidden: (flagged
+    /// confusable, all). A wrong name must come flagged.
+    #[serde(default)]
+    pub wrong_names_flagged: (usize, usize),
+    /// Cases with an effect named right: (flagged confusable, all).
+    #[serde(default)]
+    pub right_names_flagged: (usize, usize),
+    /// Single unseen effects against the floor their case reported:
+    /// (named right, all) above it, and the same below it.
+    #[serde(default)]
+    pub floor_above: (usize, usize),
+    #[serde(default)]
+    pub floor_below: (usize, usize),
+    /// Cases whose report warned that the refitted model predicts the
+    /// held-out data worse than nominal.
+    #[serde(default)]
+    pub cautioned: usize,
+}
+
+/// Whether a case's hidden single effect, one the force balance cannot
+/// see, stood at or beyond the detection floor its diagnosis reported
+/// (`None` for any other case).
+pub fn above_floor(c: &CaseResult) -> Option<bool> {
+    let Hidden::One(name) = &c.hidden else {
+        return None;
+    };
+    let f = c.detection_floors.iter().find(|f| &f.effect == name && !f.model_free)?;
+    let hidden = c.hidden_params.get(name)?.get(&f.parameter)?.as_f64()?;
+    Some(match f.value {
+        Some(v) if f.stronger_above => hidden >= v,
+        Some(v) => hidden <= v,
+        None => false,
+    })
+}
+
+pub fn summarize(options: &BenchOptions, cases: Vec<CaseResult>) -> BenchSummary {
+    let mut confusion: BTreeMap<String, BTreeMap<String, usize>> = BTreeMap::new();
+    let (mut single, mut none, mut pair, mut params) = ((0, 0), (0, 0), (0, 0), (0, 0));
+    let mut params15 = (0, 0);
+    let mut errs: BTreeMap<String, Vec<f64>> = BTreeMap::new();
+    let (mut wrong_flagged, mut right_flagged) = ((0, 0), (0, 0));
+    let (mut floor_above, mut floor_below) = ((0, 0), (0, 0));
+    for c in &cases {
+        if let Some(above) = above_floor(c) {
+            let tally = if above { &mut floor_above } else { &mut floor_below };
+            tally.0 += usize::from(c.correct);
+            tally.1 += 1;
+        }
+        let flagged = usize::from(!c.confusable_with.is_empty());
+        let hidden = c.hidden.names();
+        if c.named.iter().any(|n| !hidden.contains(n)) {
+            wrong_flagged.0 += flagged;
+            wrong_flagged.1 += 1;
+        } else if c.correct && !c.named.is_empty() {
+            right_flagged.0 += flagged;
+            right_flagged.1 += 1;
+        }
+        let col = match (&c.hidden, c.named.len()) {
+            (Hidden::Two(..), _) if c.correct => "pair (right)".to_string(),
+            (_, 0) => "none".to_string(),
+            (_, 1) => c.named[0].clone(),
+            _ => format!("pair: {}", c.named.join("+")),
+        };
+        *confusion.entry(c.hidden.label()).or_default().entry(col).or_default() += 1;
+        match &c.hidden {
+            Hidden::None => {
+                none.1 += 1;
+                none.0 += usize::from(!c.named.is_empty());
+            }
+            Hidden::One(_) => {
+                single.1 += 1;
+                single.0 += usize::from(c.correct);
+            }
+            Hidden::Two(..) => {
+                pair.1 += 1;
+                pair.0 += usize::from(c.correct);
+            }
+        }
+        for (k, e) in &c.param_errors {
+            params.1 += 1;
+            params.0 += usize::from(*e <= 0.10);
+            params15.1 += 1;
+            params15.0 += usize::from(*e <= 0.15);
+            errs.entry(k.clone()).or_default().push(*e);
+        }
+    }
+    let with_effect: Vec<&CaseResult> = cases.iter().filter(|c| c.hidden != Hidden::None).collect();
+    let mean = |f: &dyn Fn(&CaseResult) -> f64| {
+        with_effect.iter().map(|c| f(c)).sum::<f64>() / with_effect.len().max(1) as f64
+    };
+    let mut median_param_error = BTreeMap::new();
+    let mut max_param_error = BTreeMap::new();
+    for (k, mut v) in errs {
+        v.sort_by(f64::total_cmp);
+        median_param_error.insert(k.clone(), v[v.len() / 2]);
+        max_param_error.insert(k, *v.last().unwrap_or(&0.0));
+    }
+    BenchSummary {
+        options: options.clone(),
+        confusion,
+        single_right: single,
+        none_flagged: none,
+        pair_right: pair,
+        params_within_10pct: params,
+        params_within_15pct: params15,
+        median_param_error,
+        max_param_error,
+        energy_error_before: mean(&|c| c.energy_error_before),
+        energy_error_after: mean(&|c| c.energy_error_after),
+        energy_error_after_median: {
+            let mut v: Vec<f64> = with_effect.iter().map(|c| c.energy_error_after).collect();
+            v.sort_by(f64::total_cmp);
+            v.get(v.len() / 2).copied().unwrap_or(0.0)
+        },
+        frequency_error_before: mean(&|c| c.frequency_error_before),
+        frequency_error_after: mean(&|c| c.frequency_error_after),
+        mean_diagnose_s: cases.iter().map(|c| c.diagnose_s).sum::<f64>() / cases.len().max(1) as f64,
+        wrong_names_flagged: wrong_flagged,
+        right_names_flagged: right_flagged,
+        floor_above,
+        floor_below,
+        cautioned: cases.iter().filter(|c| c.cautioned).count(),
+        cases,
+    }
+}
+
+/// The benchmark's result as a text page.
+pub fn render(s: &BenchSummary) -> String {
+    use std::fmt::Write as _;
+    let mut out = String::new();
+    let o = &s.options;
+    let _ = writeln!(
+        out,
+        "diagnose-bench{}: {} cases, seed {}, points {:?} bar (first and last fitted), {:.1} s per trace, jitter ±{:.0} %",
+        match (o.structural, o.reference) {
+            (true, false) => " --structural (generator: hammer-variants, one or two structural variants a case)",
+            (true, true) => {
+                " --structural --reference (generator: hammer-variants, one or two structural variants a case; each read against a record of the same hammer without the effect)"
+            }
+            (false, false) => " (generator: the simulator, jittered)",
+            (false, true) => {
+                " --reference (generator: the simulator, jittered; each read against a record of the same hammer without the effect)"
+            }
+        },
+        s.cases.len(),
+        o.seed,
+        o.points,
+        o.duration_s,
+        100.0 * o.jitter
+    );
+    let mut cols: Vec<String> = EFFECT_NAMES.iter().map(|s| s.to_string()).collect();
+    cols.push("none".into());
+    cols.push("pair (right)".into());
+    for row in s.confusion.values() {
+        for k in row.keys() {
+            if !cols.contains(k) {
+                cols.push(k.clone());
+            }
+        }
+    }
+    let short = |c: &str| -> String {
+        c.split('_')
+            .map(|w| w.chars().take(4).collect::<String>())
+            .collect::<Vec<_>>()
+            .join("_")
+    };
+    let _ = writeln!(out, "\nconfusion (rows hidden, columns named):");
+    let _ = write!(out, "{:>20}", "");
+    for c in &cols {
+        let _ = write!(out, " {:>10}", short(c));
+    }
+    let _ = writeln!(out);
+    let mut rows: Vec<String> = EFFECT_NAMES.iter().map(|s| s.to_string()).collect();
+    rows.push("none".into());
+    rows.push("pair".into());
+    for r in rows {
+        let Some(row) = s.confusion.get(&r) else { continue };
+        let _ = write!(out, "{r:>20}");
+        for c in &cols {
+            let n = row.get(c).copied().unwrap_or(0);
+            let _ = write!(out, " {:>10}", if n == 0 { ".".to_string() } else { n.to_string() });
+        }
+        let _ = writeln!(out);
+    }
+    // Issue 10's targets: a model of another form than the hammer's is held
+    // to less than one of the same form.
+    let (single_target, pair_target) = if o.structural { (90, 70) } else { (95, 80) };
+    let _ = writeln!(
+        out,
+        "\nsingle effect named right: {}   (target ≥ {single_target} %)",
+        fraction(s.single_right)
+    );
+    let _ = writeln!(
+        out,
+        "no-effect controls flagged: {}   (target ≤ 5 %)",
+        fraction(s.none_flagged)
+    );
+    let _ = writeln!(
+        out,
+        "pairs named right:          {}   (target ≥ {pair_target} %)",
+        fraction(s.pair_right)
+    );
+    let _ = writeln!(out, "parameters within 10 %:     {}", fraction(s.params_within_10pct));
+    let _ = writeln!(out, "parameters within 15 %:     {}", fraction(s.params_within_15pct));
+    let _ = writeln!(out, "\nparameter error (named right)    median      max");
+    for (k, m) in &s.median_param_error {
+        let _ = writeln!(
+            out,
+            "{k:>28} {:>9.1} % {:>7.1} %",
+            100.0 * m,
+            100.0 * s.max_param_error.get(k).copied().unwrap_or(0.0)
+        );
+    }
+    let _ = writeln!(
+        out,
+        "\nheld-out shrink (cases with an effect, mean): impact energy {:.2} % → {:.2} %, frequency {:.2} % → {:.2} %",
+        s.energy_error_before, s.energy_error_after, s.frequency_error_before, s.frequency_error_after
+    );
+    let _ = writeln!(
+        out,
+        "held-out impact energy error after, median over cases with an effect: {:.2} %",
+        s.energy_error_after_median
+    );
+    let _ = writeln!(out, "mean diagnosis time per case: {:.2} s", s.mean_diagnose_s);
+    let (wf, wn) = s.wrong_names_flagged;
+    let (rf, rn) = s.right_names_flagged;
+    let _ = writeln!(
+        out,
+        "named an effect not hidden: {wn} cases, {wf} of them flagged confusable; named right: {rn} cases, {rf} flagged"
+    );
+    let ((ar, an), (br, bn)) = (s.floor_above, s.floor_below);
+    let _ = writeln!(
+        out,
+        "unseen single effects against the detection floor their diagnosis reported: at or beyond it {ar} of {an} named right, below it {br} of {bn}"
+    );
+    let _ = writeln!(
+        out,
+        "refitted model worse than nominal on the held-out data (a caution in the report): {} of {} cases",
+        s.cautioned,
+        s.cases.len()
+    );
+    misnamed(&mut out, s);
+    out
+}
+
+/// The cases named wrong, with what each was flagged confusable with.
+fn misnamed(out: &mut String, s: &BenchSummary) {
+    use std::fmt::Write as _;
+    let wrong: Vec<&CaseResult> = s.cases.iter().filter(|c| !c.correct).collect();
+    if !wrong.is_empty() {
+        let _ = writeln!(out, "\nmisnamed cases:");
+        for c in wrong {
+            let _ = writeln!(
+                out,
+                "  case {:>3}: hidden {:?}, named {:?}{}",
+                c.index,
+                c.hidden.names(),
+                if c.named.is_empty() {
+                    vec!["none".to_string()]
+                } else {
+                    c.named.clone()
+                },
+                if c.confusable_with.is_empty() {
+                    String::new()
+                } else {
+                    format!(", confusable with {:?}", c.confusable_with)
+                }
+            );
+        }
+    }
+}

@@ -1,0 +1,133 @@
+//! The diagnosis: where the gap lies, which catalogued effect explains it,
+//! and how far it shrinks on data the fit did not see.
+//!
+//! Statistics. Each operating point contributes the mean of its fit cycles'
+//! features; a feature's variance is its cycle-to-cycle variance over the
+//! number of cycles plus a **model floor**: the nominal model is never the
+//! hammer (its parameters are known to a few percent), and a gap below that
+//! floor is no evidence. An effect's score is a BIC difference on these
+//! per-cycle features, χ²_nominal − χ²_effect − k·ln(cycles): samples within
+//! a cycle are correlated, so raw samples would overstate the evidence.
+//!
+//! This module is the pipeline's entry point and its public vocabulary
+//! (inputs, options, outcome); the stages live in `pipeline`, the
+//! report's schema in [`super::report`], the statistics in `fitset`.
+
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use super::features::pressure_floor;
+pub use super::gap::PointWaves;
+use super::model::ModelRunner;
+use super::pipeline::{floor, group, held_out, nominal, rank, reference, where_};
+use hammer_sim::effects::EFFECT_NAMES;
+use hammer_sim::SimConfig;
+
+pub use super::features::extractor_for;
+pub use super::input::{DiagnoseError, MeasuredInput, Progress};
+pub use super::options::{Floors, Options};
+pub use super::report::{
+    EffectResult, FittedParam, InputInfo, ModelForm, ModelFreeStat, PointShrink, Recalibration, Remainder, Report,
+    Shrink, Verdict, WhereCell,
+};
+
+#[derive(Debug, Clone)]
+pub struct Outcome {
+    pub report: Report,
+    pub waves: Vec<PointWaves>,
+}
+
+/// The diagnosis of `inputs` against the nominal model `base`: the stages
+/// group → nominal → rank → held-out → where, in that order (each needs the
+/// one before), then the report assembled from their results.
+pub fn diagnose(
+    inputs: &[MeasuredInput],
+    base: &SimConfig,
+    opts: &Options,
+    progress: Progress,
+) -> Result<Outcome, DiagnoseError> {
+    diagnose_against(inputs, &[], base, opts, progress)
+}
+
+/// [`diagnose`] of what changed since `references`, records of the same
+/// hammer when it was known sound (one at least at every operating point
+/// of `inputs`; none: [`diagnose`]). The model's form error is common to
+/// both records and cancels; see [`super::pipeline::reference`].
+pub fn diagnose_against(
+    inputs: &[MeasuredInput],
+    references: &[MeasuredInput],
+    base: &SimConfig,
+    opts: &Options,
+    progress: Progress,
+) -> Result<Outcome, DiagnoseError> {
+    let started = std::time::Instant::now();
+    if inputs.is_empty() {
+        return Err(DiagnoseError::NoInput);
+    }
+    let mut extractor = extractor_for(base);
+    let all = || inputs.iter().chain(references);
+    let rear: Vec<&[f64]> = all().map(|i| i.trace.p_rear_pa.as_slice()).collect();
+    let front: Vec<&[f64]> = all().map(|i| i.trace.p_front_pa.as_slice()).collect();
+    extractor.pressure_floor_pa = [pressure_floor(&rear), pressure_floor(&front)];
+    let runner = ModelRunner::new(base.clone(), extractor);
+    let mut grouped = group::group(inputs, &runner.extractor)?;
+    let total_steps = grouped.points.len() + EFFECT_NAMES.len() + 3;
+    let done = AtomicUsize::new(0);
+    let step = |what: &str| {
+        let d = done.fetch_add(1, Ordering::Relaxed) + 1;
+        progress(d.min(total_steps), total_steps, what);
+    };
+    progress(0, total_steps, "nominal model");
+    let nominal = nominal::nominal(&grouped.points, &runner, opts, &step)?;
+    let mut reference_infos = Vec::new();
+    if !references.is_empty() {
+        let (baselines, infos) = reference::baselines(references, &runner.extractor)?;
+        reference::transplant(&mut grouped.points, &nominal.features, &baselines)?;
+        reference_infos = infos;
+    }
+    let points = &grouped.points;
+    // Against a reference the model's form error has cancelled: what the
+    // nominal model misses is the change, and a form factor measured on it
+    // would weigh the effects down by their own size.
+    let fit_opts = Options {
+        model_form: opts.model_form && references.is_empty(),
+        ..opts.clone()
+    };
+    let (fs, model_form) = nominal::fit_set(points, &nominal, &runner, &fit_opts);
+    let ranking = rank::rank(&fs, opts, &step);
+    let detection_floors = floor::floors(&fs, &ranking, opts);
+    step("detection floors");
+
+    let models = held_out::models(&fs, &nominal.bars, ranking.verdict.as_ref(), opts);
+    step("held-out check");
+    let shrink = held_out::shrink(points, &nominal.features, &models);
+    let located = where_::locate(inputs, &grouped, &nominal, &models, base, opts);
+    let recalibration = held_out::recalibration(base, &models, opts.nominal_uncertainty);
+
+    let simulations = fs.simulations() + models.simulations();
+    Ok(Outcome {
+        report: Report {
+            tool: format!("hammer diagnose {}", env!("CARGO_PKG_VERSION")),
+            inputs: grouped.infos,
+            references: reference_infos,
+            fit_points: fs.bars(),
+            where_: located.where_,
+            verdict: ranking.verdict_report(),
+            effects: ranking.effects,
+            pairs: ranking.pairs,
+            recalibration,
+            remainder: located.remainder,
+            model_form,
+            model_free: fs.model_free_stats(),
+            chambers: fs.chamber_stats(),
+            detection_floors,
+            shrink,
+            chi2_nominal: ranking.chi2_nominal,
+            features_compared: ranking.features_compared,
+            fit_cycles: fs.fit_cycles(),
+            options: opts.clone(),
+            simulations,
+            elapsed_s: started.elapsed().as_secs_f64(),
+        },
+        waves: located.waves,
+    })
+}

@@ -1,0 +1,452 @@
+//! The fit set: the fit points' measured features, their weights (floors,
+//! model-form inflation) and the nuisance parameters' sensitivities, shared
+//! by every effect's fit; and the recalibration of the nominal parameters.
+//!
+//! One place owns the statistics (see [`super::engine`]'s docs) so every
+//! stage weighs a residual the same way: the ranking's χ², the evidence and
+//! the recalibration all go through [`FitSet::residuals`] or its whitening.
+
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use super::features::{
+    feature_name, wave_index, wave_of, Summary, BINS, CHAMBER_FEATURES, ENERGY, FRONT_AREA, FRONT_EXPONENT, FRONT_FEED,
+    F_BACKHAUL, F_STROKE, GAIN_FRONT, GAIN_REAR, N_FEATURES, PERIOD, REAR_AREA, REAR_EXPONENT, REAR_FEED, VISCOUS,
+    WAVE_SIGNALS, ZERO_SHIFT_SQ,
+};
+use super::model::{Candidate, ModelRunner, NUISANCE};
+use super::options::Floors;
+use super::parallel::parallel;
+use super::report::ModelFreeStat;
+use hammer_sim::run::TruthTrace;
+
+/// The fit set's data and its weights, shared by every effect's fit.
+pub(crate) struct FitSet<'a> {
+    pub(crate) runner: &'a ModelRunner,
+    pub(crate) points: Vec<(f64, Summary, Vec<f64>)>, // bar, summary, sigma
+    pub(crate) nominal_truth: Vec<TruthTrace>,
+    /// The nominal model's features at each fit point.
+    pub(crate) nominal_features: Vec<Vec<f64>>,
+    /// Lowest and highest supply pressure of the fit set, bar.
+    pub(crate) pressures: (f64, f64),
+    pub(crate) distinct: usize,
+    pub(crate) sims: AtomicUsize,
+    /// Whitened sensitivities of the fit features to each nuisance parameter
+    /// (per unit of its prior standard deviation), concatenated over points.
+    pub(crate) nuisance: Vec<Vec<f64>>,
+    /// The measurement was read as a change from the hammer's own reference
+    /// record: the chamber characteristics' change is then evidence of its
+    /// own (the form error cancelled), as the force balance is always.
+    pub(crate) against_reference: bool,
+}
+
+impl FitSet<'_> {
+    /// The supply pressures of the fit points, bar.
+    pub(crate) fn bars(&self) -> Vec<f64> {
+        self.points.iter().map(|p| p.0).collect()
+    }
+
+    /// Measured cycles behind the fit set's means.
+    pub(crate) fn fit_cycles(&self) -> usize {
+        self.points.iter().map(|p| p.1.cycles).sum()
+    }
+
+    /// ln of the measured cycles: the BIC's price of one parameter (the
+    /// features are per-cycle means; counting samples would overstate the
+    /// evidence).
+    pub(crate) fn ln_cycles(&self) -> f64 {
+        (self.fit_cycles().max(2) as f64).ln()
+    }
+
+    /// Simulations run so far on the fit set's account.
+    pub(crate) fn simulations(&self) -> usize {
+        self.sims.load(Ordering::Relaxed)
+    }
+
+    /// Mean of feature `j` over the fit points.
+    pub(crate) fn avg(&self, j: usize) -> f64 {
+        self.points.iter().map(|p| p.1.mean[j]).sum::<f64>() / self.points.len().max(1) as f64
+    }
+
+    /// Mean of feature `j` at the fit point at `bar` (0 without one).
+    pub(crate) fn mean_at(&self, bar: f64, j: usize) -> f64 {
+        self.points
+            .iter()
+            .find(|p| (p.0 - bar).abs() < 1e-9)
+            .map_or(0.0, |p| p.1.mean[j])
+    }
+
+    /// Mean of feature `j` over the fit points and its standard error.
+    pub(crate) fn mean_se(&self, j: usize) -> (f64, f64) {
+        let n = self.points.len().max(1) as f64;
+        let m = self.points.iter().map(|p| p.1.mean[j]).sum::<f64>() / n;
+        let se = (self.points.iter().map(|p| p.2[j] * p.2[j]).sum::<f64>()).sqrt() / n;
+        (m, se)
+    }
+
+    /// The measurement's feature `j` against the nominal model's, over the
+    /// fit points: the mean difference and its standard error.
+    pub(crate) fn off_nominal(&self, j: usize) -> (f64, f64) {
+        let diffs: Vec<f64> = self
+            .points
+            .iter()
+            .zip(&self.nominal_features)
+            .map(|(p, nom)| p.1.mean[j] - nom[j])
+            .filter(|x| x.is_finite())
+            .collect();
+        let d = diffs.iter().sum::<f64>() / diffs.len().max(1) as f64;
+        (d, self.mean_se(j).1)
+    }
+
+    /// [`Self::off_nominal`] in standard errors; `None` without an error to weigh it by.
+    pub(crate) fn off_nominal_z(&self, j: usize) -> Option<f64> {
+        let (d, se) = self.off_nominal(j);
+        (se > 0.0).then(|| d / se)
+    }
+
+    /// The force balance's quantities against the nominal model's.
+    pub(crate) fn model_free_stats(&self) -> Vec<ModelFreeStat> {
+        self.stats(&MODEL_FREE)
+    }
+
+    /// The chamber characteristics against the nominal model's (against a
+    /// reference record: their change since it, on the model's values).
+    pub(crate) fn chamber_stats(&self) -> Vec<ModelFreeStat> {
+        self.stats(&CHAMBER_FEATURES)
+    }
+
+    /// Features `which` against the nominal model's, over the fit points.
+    fn stats(&self, which: &[usize]) -> Vec<ModelFreeStat> {
+        which
+            .iter()
+            .map(|&j| {
+                let (d, se) = self.off_nominal(j);
+                let nominal = self.nominal_features.iter().map(|f| f[j]).sum::<f64>() / self.points.len().max(1) as f64;
+                ModelFreeStat {
+                    feature: feature_name(j),
+                    measured: nominal + d,
+                    nominal,
+                    se,
+                    z: if se > 0.0 { d / se } else { 0.0 },
+                }
+            })
+            .collect()
+    }
+
+    pub(crate) fn residuals(&self, cand: &Candidate) -> Option<Vec<f64>> {
+        let mut r = Vec::with_capacity(self.points.len() * N_FEATURES);
+        for ((bar, s, sigma), truth) in self.points.iter().zip(&self.nominal_truth) {
+            if cand.has_physics() {
+                self.sims.fetch_add(1, Ordering::Relaxed);
+            }
+            let m = self.runner.features(*bar, cand, Some(truth))?;
+            for j in 0..N_FEATURES {
+                r.push(residual(j, m[j], s.mean[j], sigma[j]));
+            }
+        }
+        Some(self.profile(r))
+    }
+
+    /// Profiles the nuisance parameters out of whitened residuals `r`: the
+    /// linearised model m + J·δ with prior δ ~ N(0, 1) is fitted in closed
+    /// form, and the residual plus the prior's terms returned.
+    pub(crate) fn profile(&self, mut r: Vec<f64>) -> Vec<f64> {
+        let k = self.nuisance.len();
+        if k == 0 {
+            return r;
+        }
+        let (a, b) = prior_normal_equations(&self.nuisance, &r, &vec![0.0; k]);
+        let Some(delta) = super::fit::solve(a, b) else {
+            return r;
+        };
+        for (i, col) in self.nuisance.iter().enumerate() {
+            for (x, c) in r.iter_mut().zip(col) {
+                *x += delta[i] * c;
+            }
+        }
+        r.extend(delta);
+        r
+    }
+
+    /// The model-form factor of every group of model-based features: the
+    /// RMS of `cand`'s whitened, profiled residual over the group, at least 1.
+    pub(crate) fn model_form_factors(&self, cand: &Candidate) -> Vec<f64> {
+        let mut sum = [0.0; MODEL_FORM_GROUPS];
+        let mut n = [0usize; MODEL_FORM_GROUPS];
+        if let Some(r) = self.residuals(cand) {
+            for (i, x) in r.iter().take(self.points.len() * N_FEATURES).enumerate() {
+                if let Some(g) = model_form_group(i % N_FEATURES) {
+                    sum[g] += x * x;
+                    n[g] += 1;
+                }
+            }
+        }
+        (0..MODEL_FORM_GROUPS)
+            .map(|g| (sum[g] / n[g].max(1) as f64).sqrt().max(1.0))
+            .collect()
+    }
+
+    /// Divides each model-based feature's weight by its group's factor.
+    pub(crate) fn inflate(&mut self, factors: &[f64]) {
+        for (p, point) in self.points.iter_mut().enumerate() {
+            for j in 0..N_FEATURES {
+                if let Some(g) = model_form_group(j) {
+                    point.2[j] *= factors[g];
+                    for col in &mut self.nuisance {
+                        col[p * N_FEATURES + j] /= factors[g];
+                    }
+                }
+            }
+        }
+    }
+
+    /// The nominal parameters refitted with `cand`'s effects held:
+    /// Gauss–Newton on the simulator itself, re-linearised at every step,
+    /// each parameter's prior N(0, 1) in units of `h` of its nominal value.
+    /// At a real hammer's ±20 % the model is far from linear, so the
+    /// profile's one linearisation at nominal would overshoot.
+    ///
+    /// `from`, if given, is a start (in prior standard deviations) tried
+    /// against nominal: the nominal model's own recalibration, from which a
+    /// model with an effect the force balance pinned is a few steps away,
+    /// where from nominal it may be more than three.
+    pub(crate) fn recalibrate(
+        &self,
+        cand: &Candidate,
+        h: f64,
+        steps: usize,
+        threads: usize,
+        from: Option<&[f64]>,
+    ) -> Option<Recalibrated> {
+        let k = NUISANCE.len();
+        let runner_at = |d: &[f64]| {
+            let mut r = self.runner.clone();
+            for (i, x) in d.iter().enumerate() {
+                *(NUISANCE[i].1)(&mut r.base) *= 1.0 + h * x;
+            }
+            r
+        };
+        let whitened = |d: &[f64]| -> Option<Vec<f64>> {
+            let r = runner_at(d);
+            let mut out = Vec::with_capacity(self.points.len() * N_FEATURES);
+            for (bar, s, sigma) in &self.points {
+                self.sims.fetch_add(1, Ordering::Relaxed);
+                let m = r.features(*bar, cand, None)?;
+                out.extend((0..N_FEATURES).map(|j| residual(j, m[j], s.mean[j], sigma[j])));
+            }
+            Some(out)
+        };
+        let cost = |r: &[f64], d: &[f64]| r.iter().chain(d).map(|x| x * x).sum::<f64>();
+        // Finite-difference step, in prior standard deviations.
+        const STEP: f64 = 0.25;
+        let mut delta = vec![0.0; k];
+        let mut r = whitened(&delta)?;
+        if let Some(start) = from.filter(|d| d.len() == k) {
+            if let Some(rs) = whitened(start) {
+                if cost(&rs, start) < cost(&r, &delta) {
+                    delta = start.to_vec();
+                    r = rs;
+                }
+            }
+        }
+        let mut sd = vec![1.0; k];
+        for _ in 0..steps {
+            let jobs: Vec<usize> = (0..k).collect();
+            let cols = parallel(threads, jobs, &|i| {
+                let mut d = delta.clone();
+                d[i] += STEP;
+                whitened(&d).map(|ri| ri.iter().zip(&r).map(|(a, b)| (a - b) / STEP).collect::<Vec<f64>>())
+            });
+            let cols: Vec<Vec<f64>> = cols
+                .into_iter()
+                .map(|c| c.unwrap_or_else(|| vec![0.0; r.len()]))
+                .collect();
+            let (a, b) = prior_normal_equations(&cols, &r, &delta);
+            sd = (0..k)
+                .map(|i| {
+                    let mut e = vec![0.0; k];
+                    e[i] = 1.0;
+                    super::fit::solve(a.clone(), e).map_or(1.0, |x| x[i].max(0.0).sqrt())
+                })
+                .collect();
+            let Some(mut step) = super::fit::solve(a.clone(), b.clone()) else {
+                break;
+            };
+            // A parameter at its bound that the step pushes further is held
+            // there, and the step solved for the others: clamped afterwards,
+            // it would be a step the linearisation never proposed.
+            let held: Vec<usize> = (0..k)
+                .filter(|&i| delta[i].abs() >= MAX_PRIOR_SDS && step[i] * delta[i] > 0.0)
+                .collect();
+            if !held.is_empty() {
+                let (mut a, mut b) = (a, b);
+                for &i in &held {
+                    for j in 0..k {
+                        a[i][j] = 0.0;
+                        a[j][i] = 0.0;
+                    }
+                    a[i][i] = 1.0;
+                    b[i] = 0.0;
+                }
+                let Some(s) = super::fit::solve(a, b) else { break };
+                step = s;
+            }
+            // Halve the step until the cost falls (at most five times).
+            let before = cost(&r, &delta);
+            let mut scale = 1.0;
+            let mut gain = None;
+            for _ in 0..5 {
+                let d: Vec<f64> = delta
+                    .iter()
+                    .zip(&step)
+                    .map(|(x, s)| (x + scale * s).clamp(-MAX_PRIOR_SDS, MAX_PRIOR_SDS))
+                    .collect();
+                if let Some(rn) = whitened(&d) {
+                    let after = cost(&rn, &d);
+                    if after < before {
+                        delta = d;
+                        r = rn;
+                        gain = Some(before - after);
+                        break;
+                    }
+                }
+                scale *= 0.5;
+            }
+            if gain.is_none_or(|g| g < CONVERGED * before) {
+                break;
+            }
+        }
+        Some(Recalibrated {
+            runner: runner_at(&delta),
+            delta,
+            sd,
+        })
+    }
+
+    /// What of `cand`'s effect no nominal parameter can absorb, in χ²
+    /// units of the fit set's weights: the nominal model's profiled χ²
+    /// against `cand`'s own simulated features, as if the hammer were the
+    /// model with that effect. The detection floors weigh an effect by it.
+    pub(crate) fn signature_chi2(&self, cand: &Candidate) -> Option<f64> {
+        let mut r = Vec::with_capacity(self.points.len() * N_FEATURES);
+        for (((bar, _, sigma), truth), nom) in self.points.iter().zip(&self.nominal_truth).zip(&self.nominal_features) {
+            self.sims.fetch_add(1, Ordering::Relaxed);
+            let m = self.runner.features(*bar, cand, Some(truth))?;
+            r.extend((0..N_FEATURES).map(|j| residual(j, nom[j], m[j], sigma[j])));
+        }
+        Some(self.profile(r).iter().map(|x| x * x).sum())
+    }
+
+    pub(crate) fn chi2(&self, cand: &Candidate) -> Option<f64> {
+        self.residuals(cand).map(|r| r.iter().map(|x| x * x).sum())
+    }
+}
+
+/// The Gauss–Newton step for whitened residuals `r` with Jacobian columns
+/// `cols` and a unit Gaussian prior on each parameter, taken from `at`:
+/// (JᵀJ + I)·step = −(Jᵀr + at). The profile (from 0) and the
+/// recalibration (from where it has got to) both solve it.
+pub(crate) fn prior_normal_equations(cols: &[Vec<f64>], r: &[f64], at: &[f64]) -> (Vec<Vec<f64>>, Vec<f64>) {
+    let dot = |x: &[f64], y: &[f64]| x.iter().zip(y).map(|(a, b)| a * b).sum::<f64>();
+    let k = cols.len();
+    let mut a = vec![vec![0.0; k]; k];
+    let mut b = vec![0.0; k];
+    for i in 0..k {
+        for j in 0..k {
+            a[i][j] = dot(&cols[i], &cols[j]);
+        }
+        a[i][i] += 1.0;
+        b[i] = -(dot(&cols[i], r) + at[i]);
+    }
+    (a, b)
+}
+
+/// The nominal model recalibrated for a candidate.
+pub(crate) struct Recalibrated {
+    pub(crate) runner: ModelRunner,
+    /// Each nuisance parameter's move and standard deviation, in prior standard deviations.
+    pub(crate) delta: Vec<f64>,
+    pub(crate) sd: Vec<f64>,
+}
+
+/// A recalibration stops at this many prior standard deviations: beyond,
+/// the parameter is no longer the hammer's but a stand-in for a form error.
+pub(crate) const MAX_PRIOR_SDS: f64 = 2.5;
+/// Gauss–Newton steps of a recalibration, at most. Three were too few on
+/// a hammer of another form: the structural benchmark's case 0 ended with
+/// the impact energy 21 % short at the fit points (valve damping at its
+/// bound, the valve's area not yet moved), eight closed it to 0.4 %.
+pub(crate) const RECALIBRATION_STEPS: usize = 8;
+/// A recalibration stops earlier once a step gains less than this share of
+/// the cost.
+const CONVERGED: f64 = 1e-3;
+/// Groups of model-based features whose weight the model's form limits:
+/// one per waveform. The period and the impact energy keep their floors
+/// (the recalibration must meet them), and the force balance's features
+/// are model-free.
+pub(crate) const MODEL_FORM_GROUPS: usize = WAVE_SIGNALS.len();
+
+pub(crate) fn model_form_group(feature: usize) -> Option<usize> {
+    wave_of(feature).map(|(signal, _)| signal)
+}
+
+pub(crate) fn model_form_group_name(g: usize) -> &'static str {
+    WAVE_SIGNALS[g]
+}
+
+/// Whether feature `j` counts in the fit's χ². The chamber characteristics
+/// do not: on hammers of other forms the rear feed's onset, the exponents
+/// and the feed areas move with every effect and with the form (the second
+/// family's rear feed can start 6 ms earlier under a valve delay that
+/// starts its front feed 1 ms later), and with the front feed's onset in
+/// the fit the paper's friction on such a hammer lost its held-out energy
+/// check; they are reported (`chambers` in report.json) and the front
+/// feed's change since a reference is a valve delay's evidence.
+pub(crate) fn in_fit(j: usize) -> bool {
+    !CHAMBER_FEATURES.contains(&j)
+}
+
+/// The force balance's features: model-free (see [`super::features`]).
+pub(crate) const MODEL_FREE: [usize; 6] = [F_STROKE, F_BACKHAUL, VISCOUS, GAIN_REAR, GAIN_FRONT, ZERO_SHIFT_SQ];
+
+/// Missing on the model side where the measurement has it: a clear miss.
+/// A feature the fit does not weigh ([`in_fit`]) counts nothing.
+pub(crate) fn residual(j: usize, model: f64, meas: f64, sigma: f64) -> f64 {
+    if !in_fit(j) {
+        return 0.0;
+    }
+    match (model.is_finite(), meas.is_finite() && sigma.is_finite() && sigma > 0.0) {
+        (true, true) => (model - meas) / sigma,
+        (false, true) => 5.0,
+        _ => 0.0,
+    }
+}
+
+pub(crate) fn sigmas(s: &Summary, nominal: &[f64], f: &Floors) -> Vec<f64> {
+    let n = s.cycles.max(1) as f64;
+    let mut wave_scale = [0.0; 4];
+    for (si, scale) in wave_scale.iter_mut().enumerate() {
+        let xs: Vec<f64> = (0..BINS)
+            .map(|b| nominal[wave_index(si, b)])
+            .filter(|x| x.is_finite())
+            .collect();
+        *scale = (xs.iter().map(|x| x * x).sum::<f64>() / xs.len().max(1) as f64).sqrt();
+    }
+    (0..N_FEATURES)
+        .map(|j| {
+            let floor = match j {
+                PERIOD => f.period_rel * nominal[PERIOD].abs(),
+                ENERGY => f.energy_rel * nominal[ENERGY].abs(),
+                F_STROKE | F_BACKHAUL => f.force_offset_n,
+                VISCOUS => f.viscous_n_s_per_m,
+                GAIN_REAR | GAIN_FRONT => f.gain,
+                ZERO_SHIFT_SQ => f.zero_shift_sq_m2ps4,
+                FRONT_FEED | REAR_FEED => f.feed_onset_s,
+                FRONT_EXPONENT | REAR_EXPONENT => f.closed_exponent,
+                FRONT_AREA | REAR_AREA => f.feed_area_rel * nominal[j].abs(),
+                _ => f.wave_rel * wave_scale[wave_of(j).map_or(0, |w| w.0)],
+            };
+            let sd = if s.sd[j].is_finite() { s.sd[j] } else { 0.0 };
+            (sd * sd / n + floor * floor).sqrt()
+        })
+        .collect()
+}

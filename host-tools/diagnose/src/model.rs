@@ -1,0 +1,149 @@
+//! The model side of the diagnosis: the nominal simulator plus candidate
+//! effects, read by the same feature extractor as the measurement.
+
+use super::effects::{diagnosis, pressure_reading_factors, shift_expected_features};
+use super::features::{summarize, Extractor, Signals, N_FEATURES};
+use super::fit::ParamSpec;
+pub use super::report::Candidate;
+use hammer_sim::effects::Effects;
+use hammer_sim::run::TruthTrace;
+use hammer_sim::{simulate_truth, SimConfig};
+
+/// E[u²] of the zero-shift magnitude factor u ~ U(0.5, 1.5) (`sim::sensor`).
+pub const ZERO_SHIFT_SQ_FACTOR: f64 = 1.0 + 1.0 / 12.0;
+
+/// The free parameters the diagnosis fits for an effect (see
+/// [`super::effects`]); none for an unknown name.
+pub fn free_params(name: &str, distinct_pressures: usize) -> Vec<ParamSpec> {
+    diagnosis(name).map_or_else(Vec::new, |d| d.free_params(distinct_pressures))
+}
+
+/// Writes fitted values `theta` of `name` into `effects`. `pressures` are the
+/// lowest and highest supply pressures of the fit set, bar.
+pub fn apply(effects: &mut Effects, name: &str, theta: &[f64], pressures: (f64, f64)) {
+    if let Some(d) = diagnosis(name) {
+        d.apply(effects, theta, pressures);
+    }
+}
+
+/// The catalogue parameters of an effect as they would go in a config file.
+pub fn catalogue_params(effects: &Effects, name: &str) -> serde_json::Value {
+    let v = serde_json::to_value(effects).unwrap_or_default();
+    v.get(name).cloned().unwrap_or(serde_json::Value::Null)
+}
+
+/// The nominal parameters a modeller knows only to a few percent (calibrated
+/// or estimated in docs/model.md): the diagnosis lets each of them move
+/// within a Gaussian prior rather than blame an effect for what they explain.
+/// Mass and piston areas are not among them: they are measured.
+pub const NUISANCE: [(&str, fn(&mut SimConfig) -> &mut f64); 9] = [
+    ("valve.full_open_area_m2", |c| &mut c.valve.full_open_area_m2),
+    ("valve.cd", |c| &mut c.valve.cd),
+    ("valve.damping_n_s_per_m", |c| &mut c.valve.damping_n_s_per_m),
+    ("valve.pilot_area_rear_m2", |c| &mut c.valve.pilot_area_rear_m2),
+    ("valve.pilot_area_front_m2", |c| &mut c.valve.pilot_area_front_m2),
+    ("hammer.outlet_cd", |c| &mut c.hammer.outlet_cd),
+    ("hammer.rear_dead_volume_m3", |c| &mut c.hammer.rear_dead_volume_m3),
+    ("hammer.front_dead_volume_m3", |c| &mut c.hammer.front_dead_volume_m3),
+    ("contact.restitution", |c| &mut c.contact.restitution),
+];
+
+/// Runs the model at operating points and reads it like a measurement.
+#[derive(Debug, Clone)]
+pub struct ModelRunner {
+    pub base: SimConfig,
+    pub extractor: Extractor,
+    /// Simulated time per run; the cycles after `settle_s` are averaged.
+    pub duration_s: f64,
+    pub settle_s: f64,
+}
+
+impl ModelRunner {
+    pub fn new(base: SimConfig, extractor: Extractor) -> Self {
+        Self {
+            base,
+            extractor,
+            duration_s: 0.45,
+            settle_s: 0.27,
+        }
+    }
+
+    pub fn config(&self, supply_bar: f64, effects: &Effects) -> SimConfig {
+        let mut c = self.base.clone();
+        c.supply.pressure_bar = supply_bar;
+        c.solver.duration_s = self.duration_s;
+        c.effects = effects.clone();
+        c
+    }
+
+    /// The ideal (noiseless) solution of the physical part of a candidate.
+    pub fn truth(&self, supply_bar: f64, cand: &Candidate) -> Option<TruthTrace> {
+        simulate_truth(&self.config(supply_bar, &cand.physics()))
+            .ok()
+            .map(|r| r.truth)
+    }
+
+    /// Mean steady features of the candidate at `supply_bar`; `nominal_truth`
+    /// is reused when the candidate has no physical effect.
+    pub fn features(&self, supply_bar: f64, cand: &Candidate, nominal_truth: Option<&TruthTrace>) -> Option<Vec<f64>> {
+        let owned;
+        let truth = match nominal_truth {
+            Some(t) if !cand.has_physics() => t,
+            _ => {
+                owned = self.truth(supply_bar, cand)?;
+                &owned
+            }
+        };
+        self.features_of_truth(truth, &cand.effects, supply_bar)
+    }
+
+    /// Whether the measurement's transducers read the model's pressures as
+    /// they are (no gain effect, no floor): then they need no copy.
+    fn reads_as_is(&self, effects: &Effects) -> bool {
+        pressure_reading_factors(effects) == (1.0, 1.0)
+            && self.extractor.pressure_floor_pa.iter().all(|f| !f.is_finite())
+    }
+
+    /// A model's pressures as the measurement's transducers read them: the
+    /// candidate's sensor gains, then the transducers' floor. Every model
+    /// signal compared with the measurement goes through here.
+    pub fn read_pressures(&self, effects: &Effects, p_rear_pa: &mut [f64], p_front_pa: &mut [f64]) {
+        let (f1, f2) = pressure_reading_factors(effects);
+        let [floor1, floor2] = self.extractor.pressure_floor_pa;
+        p_rear_pa.iter_mut().for_each(|p| *p = (*p * f1).max(floor1));
+        p_front_pa.iter_mut().for_each(|p| *p = (*p * f2).max(floor2));
+    }
+
+    /// Features of a simulated solution at `supply_bar` seen through the
+    /// candidate's sensor effects.
+    pub fn features_of_truth(&self, truth: &TruthTrace, effects: &Effects, supply_bar: f64) -> Option<Vec<f64>> {
+        let mut read;
+        let (p1, p2): (&[f64], &[f64]) = if self.reads_as_is(effects) {
+            (&truth.p_rear_pa, &truth.p_front_pa)
+        } else {
+            read = (truth.p_rear_pa.clone(), truth.p_front_pa.clone());
+            self.read_pressures(effects, &mut read.0, &mut read.1);
+            (&read.0, &read.1)
+        };
+        let s = Signals {
+            dt_s: truth.dt_s,
+            p_rear_pa: p1,
+            p_front_pa: p2,
+            accel_mps2: &truth.accel_mps2,
+            supply_pa: supply_bar * 1e5,
+        };
+        let cycles: Vec<_> = self
+            .extractor
+            .cycles(&s)
+            .into_iter()
+            .filter(|c| c.t_impact_s >= self.settle_s)
+            .collect();
+        if cycles.is_empty() {
+            return None;
+        }
+        let mut mean = summarize(&cycles).mean;
+        shift_expected_features(effects, &mut mean);
+        debug_assert_eq!(mean.len(), N_FEATURES);
+        Some(mean)
+    }
+}

@@ -1,0 +1,142 @@
+//! The diagnosis' tunables: the model floors and the decision thresholds.
+//! Apart from the engine because every stage reads them and `report.json`
+//! records them, so they sit below both.
+
+use serde::{Deserialize, Serialize};
+
+/// Model-floor standard deviations (see the module docs), calibrated on
+/// no-effect controls of `hammer diagnose-bench` whose nominal parameters
+/// were jittered (docs/diagnosis.md).
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
+pub struct Floors {
+    pub period_rel: f64,
+    pub energy_rel: f64,
+    pub force_offset_n: f64,
+    pub viscous_n_s_per_m: f64,
+    pub gain: f64,
+    pub zero_shift_sq_m2ps4: f64,
+    /// Relative to each waveform's RMS over the cycle.
+    pub wave_rel: f64,
+    /// The chamber characteristics: feed onsets, closed-phase exponents,
+    /// feed areas (relative).
+    #[serde(default = "default_feed_onset_floor_s")]
+    pub feed_onset_s: f64,
+    #[serde(default = "default_closed_exponent_floor")]
+    pub closed_exponent: f64,
+    #[serde(default = "default_feed_area_floor_rel")]
+    pub feed_area_rel: f64,
+}
+
+fn default_feed_onset_floor_s() -> f64 {
+    Floors::default().feed_onset_s
+}
+
+fn default_closed_exponent_floor() -> f64 {
+    Floors::default().closed_exponent
+}
+
+fn default_feed_area_floor_rel() -> f64 {
+    Floors::default().feed_area_rel
+}
+
+impl Default for Floors {
+    fn default() -> Self {
+        Self {
+            period_rel: 0.002,
+            energy_rel: 0.003,
+            force_offset_n: 0.3,
+            viscous_n_s_per_m: 0.2,
+            gain: 0.002,
+            zero_shift_sq_m2ps4: 9.0,
+            wave_rel: 0.005,
+            // How far the measured onset falls from its truth on a sound
+            // hammer, RMS (docs/estimator.md): the same calculation on the
+            // model's noise-free solution and on a measurement differs by it.
+            feed_onset_s: 50e-6,
+            closed_exponent: 0.002,
+            feed_area_rel: 0.01,
+        }
+    }
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Options {
+    pub floors: Floors,
+    /// Relative standard deviation of the nominal parameters the model is
+    /// unsure of ([`crate::model::NUISANCE`]); 0 trusts them exactly.
+    pub nominal_uncertainty: f64,
+    pub max_iterations: usize,
+    /// An effect the force balance cannot see must score above this (BIC
+    /// units) to be named; one it sees needs a positive score and
+    /// [`Options::min_model_free_z`].
+    pub min_score: f64,
+    /// An effect the force balance sees (friction, a gain error, a zero
+    /// shift) is named only if its signature there stands this many standard
+    /// errors off the nominal model: the force balance needs no valve or port
+    /// model, so the model's form error cannot fake it, and however much of
+    /// the gap has other causes, it does not hide it.
+    #[serde(default = "default_min_model_free_z")]
+    pub min_model_free_z: f64,
+    /// An effect the force balance cannot see (leakage, valve delay, heat
+    /// transfer, a supply restriction) has only the model-based features as
+    /// evidence, and they carry the model's form error: it must explain at
+    /// least this fraction of the nominal χ², because a smooth form error
+    /// lends any effect a little of its shape.
+    pub min_explained: f64,
+    /// A pair's second effect, unseen by the force balance, must explain
+    /// this fraction of what the first leaves: after the first effect the
+    /// rest is mostly noise and form error, whose shape any effect fits a little.
+    #[serde(default = "default_min_explained_pair")]
+    pub min_explained_pair: f64,
+    /// A named effect the force balance cannot see is flagged confusable
+    /// with each other such effect scoring within this many BIC units of it:
+    /// leakage, heat transfer and a supply restriction lower the same
+    /// pressures (the isolability matrix), and on a hammer of another form
+    /// the last few percent that part them are within the form error. Set
+    /// on the structural benchmark's calibration seed (docs/diagnosis.md).
+    #[serde(default = "default_confusable_margin")]
+    pub confusable_margin: f64,
+    /// Pairs are tried when the best single effect leaves a reduced χ² above this.
+    pub pair_residual: f64,
+    /// How many runners-up are tried as the second effect of a pair.
+    pub pair_candidates: usize,
+    pub threads: usize,
+    /// Keep the waveforms for the figures.
+    pub figures: bool,
+    /// Estimate the model-form error of the model-based features from the
+    /// recalibrated nominal model's residual (see [`crate::report::ModelForm`]); off, the
+    /// floors alone weigh them (a model whose form is the hammer's).
+    pub model_form: bool,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Self {
+            floors: Floors::default(),
+            nominal_uncertainty: 0.2,
+            max_iterations: 12,
+            min_score: 20.0,
+            min_model_free_z: default_min_model_free_z(),
+            min_explained: 0.4,
+            min_explained_pair: default_min_explained_pair(),
+            confusable_margin: default_confusable_margin(),
+            pair_residual: 2.0,
+            pair_candidates: 5,
+            threads: std::thread::available_parallelism().map_or(2, |n| n.get()),
+            figures: true,
+            model_form: true,
+        }
+    }
+}
+
+fn default_min_model_free_z() -> f64 {
+    3.0
+}
+
+fn default_confusable_margin() -> f64 {
+    20.0
+}
+
+fn default_min_explained_pair() -> f64 {
+    0.5
+}

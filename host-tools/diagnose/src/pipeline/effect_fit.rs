@@ -1,0 +1,223 @@
+//! One fit of one effect (or a pair) to the fit set: Levenberg–Marquardt on
+//! the catalogue's free parameters, scored by BIC against the nominal model,
+//! with the evidence a person can check (the force balance's signature and
+//! where the gap closed).
+
+use std::collections::BTreeMap;
+use std::sync::atomic::Ordering;
+
+use crate::effects::diagnosis;
+use crate::features::{feature_name, wave_of, Extractor, BINS, N_FEATURES, WAVE_SIGNALS};
+use crate::fit::{levenberg_marquardt, FitResult};
+use crate::fitset::{residual, FitSet};
+use crate::model::{apply, catalogue_params, free_params, Candidate};
+use crate::options::Options;
+use crate::report::{EffectResult, FittedParam};
+use crate::stages::Stage;
+use hammer_sim::run::TruthTrace;
+
+/// Start values from what the measurement shows directly.
+fn start_values(fs: &FitSet, name: &str) -> Vec<f64> {
+    diagnosis(name).map_or_else(Vec::new, |d| d.start_values(fs))
+}
+
+/// Fits `names` together (one or two effects); `init` overrides start values.
+pub(crate) fn fit_effects(
+    fs: &FitSet,
+    names: &[&str],
+    init: &[FittedParam],
+    chi2_nominal: f64,
+    ln_n: f64,
+    opts: &Options,
+) -> Option<EffectResult> {
+    let mut specs = Vec::new();
+    let mut theta0 = Vec::new();
+    let mut owner = Vec::new();
+    for (k, name) in names.iter().enumerate() {
+        let sp = free_params(name, fs.distinct);
+        let st = start_values(fs, name);
+        for (s, v) in sp.iter().zip(st) {
+            let v = init
+                .iter()
+                .find(|p| p.key == format!("{name}.{}", s.key))
+                .map_or(v, |p| p.value);
+            specs.push(*s);
+            theta0.push(v);
+            owner.push(k);
+        }
+    }
+    let build = |theta: &[f64]| {
+        let mut c = Candidate::default();
+        for (k, name) in names.iter().enumerate() {
+            let t: Vec<f64> = theta
+                .iter()
+                .zip(&owner)
+                .filter(|(_, &o)| o == k)
+                .map(|(x, _)| *x)
+                .collect();
+            apply(&mut c.effects, name, &t, fs.pressures);
+        }
+        c
+    };
+    let sims_before = fs.sims.load(Ordering::Relaxed);
+    let fit: FitResult = levenberg_marquardt(&specs, &theta0, opts.max_iterations, &mut |t| fs.residuals(&build(t)))?;
+    let cand = build(&fit.theta);
+    let k = specs.len() as f64;
+    let score = chi2_nominal - fit.chi2 - k * ln_n;
+    let explained = if chi2_nominal > 0.0 {
+        ((chi2_nominal - fit.chi2) / chi2_nominal).max(0.0)
+    } else {
+        0.0
+    };
+    let mut params = serde_json::Map::new();
+    for name in names {
+        params.insert(name.to_string(), catalogue_params(&cand.effects, name));
+    }
+    let fitted = specs
+        .iter()
+        .zip(&owner)
+        .zip(fit.theta.iter().zip(&fit.sd))
+        .map(|((s, &o), (&v, &sd))| FittedParam {
+            key: format!("{}.{}", names[o], s.key),
+            value: v,
+            sd,
+        })
+        .collect();
+    let evidence = evidence(fs, names, &cand);
+    // A pair is seen by the force balance as well as its clearer member.
+    let model_free_z = names
+        .iter()
+        .filter_map(|n| diagnosis(n).and_then(|d| d.model_free_z(fs)))
+        .reduce(f64::max);
+    Some(EffectResult {
+        name: names.join("+"),
+        params: if names.len() == 1 {
+            params.remove(names[0]).unwrap_or_default()
+        } else {
+            serde_json::Value::Object(params)
+        },
+        fitted,
+        chi2: fit.chi2,
+        score,
+        explained_fraction: explained,
+        evidence,
+        model_free_z,
+        simulations: fs.sims.load(Ordering::Relaxed) - sims_before,
+        candidate: cand,
+    })
+}
+
+/// What in the measurement the effect matched: its signature in the force
+/// balance, and the features whose gap it closed most.
+fn evidence(fs: &FitSet, names: &[&str], cand: &Candidate) -> Vec<String> {
+    let mut out: Vec<String> = names
+        .iter()
+        .filter_map(|name| diagnosis(name).and_then(|d| d.evidence(fs)))
+        .collect();
+    // The features whose gap the candidate closed most, grouped by signal and stage.
+    let nominal = Candidate::default();
+    let mut gains: BTreeMap<String, f64> = BTreeMap::new();
+    let stages_of_bins = fs
+        .nominal_truth
+        .first()
+        .map(|t| bin_stages(t, &fs.runner.base.hammer, &fs.runner.extractor));
+    for ((bar, s, sigma), truth) in fs.points.iter().zip(&fs.nominal_truth) {
+        let (Some(m0), Some(m1)) = (
+            fs.runner.features(*bar, &nominal, Some(truth)),
+            fs.runner.features(*bar, cand, Some(truth)),
+        ) else {
+            continue;
+        };
+        for j in 0..N_FEATURES {
+            let r0 = residual(j, m0[j], s.mean[j], sigma[j]);
+            let r1 = residual(j, m1[j], s.mean[j], sigma[j]);
+            let label = match (wave_of(j), &stages_of_bins) {
+                (Some((si, b)), Some(st)) => format!("{} in {}", WAVE_SIGNALS[si], st[b].name()),
+                _ => feature_name(j),
+            };
+            *gains.entry(label).or_default() += r0 * r0 - r1 * r1;
+        }
+    }
+    let mut g: Vec<(String, f64)> = gains.into_iter().filter(|(_, v)| *v > 0.0).collect();
+    g.sort_by(|a, b| b.1.total_cmp(&a.1));
+    let total: f64 = g.iter().map(|x| x.1).sum();
+    if total > 0.0 {
+        let top: Vec<String> = g
+            .iter()
+            .take(4)
+            .map(|(k, v)| format!("{k} ({:.0} %)", 100.0 * v / total))
+            .collect();
+        out.push(format!("closes the gap mostly in: {}", top.join(", ")));
+    }
+    out
+}
+
+/// The dominant stage of each waveform bin of the nominal cycle.
+fn bin_stages(truth: &TruthTrace, hammer: &hammer_sim::params::HammerParams, extractor: &Extractor) -> Vec<Stage> {
+    let edges = crate::stages::Edges {
+        front_outlet_m: hammer.front_outlet_opens_m,
+        rear_outlet_m: hammer.rear_outlet_opens_m,
+    };
+    // The last cycle of the solution, its impacts found as the measurement's are.
+    let signals = crate::features::Signals {
+        dt_s: truth.dt_s,
+        p_rear_pa: &truth.p_rear_pa,
+        p_front_pa: &truth.p_front_pa,
+        accel_mps2: &truth.accel_mps2,
+        supply_pa: f64::NAN,
+    };
+    let imps: Vec<usize> = extractor
+        .impacts(&signals)
+        .iter()
+        .map(|t| (t / truth.dt_s).ceil() as usize)
+        .collect();
+    let (i0, i1) = match imps.len() {
+        n if n >= 2 => (imps[n - 2], imps[n - 1].min(truth.len())),
+        _ => return vec![Stage::StrokeIntake; BINS],
+    };
+    let n = i1 - i0;
+    (0..BINS)
+        .map(|b| {
+            let mut count: BTreeMap<Stage, usize> = BTreeMap::new();
+            for k in (b * n / BINS)..((b + 1) * n / BINS) {
+                let i = i0 + k;
+                let st = crate::stages::stage_of(
+                    &edges,
+                    truth.x_m[i],
+                    truth.v_mps[i],
+                    k as f64 * truth.dt_s,
+                    crate::gap::IMPACT_WINDOW_S,
+                );
+                *count.entry(st).or_default() += 1;
+            }
+            count
+                .into_iter()
+                .max_by_key(|x| x.1)
+                .map_or(Stage::StrokeIntake, |x| x.0)
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::pipeline::tests::nominal_runner;
+    use hammer_sim::simulate_truth;
+
+    /// The nominal cycle's bins, from the impact on, run through the cycle
+    /// in its physical order: the backhaul before the stroke, the stroke
+    /// into the next impact, and no stage of the backhaul once the stroke began.
+    #[test]
+    fn bins_follow_the_cycle() {
+        let runner = nominal_runner();
+        let run = simulate_truth(&runner.config(4.0, &hammer_sim::effects::Effects::default())).unwrap();
+        let st = bin_stages(&run.truth, &runner.base.hammer, &runner.extractor);
+        assert_eq!(st.len(), BINS);
+        let stroke = |s: &Stage| matches!(s, Stage::StrokeIntake | Stage::StrokeClosed | Stage::StrokeVenting);
+        assert!(!stroke(&st[0]), "{st:?}");
+        assert!(stroke(&st[BINS - 1]), "{st:?}");
+        let first_stroke = st.iter().position(stroke).unwrap();
+        assert!(st[first_stroke..].iter().all(stroke), "{st:?}");
+        assert!(st[..first_stroke].contains(&Stage::BackhaulFed), "{st:?}");
+    }
+}

@@ -1,0 +1,65 @@
+//! The diagnosis as a pipeline of named stages, each a function of the one
+//! before's result (see [`crate`] for the map):
+//!
+//! 1. [`group`]: inputs → operating points, cycles split into fit and held out;
+//!    [`reference`] (with reference records): each point read as a change
+//!    from the same hammer's earlier record, moved onto the nominal model;
+//! 2. [`nominal`]: the nominal model at every point → the fit set;
+//! 3. [`rank`]: every effect fitted ([`effect_fit`]) and ranked → the verdict;
+//!    [`floor`]: how large each unseen effect must be to be named here;
+//! 4. [`held_out`]: the verdict's model against the held-out data → the shrink;
+//! 5. [`where_`]: the gap and its remainder by signal × stage → where to look.
+//!
+//! [`crate::engine::diagnose`] runs them in this order and
+//! assembles the report; a stage's unit test runs it alone.
+
+pub(crate) mod effect_fit;
+pub(crate) mod floor;
+pub(crate) mod group;
+pub(crate) mod held_out;
+pub(crate) mod nominal;
+pub(crate) mod rank;
+pub(crate) mod reference;
+pub(crate) mod where_;
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use crate::features::extractor_for;
+    use crate::input::MeasuredInput;
+    use crate::model::ModelRunner;
+    use crate::options::Options;
+    use hammer_sim::simulate::simulate;
+    use hammer_sim::SimConfig;
+
+    /// A short simulated measurement of the nominal hammer at `bar`.
+    pub(crate) fn measured(bar: f64, fit: bool) -> MeasuredInput {
+        let mut c = SimConfig::nominal(bar);
+        c.solver.duration_s = 0.4;
+        c.seed = 3;
+        let sim = simulate(&c).unwrap();
+        MeasuredInput {
+            label: format!("nominal at {bar} bar"),
+            supply_bar: bar,
+            trace: sim.trace(),
+            fit,
+        }
+    }
+
+    /// The diagnosis' model of the default hammer, as the engine builds it.
+    pub(crate) fn nominal_runner() -> ModelRunner {
+        let base = SimConfig::default();
+        ModelRunner::new(base.clone(), extractor_for(&base))
+    }
+
+    /// The options a stage's test runs with: two threads, no figures.
+    pub(crate) fn options() -> Options {
+        Options {
+            figures: false,
+            threads: 2,
+            ..Options::default()
+        }
+    }
+
+    /// A progress callback that reports nothing.
+    pub(crate) fn quiet(_: &str) {}
+}

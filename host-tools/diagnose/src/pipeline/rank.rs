@@ -1,0 +1,413 @@
+//! Stage 3, rank: every effect of the catalogue fitted alone to the fit
+//! set and ranked by its BIC score; the best named if it is significant;
+//! pairs tried when the best leaves enough unexplained, and named only if
+//! the second effect earns its parameters as a single earns its own.
+//!
+//! The decisions (significant? try pairs? does the pair win?) are small
+//! functions of the scores alone, so they can be read and tested without a
+//! simulation.
+
+use super::effect_fit::fit_effects;
+use crate::features::N_FEATURES;
+use crate::fitset::FitSet;
+use crate::model::Candidate;
+use crate::options::Options;
+use crate::parallel::parallel;
+use crate::report::{EffectResult, FittedParam, Verdict};
+use hammer_sim::effects::EFFECT_NAMES;
+
+pub(crate) struct Ranking {
+    /// Single effects, best first.
+    pub(crate) effects: Vec<EffectResult>,
+    /// Pairs with the best single, best first (empty when not tried).
+    pub(crate) pairs: Vec<EffectResult>,
+    /// The named single effect or pair.
+    pub(crate) verdict: Option<EffectResult>,
+    pub(crate) reason: String,
+    /// Unseen effects scoring nearly as well as an unseen named single.
+    pub(crate) confusable: Vec<String>,
+    pub(crate) chi2_nominal: f64,
+    pub(crate) features_compared: usize,
+}
+
+impl Ranking {
+    /// The verdict as the report states it.
+    pub(crate) fn verdict_report(&self) -> Verdict {
+        match &self.verdict {
+            Some(v) => Verdict {
+                effects: v.name.split('+').map(str::to_string).collect(),
+                params: v.params.clone(),
+                score: v.score,
+                reason: self.reason.clone(),
+                confusable_with: self.confusable.clone(),
+            },
+            None => Verdict {
+                effects: vec!["none".into()],
+                params: serde_json::json!({}),
+                score: self.effects.first().map_or(0.0, |e| e.score),
+                reason: self.reason.clone(),
+                confusable_with: Vec::new(),
+            },
+        }
+    }
+}
+
+/// Ranks the catalogue on `fs`; `step` is called once per effect and once for the pairs.
+pub(crate) fn rank(fs: &FitSet, opts: &Options, step: &(dyn Fn(&str) + Sync)) -> Ranking {
+    let ln_n = fs.ln_cycles();
+    let chi2_nominal = fs.chi2(&Candidate::default()).unwrap_or(f64::INFINITY);
+    let mut effects: Vec<EffectResult> = parallel(opts.threads, EFFECT_NAMES.to_vec(), &|name| {
+        let r = fit_effects(fs, &[name], &[], chi2_nominal, ln_n, opts);
+        step(&format!("fitted {name}"));
+        r
+    })
+    .into_iter()
+    .flatten()
+    .collect();
+    effects.sort_by(|a, b| b.score.total_cmp(&a.score));
+    let n_compared = fs.points.len() * N_FEATURES;
+    let mut pairs = Vec::new();
+    let mut verdict = None;
+    // The best-scoring effect with evidence of its own: a higher score
+    // without it is the form error's shape, not an effect.
+    let reason = match effects.iter().position(|e| significant(e, opts)) {
+        Some(i) => {
+            let best = &effects[i];
+            verdict = Some(best.clone());
+            let mut reason = single_reason(&effects, i, opts);
+            if needs_pair(best, n_compared, ln_n, opts) {
+                pairs = fit_pairs(fs, &effects, i, chi2_nominal, ln_n, opts);
+                let second_z = |p: &EffectResult| {
+                    let second = p.name.split('+').nth(1).unwrap_or_default();
+                    effects.iter().find(|e| e.name == second).and_then(|e| e.model_free_z)
+                };
+                if let Some((p, extra)) = pairs
+                    .iter()
+                    .find_map(|p| pair_gain(best, p, second_z(p), ln_n, opts).map(|x| (p, x)))
+                {
+                    reason = pair_reason(best, p, n_compared, extra);
+                    verdict = Some(p.clone());
+                }
+            }
+            reason
+        }
+        None => effects
+            .first()
+            .map_or_else(|| "no effect could be fitted".into(), |best| none_reason(best, opts)),
+    };
+    step("pairs");
+    let confusable = match &verdict {
+        Some(v) if v.name.contains('+') => confusable_with(v, &pairs, &effects, opts),
+        Some(v) => confusable_with(v, &effects, &effects, opts),
+        None => Vec::new(),
+    };
+    let reason = match confusable.as_slice() {
+        [] => reason,
+        c => format!(
+            "{reason}; confusable here with {} (within {:.0} of its score, and no force-balance signature to part them)",
+            c.join(", "),
+            opts.confusable_margin
+        ),
+    };
+    Ranking {
+        effects,
+        pairs,
+        verdict,
+        reason,
+        confusable,
+        chi2_nominal,
+        features_compared: n_compared,
+    }
+}
+
+/// Shows evidence of its own: the force balance's signature if it has
+/// one, and then the model-based fit need only agree (a positive score); a
+/// model-based fit cannot name such an effect without it. Else a score
+/// above the threshold and a share of the gap.
+fn significant(e: &EffectResult, opts: &Options) -> bool {
+    own_evidence(e.model_free_z, e.score, e.explained_fraction, opts.min_explained, opts)
+}
+
+/// The rule of [`significant`] for a single or a pair's second effect: `z`
+/// its force-balance signature (`None` if it has none), `score` what it
+/// adds in BIC units, `share` the part of the gap it explains (of at least
+/// `min_share`).
+fn own_evidence(z: Option<f64>, score: f64, share: f64, min_share: f64, opts: &Options) -> bool {
+    match z {
+        Some(z) => score > 0.0 && z >= opts.min_model_free_z,
+        None => score > opts.min_score && share >= min_share,
+    }
+}
+
+/// The effects the named single, or a named pair's second effect, cannot
+/// be told from when the force balance cannot see it: the effect each other
+/// candidate (`candidates`: the singles, or the pairs with the same first)
+/// adds instead, if the force balance cannot see that one either and it
+/// scores within `confusable_margin` of the named.
+fn confusable_with(
+    named: &EffectResult,
+    candidates: &[EffectResult],
+    singles: &[EffectResult],
+    opts: &Options,
+) -> Vec<String> {
+    let last = |e: &EffectResult| e.name.rsplit('+').next().unwrap_or_default().to_string();
+    let unseen = |name: &str| singles.iter().any(|s| s.name == name && s.model_free_z.is_none());
+    if !unseen(&last(named)) {
+        return Vec::new();
+    }
+    candidates
+        .iter()
+        .filter(|e| e.name != named.name && unseen(&last(e)))
+        .filter(|e| e.score >= named.score - opts.confusable_margin)
+        .map(last)
+        .collect()
+}
+
+/// A pair can only be named if the single leaves more than the threshold
+/// to explain: otherwise do not spend the simulations.
+fn needs_pair(best: &EffectResult, n_compared: usize, ln_n: f64, opts: &Options) -> bool {
+    let reduced = best.chi2 / n_compared.max(1) as f64;
+    reduced > opts.pair_residual || best.chi2 > opts.min_score + 2.0 * ln_n
+}
+
+/// The pair's score over the single, if it wins: its second effect must
+/// show evidence of its own as a single must against nominal (`second_z`:
+/// its force-balance signature).
+fn pair_gain(
+    best: &EffectResult,
+    pair: &EffectResult,
+    second_z: Option<f64>,
+    ln_n: f64,
+    opts: &Options,
+) -> Option<f64> {
+    let extra = best.chi2 - pair.chi2 - (pair.fitted.len() - best.fitted.len()) as f64 * ln_n;
+    let share = if best.chi2 > 0.0 {
+        (best.chi2 - pair.chi2) / best.chi2
+    } else {
+        0.0
+    };
+    own_evidence(second_z, extra, share, opts.min_explained_pair, opts).then_some(extra)
+}
+
+/// The named single (`effects[best]`) with each runner-up; the next effects
+/// by their own score: a second effect shows there first, and each pair
+/// costs a fit.
+fn fit_pairs(
+    fs: &FitSet,
+    effects: &[EffectResult],
+    best: usize,
+    chi2_nominal: f64,
+    ln_n: f64,
+    opts: &Options,
+) -> Vec<EffectResult> {
+    let best = &effects[best];
+    let first = best.name.clone();
+    let start: Vec<FittedParam> = best.fitted.clone();
+    let jobs: Vec<(String, Vec<FittedParam>)> = effects
+        .iter()
+        .filter(|e| e.name != first)
+        .take(opts.pair_candidates)
+        .map(|o| (o.name.clone(), o.fitted.clone()))
+        .collect();
+    let mut pairs: Vec<EffectResult> = parallel(opts.threads, jobs, &|(other, other_start)| {
+        let mut init = start.clone();
+        init.extend(other_start);
+        fit_effects(fs, &[first.as_str(), other.as_str()], &init, chi2_nominal, ln_n, opts)
+    })
+    .into_iter()
+    .flatten()
+    .collect();
+    pairs.sort_by(|a, b| b.score.total_cmp(&a.score));
+    pairs
+}
+
+/// The evidence an effect showed, in the terms of the rule it is judged by.
+fn evidence_phrase(e: &EffectResult, opts: &Options) -> String {
+    match e.model_free_z {
+        Some(z) => format!(
+            "its model-free signature (force balance; against a reference, the chamber characteristics) stands {z:.1} standard errors off nominal (needs {:.0})",
+            opts.min_model_free_z
+        ),
+        None => format!(
+            "it explains {:.0} % of the gap (needs {:.0} %, the force balance cannot see it)",
+            100.0 * e.explained_fraction,
+            100.0 * opts.min_explained
+        ),
+    }
+}
+
+/// Why the best single was not named, in the terms of the rule it failed.
+fn none_reason(best: &EffectResult, opts: &Options) -> String {
+    format!(
+        "no effect shows enough evidence: best {} scores {:.0} (needs > {:.0}); {}",
+        best.name,
+        best.score,
+        opts.min_score,
+        evidence_phrase(best, opts)
+    )
+}
+
+fn single_reason(effects: &[EffectResult], best: usize, opts: &Options) -> String {
+    let e = &effects[best];
+    let next = effects.iter().find(|x| x.name != e.name);
+    let evidence = evidence_phrase(e, opts);
+    let passed = if best > 0 {
+        format!(
+            "; {} scored higher without evidence of its own",
+            effects[..best]
+                .iter()
+                .map(|x| x.name.as_str())
+                .collect::<Vec<_>>()
+                .join(", ")
+        )
+    } else {
+        String::new()
+    };
+    format!(
+        "{} scores {:.0}, {evidence} (next {} at {:.0}){passed}",
+        e.name,
+        e.score,
+        next.map_or("-", |x| x.name.as_str()),
+        next.map_or(0.0, |x| x.score)
+    )
+}
+
+fn pair_reason(best: &EffectResult, pair: &EffectResult, n_compared: usize, extra: f64) -> String {
+    let reduced = best.chi2 / n_compared.max(1) as f64;
+    format!(
+        "{} leaves a reduced χ² of {reduced:.1}; adding the second effect removes {:.0} % of the rest (score +{extra:.0})",
+        best.name,
+        100.0 * (best.chi2 - pair.chi2) / best.chi2
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn result(name: &str, params: usize, chi2: f64, chi2_nominal: f64, ln_n: f64) -> EffectResult {
+        let fitted = (0..params)
+            .map(|i| FittedParam {
+                key: format!("{name}.p{i}"),
+                value: 1.0,
+                sd: 0.1,
+            })
+            .collect();
+        EffectResult {
+            name: name.into(),
+            params: serde_json::json!({}),
+            fitted,
+            chi2,
+            score: chi2_nominal - chi2 - params as f64 * ln_n,
+            explained_fraction: ((chi2_nominal - chi2) / chi2_nominal).max(0.0),
+            evidence: Vec::new(),
+            model_free_z: None,
+            simulations: 0,
+            candidate: Candidate::default(),
+        }
+    }
+
+    /// An effect the force balance cannot see needs a share of the gap: a
+    /// large gap closed by a fifth is the form error's shape, not an effect.
+    #[test]
+    fn an_unseen_effect_must_explain_a_share_of_the_gap() {
+        let opts = Options::default();
+        let ln_n = 20f64.ln();
+        assert!(significant(&result("a", 1, 500.0, 1000.0, ln_n), &opts));
+        let partial = result("b", 1, 800.0, 1000.0, ln_n);
+        assert!(partial.score > opts.min_score);
+        assert!(!significant(&partial, &opts));
+        assert!(
+            !significant(&result("c", 1, 12.0, 30.0, ln_n), &opts),
+            "score below threshold"
+        );
+    }
+
+    /// An effect the force balance sees is named on that evidence however
+    /// little of a gap with other causes it explains, and not without it
+    /// however well its model-based fit scores.
+    #[test]
+    fn a_seen_effect_is_named_on_its_force_balance() {
+        let opts = Options::default();
+        let ln_n = 20f64.ln();
+        let small_share = EffectResult {
+            model_free_z: Some(12.0),
+            ..result("friction", 2, 900.0, 1000.0, ln_n)
+        };
+        assert!(small_share.explained_fraction < opts.min_explained);
+        assert!(significant(&small_share, &opts));
+        let unseen = EffectResult {
+            model_free_z: Some(1.0),
+            ..result("friction", 2, 100.0, 1000.0, ln_n)
+        };
+        assert!(!significant(&unseen, &opts));
+        assert!(none_reason(&unseen, &opts).contains("1.0 standard errors off nominal (needs 3)"));
+        let weak = EffectResult {
+            model_free_z: Some(12.0),
+            ..result("friction", 2, 999.0, 1000.0, ln_n)
+        };
+        assert!(!significant(&weak, &opts), "the model-based fit disagrees");
+    }
+
+    /// An unseen effect named with another unseen one close behind is
+    /// flagged; one the force balance sees, or one far ahead, is not.
+    #[test]
+    fn a_close_unseen_runner_up_is_flagged_confusable() {
+        let opts = Options::default();
+        let ln_n = 20f64.ln();
+        let heat = result("heat_transfer", 1, 500.0, 1000.0, ln_n);
+        let leak = result("leakage", 1, 510.0, 1000.0, ln_n);
+        let supply = result("supply_restriction", 1, 530.0, 1000.0, ln_n);
+        let friction = EffectResult {
+            model_free_z: Some(0.5),
+            ..result("coulomb_friction", 2, 510.0, 1000.0, ln_n)
+        };
+        let seen = EffectResult {
+            model_free_z: Some(9.0),
+            ..result("pressure_gain_error", 2, 100.0, 1000.0, ln_n)
+        };
+        let all = [seen.clone(), heat.clone(), friction, leak, supply];
+        assert_eq!(confusable_with(&heat, &all, &all, &opts), ["leakage"]);
+        assert!(confusable_with(&seen, &all, &all, &opts).is_empty());
+        // A pair's unseen second effect, against the pairs with the same first.
+        let pairs = [
+            result("pressure_gain_error+heat_transfer", 3, 80.0, 1000.0, ln_n),
+            result("pressure_gain_error+leakage", 3, 85.0, 1000.0, ln_n),
+            result("pressure_gain_error+coulomb_friction", 4, 82.0, 1000.0, ln_n),
+        ];
+        assert_eq!(confusable_with(&pairs[0], &pairs, &all, &opts), ["leakage"]);
+    }
+
+    /// A single that leaves only noise spends no simulations on pairs; one
+    /// that leaves much does.
+    #[test]
+    fn pairs_only_when_the_single_leaves_something() {
+        let opts = Options::default();
+        let ln_n = 20f64.ln();
+        let n = 88;
+        assert!(!needs_pair(&result("a", 1, 10.0, 1000.0, ln_n), n, ln_n, &opts));
+        assert!(needs_pair(&result("a", 1, 400.0, 1000.0, ln_n), n, ln_n, &opts));
+    }
+
+    /// Occam: a pair's lower χ² wins only when the second effect pays for
+    /// its parameters as a single does against nominal, and shows evidence
+    /// of its own: a share of the rest, or its force-balance signature.
+    #[test]
+    fn a_pair_must_earn_its_parameters() {
+        let opts = Options::default();
+        let ln_n = 20f64.ln();
+        let best = result("a", 1, 400.0, 1000.0, ln_n);
+        let slightly = result("a+b", 3, 385.0, 1000.0, ln_n);
+        assert!(slightly.chi2 < best.chi2);
+        assert_eq!(pair_gain(&best, &slightly, None, ln_n, &opts), None);
+        let tenth = result("a+b", 3, 360.0, 1000.0, ln_n);
+        assert_eq!(pair_gain(&best, &tenth, None, ln_n, &opts), None);
+        assert!(pair_gain(&best, &tenth, Some(8.0), ln_n, &opts).is_some());
+        assert!(pair_gain(&best, &slightly, Some(8.0), ln_n, &opts).is_some());
+        assert_eq!(pair_gain(&best, &tenth, Some(1.0), ln_n, &opts), None);
+        let most = result("a+b", 3, 40.0, 1000.0, ln_n);
+        let extra = pair_gain(&best, &most, None, ln_n, &opts).unwrap();
+        assert!((extra - (360.0 - 2.0 * ln_n)).abs() < 1e-9);
+        assert!(pair_reason(&best, &most, 88, extra).contains("removes 90 %"));
+    }
+}

@@ -1,0 +1,87 @@
+"""Bad input raises ValueError with the CLI's message, never a crash of the interpreter."""
+
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+
+import numpy as np
+import pytest
+
+import hammer_monitor as hm
+
+
+def test_a_missing_trace_is_the_clis_message(hammer, tmp_path):
+    missing = tmp_path / "missing.csv"
+    with pytest.raises(ValueError) as e:
+        hm.estimate(missing)
+    assert str(e.value) == hammer.error("estimate", missing)
+    with pytest.raises(ValueError) as e:
+        hm.read_trace(missing)
+    assert str(e.value) == hammer.error("estimate", missing)
+
+
+def test_a_malformed_trace_is_the_clis_message(hammer, tmp_path):
+    bad = tmp_path / "bad.csv"
+    bad.write_text("t_s,p_rear_pa,p_front_pa,accel_mps2\n0,1,2,3\n0.00001,1,two,3\n")
+    with pytest.raises(ValueError) as e:
+        hm.estimate(bad)
+    assert "not a finite number" in str(e.value)
+    assert str(e.value) == hammer.error("estimate", bad)
+
+
+def test_a_malformed_config_is_the_clis_message(hammer, simulated, tmp_path):
+    config = tmp_path / "bad.toml"
+    config.write_text("[estimator]\nimpact_threshold_mps2 = \"high\"\n")
+    with pytest.raises(ValueError) as e:
+        hm.estimate(simulated, config)
+    assert str(e.value) == hammer.error("estimate", simulated, "--config", config)
+
+
+def test_an_unknown_effect_is_the_clis_message(hammer):
+    with pytest.raises(ValueError) as e:
+        hm.simulate(5.0, 0.05, effects={"no_such_effect": True})
+    assert "unknown effect" in str(e.value)
+    assert str(e.value) == hammer.error("simulate", "--duration", 0.05, "--effect", "no_such_effect")
+
+
+def test_bad_arrays_are_refused_not_crashed():
+    t = np.arange(1000) * 1e-5
+    with pytest.raises(ValueError, match="different lengths"):
+        hm.estimate(t_s=t, p_rear_pa=np.zeros(1000), p_front_pa=np.zeros(999), accel_mps2=np.zeros(1000))
+    with pytest.raises(ValueError, match="not uniform"):
+        jitter = t.copy()
+        jitter[500] += 3e-6
+        hm.estimate(t_s=jitter, p_rear_pa=np.zeros(1000), p_front_pa=np.zeros(1000), accel_mps2=np.zeros(1000))
+    with pytest.raises(ValueError):
+        hm.estimate(t_s=t[:1], p_rear_pa=[0.0], p_front_pa=[0.0], accel_mps2=[0.0])
+    with pytest.raises(ValueError, match="out of range"):
+        hm.simulate(99.0, 0.05)
+
+
+def test_ctrl_c_interrupts_a_long_simulation():
+    # A minute of simulated time takes several seconds; Ctrl-C returns at once.
+    script = textwrap.dedent(
+        """
+        import sys, time, hammer_monitor as hm
+        print("started", flush=True)
+        try:
+            hm.simulate(5.0, 60.0)
+        except KeyboardInterrupt:
+            print("interrupted", flush=True)
+            sys.exit(0)
+        print("finished", flush=True)
+        """
+    )
+    p = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True)
+    assert p.stdout.readline().strip() == "started"
+    time.sleep(0.5)
+    sent = time.monotonic()
+    p.send_signal(signal.SIGINT)
+    out, _ = p.communicate(timeout=60)
+    took = time.monotonic() - sent
+    assert out.strip() == "interrupted"
+    assert p.returncode == 0
+    assert took < 2.0, f"the interrupt took {took:.1f} s"
