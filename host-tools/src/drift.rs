@@ -13,10 +13,15 @@
 //! from the board's raw captures.
 //!
 //! A window of `k` captured cycles gives one reading per characteristic:
-//! drift = window mean − record mean, with the expanded uncertainty (k = 2)
-//! of that difference from the record's cycle-to-cycle spread,
-//! U = 2·s·√(1/m + 1/n) (m cycles in the window, n in the record): under no
-//! change the window's cycles scatter as the record's did. One window beyond
+//! drift = window median − record median, with the expanded uncertainty
+//! (k = 2) of that difference from the record's cycle-to-cycle spread,
+//! U = 2·1.2533·σ·√(1/m + 1/n) (m cycles in the window, n in the record;
+//! 1.2533 = √(π/2), a median's standard error over a mean's): under no
+//! change the window's cycles scatter as the record's did. Medians, and σ
+//! from the median absolute deviation (1.4826·MAD), because a cycle whose
+//! feed was misread (one in a hundred captures reads its front feed a
+//! millisecond late) would otherwise move a record's mean and widen every
+//! window's U: an outlier is left out, not covered. One window beyond
 //! its U happens by chance (about 1 in 20 per characteristic), so the alarm
 //! needs `--drift-confirm` windows in a row beyond it (3 by default: about
 //! 1 in 10 000 per characteristic and window by chance), the way a
@@ -30,9 +35,7 @@ use hammer_trace::trace::Trace;
 use serde::Serialize;
 
 use crate::diagnose::engine::extractor_for;
-use crate::diagnose::features::{
-    feature_name, steady_from, summarize, CycleFeatures, Extractor, Signals, CHAMBER_FEATURES,
-};
+use crate::diagnose::features::{feature_name, steady_from, CycleFeatures, Extractor, Signals, CHAMBER_FEATURES};
 use crate::reference_record::Record;
 
 /// Characteristics read, in [`CHAMBER_FEATURES`] order.
@@ -88,13 +91,15 @@ impl Default for DriftArgs {
     }
 }
 
-/// One operating point of the record: each characteristic's mean, its
-/// cycle-to-cycle standard deviation and how many cycles gave it.
+/// One operating point of the record: each characteristic's median, its
+/// cycle-to-cycle spread (1.4826·MAD: a standard deviation where the
+/// cycles scatter normally, untouched by a misread one) and how many
+/// cycles gave it.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Baseline {
     pub supply_bar: f64,
-    pub mean: [f64; N_CHARACTERISTICS],
-    pub sd: [f64; N_CHARACTERISTICS],
+    pub median: [f64; N_CHARACTERISTICS],
+    pub spread: [f64; N_CHARACTERISTICS],
     pub cycles: [usize; N_CHARACTERISTICS],
 }
 
@@ -130,13 +135,13 @@ impl Commissioned {
                     .with_context(|| format!("reading {}", path.display()))?;
                 cycles.extend(cycles_of(&extractor, &trace, point.supply_bar));
             }
-            let summary = summarize(&cycles);
-            let count = |j: usize| cycles.iter().filter(|c| c.values[j].is_finite()).count();
+            let values =
+                |j: usize| -> Vec<f64> { cycles.iter().map(|c| c.values[j]).filter(|x| x.is_finite()).collect() };
             let b = Baseline {
                 supply_bar: point.supply_bar,
-                mean: CHAMBER_FEATURES.map(|j| summary.mean[j]),
-                sd: CHAMBER_FEATURES.map(|j| summary.sd[j]),
-                cycles: CHAMBER_FEATURES.map(count),
+                median: CHAMBER_FEATURES.map(|j| median(&values(j))),
+                spread: CHAMBER_FEATURES.map(|j| robust_sd(&values(j))),
+                cycles: CHAMBER_FEATURES.map(|j| values(j).len()),
             };
             if b.cycles.iter().all(|&n| n < 2) {
                 bail!(
@@ -222,6 +227,34 @@ impl Commissioned {
     }
 }
 
+/// The median of `xs` (NaN when empty).
+pub fn median(xs: &[f64]) -> f64 {
+    let mut v = xs.to_vec();
+    v.sort_by(f64::total_cmp);
+    match v.len() {
+        0 => f64::NAN,
+        n if n % 2 == 1 => v[n / 2],
+        n => 0.5 * (v[n / 2 - 1] + v[n / 2]),
+    }
+}
+
+/// 1.4826·MAD: the standard deviation of normally scattered values, robust
+/// to a few that are not; the plain one where the MAD is zero (values
+/// quantised to a few levels).
+pub fn robust_sd(xs: &[f64]) -> f64 {
+    let m = median(xs);
+    let dev: Vec<f64> = xs.iter().map(|x| (x - m).abs()).collect();
+    let r = 1.4826 * median(&dev);
+    if r > 0.0 || xs.len() < 2 {
+        return r;
+    }
+    let mean = xs.iter().sum::<f64>() / xs.len() as f64;
+    (xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (xs.len() - 1) as f64).sqrt()
+}
+
+/// A median's standard error over a mean's, for normal scatter: √(π/2).
+const MEDIAN_EFFICIENCY: f64 = 1.2533;
+
 /// The steady cycles of a trace, as the diagnosis reads a record's.
 fn cycles_of(extractor: &Extractor, trace: &Trace, supply_bar: f64) -> Vec<CycleFeatures> {
     let s = Signals {
@@ -241,9 +274,9 @@ fn cycles_of(extractor: &Extractor, trace: &Trace, supply_bar: f64) -> Vec<Cycle
 pub struct Characteristic {
     /// The diagnosis' feature name, with its unit (`front_feed_s`, …).
     pub name: String,
-    /// Window mean; NaN where the window read it in no cycle.
+    /// Window median; NaN where the window read it in no cycle.
     pub measured: f64,
-    /// The record's mean at this operating point.
+    /// The record's median at this operating point.
     pub reference: f64,
     /// measured − reference.
     pub drift: f64,
@@ -288,7 +321,7 @@ impl Drift {
     }
 
     /// The reading as named numbers for the fleet (MQTT, line protocol):
-    /// per characteristic `<name>` (window mean) and, its unit kept last,
+    /// per characteristic `<name>` (window median) and, its unit kept last,
     /// `<stem>_reference<unit>`, `<stem>_drift<unit>`,
     /// `<stem>_drift_uncertainty<unit>` (`front_feed_s`,
     /// `front_feed_drift_s`, …); then `cycles` and `window`.
@@ -405,14 +438,10 @@ impl Window {
             .map(|i| {
                 let xs: Vec<f64> = readings.iter().map(|r| r[i]).filter(|x| x.is_finite()).collect();
                 let (m, n) = (xs.len(), b.cycles[i]);
-                let measured = if m > 0 {
-                    xs.iter().sum::<f64>() / m as f64
-                } else {
-                    f64::NAN
-                };
-                let drift = measured - b.mean[i];
+                let measured = median(&xs);
+                let drift = measured - b.median[i];
                 let uncertainty = if m > 0 && n > 1 {
-                    2.0 * b.sd[i] * (1.0 / m as f64 + 1.0 / n as f64).sqrt()
+                    2.0 * MEDIAN_EFFICIENCY * b.spread[i] * (1.0 / m as f64 + 1.0 / n as f64).sqrt()
                 } else {
                     f64::NAN
                 };
@@ -422,7 +451,7 @@ impl Window {
                 Characteristic {
                     name: feature_name(CHAMBER_FEATURES[i]),
                     measured,
-                    reference: b.mean[i],
+                    reference: b.median[i],
                     drift,
                     uncertainty,
                     cycles: m,
@@ -444,32 +473,52 @@ impl Window {
 mod tests {
     use super::*;
 
+    /// One misread cycle in a hundred moves neither the median nor the
+    /// spread; normal scatter gives its standard deviation back.
+    #[test]
+    fn an_outlier_moves_neither_the_median_nor_the_spread() {
+        let mut rng = hammer_sim::rng::Rng::new(7);
+        let normal: Vec<f64> = (0..4000).map(|_| rng.normal()).collect();
+        let sd = robust_sd(&normal);
+        // 1.4826·MAD over 4 000 normal values: within 0.05 of 1 (its own
+        // standard error is about 0.02).
+        assert!((sd - 1.0).abs() < 0.05, "{sd}");
+        let mut with = normal[..99].to_vec();
+        let (sd99, m99) = (robust_sd(&with), median(&with));
+        with.push(1e3);
+        assert!((robust_sd(&with) - sd99).abs() < 0.05 * sd99 && (median(&with) - m99).abs() < 0.05);
+        assert_eq!(median(&[3.0, 1.0]), 2.0);
+        assert!(median(&[]).is_nan());
+        // Quantised to one level but one: the plain standard deviation.
+        assert!((robust_sd(&[1.0, 1.0, 1.0, 2.0]) - 0.5).abs() < 1e-12);
+    }
+
     fn baseline() -> Baseline {
         Baseline {
             supply_bar: 4.0,
-            mean: [1e-3, 2e-3, 1.3, 1.35, 5e-6, 6e-6],
-            sd: [1e-4, 1e-4, 0.02, 0.02, 2e-7, 2e-7],
+            median: [1e-3, 2e-3, 1.3, 1.35, 5e-6, 6e-6],
+            spread: [1e-4, 1e-4, 0.02, 0.02, 2e-7, 2e-7],
             cycles: [30; N_CHARACTERISTICS],
         }
     }
 
-    /// A window at the record's mean reads no drift; one moved by ten
+    /// A window at the record's median reads no drift; one moved by ten
     /// record spreads is beyond at once and alarms on the second window;
-    /// the uncertainty is 2·s·√(1/m + 1/n).
+    /// the uncertainty is 2·1.2533·σ·√(1/m + 1/n).
     #[test]
     fn a_move_beyond_the_uncertainty_alarms_on_the_second_window() {
         let b = baseline();
         let mut w = Window::new(b.clone(), 4, 2);
         for _ in 0..3 {
-            assert!(w.push(b.mean).is_none());
+            assert!(w.push(b.median).is_none());
         }
-        let d = w.push(b.mean).expect("a full window");
+        let d = w.push(b.median).expect("a full window");
         assert!(!d.alarm());
-        let u = 2.0 * 1e-4 * (1.0 / 4.0 + 1.0 / 30.0f64).sqrt();
+        let u = 2.0 * 1.2533 * 1e-4 * (1.0 / 4.0 + 1.0 / 30.0f64).sqrt();
         let f = d.get("front_feed_s").unwrap();
         assert!((f.uncertainty - u).abs() < 1e-12 && f.drift.abs() < 1e-15);
-        let mut moved = b.mean;
-        moved[0] += 10.0 * b.sd[0];
+        let mut moved = b.median;
+        moved[0] += 10.0 * b.spread[0];
         let first = (0..4).filter_map(|_| w.push(moved)).last().unwrap();
         let f = first.get("front_feed_s").unwrap();
         assert!(f.beyond && !f.alarm, "{f:?}");
@@ -480,7 +529,7 @@ mod tests {
         assert_eq!(second.alarms(), ["front_feed_s"]);
         let fields = second.fields();
         let get = |n: &str| fields.iter().find(|(k, _)| k == n).map(|(_, v)| *v);
-        assert_eq!(get("front_feed_drift_s"), Some(10.0 * b.sd[0]));
+        assert_eq!(get("front_feed_drift_s"), Some(10.0 * b.spread[0]));
         assert!(get("front_closed_exponent_drift_uncertainty").is_some());
         assert!(get("rear_feed_area_reference_m2").is_some());
     }
@@ -490,7 +539,7 @@ mod tests {
     fn an_unread_characteristic_is_not_a_drift() {
         let b = baseline();
         let mut w = Window::new(b.clone(), 2, 2);
-        let mut r = b.mean;
+        let mut r = b.median;
         r[4] = f64::NAN;
         w.push(r);
         let d = w.push(r).unwrap();

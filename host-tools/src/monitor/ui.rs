@@ -760,8 +760,8 @@ mod tests {
         let mut w = crate::drift::Window::new(
             crate::drift::Baseline {
                 supply_bar: 4.0,
-                mean: [1e-3, 2e-3, 1.3, 1.3, 5e-6, 5e-6],
-                sd: [1e-4, 1e-4, 0.02, 0.02, 2e-7, 2e-7],
+                median: [1e-3, 2e-3, 1.3, 1.3, 5e-6, 5e-6],
+                spread: [1e-4, 1e-4, 0.02, 0.02, 2e-7, 2e-7],
                 cycles: [30; 6],
             },
             1,
@@ -778,7 +778,7 @@ mod tests {
         app.show_help = false;
         let s = screen(&app, 160, 50);
         assert!(s.contains("Since commissioning (4 bar)"), "{s}");
-        assert!(s.contains("front_feed_s") && s.contains("+0.500 ± 0.203 ms"), "{s}");
+        assert!(s.contains("front_feed_s") && s.contains("+0.500 ± 0.255 ms"), "{s}");
         assert!(s.contains("CHANGE SINCE COMMISSIONING: front_feed_s"), "{s}");
         // A full history draws in well under a frame's time.
         let mut app = App::new("x".into(), false, 1e9);
