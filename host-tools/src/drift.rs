@@ -535,6 +535,50 @@ mod tests {
     }
 
     /// A characteristic no cycle of the window read is NaN, never beyond.
+    fn record(points: &[f64]) -> Commissioned {
+        Commissioned {
+            dir: PathBuf::from("ref"),
+            record: Record {
+                format: "hammer-commission".into(),
+                version: 1,
+                firmware_version: "0.1.0".into(),
+                board: "b".into(),
+                calibration_hash: 0x1234,
+                points: vec![],
+            },
+            baselines: points
+                .iter()
+                .map(|&supply_bar| Baseline {
+                    supply_bar,
+                    ..baseline()
+                })
+                .collect(),
+            extractor: extractor_for(&SimConfig::default()),
+        }
+    }
+
+    /// A recalibrated board reads no drift unless told, and then with a
+    /// warning; the point is the board's supply, else the one given, else
+    /// the record's only one, and a pressure the record lacks is named.
+    #[test]
+    fn a_stale_record_is_refused_and_the_point_is_chosen_by_pressure() {
+        let c = record(&[4.0, 7.0]);
+        assert_eq!(c.check_calibration(0x1234, false), Ok(None));
+        let e = c.check_calibration(0x9999, false).unwrap_err();
+        assert!(e.contains("stale") && e.contains("--allow-stale-reference"), "{e}");
+        assert!(c
+            .check_calibration(0x9999, true)
+            .unwrap()
+            .unwrap()
+            .contains("recalibration"));
+        assert_eq!(c.point_for(4.02, None).unwrap().supply_bar, 4.0);
+        assert_eq!(c.point_for(f64::NAN, Some(7.0)).unwrap().supply_bar, 7.0);
+        assert!(c.point_for(f64::NAN, None).unwrap_err().contains("--point-bar"));
+        let e = c.point_for(5.5, None).unwrap_err();
+        assert!(e.contains("5.50 bar") && e.contains("4 bar, 7 bar"), "{e}");
+        assert_eq!(record(&[4.0]).point_for(f64::NAN, None).unwrap().supply_bar, 4.0);
+    }
+
     #[test]
     fn an_unread_characteristic_is_not_a_drift() {
         let b = baseline();
