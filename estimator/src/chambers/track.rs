@@ -49,28 +49,22 @@ pub fn closed(dt_s: f32, impact_m: f32, open: usize, close: usize, x: &mut [f32]
     let mut v0 = 0.0f32;
     for _ in 0..2 {
         let split = turn;
-        // u: velocity gained from rest; its integral over the cycle.
+        // u: velocity gained from rest, kept in `x` (overwritten below) so
+        // that the turn is found without evaluating `accel` again; its
+        // integral over the cycle.
         let (mut u, mut du_prev, mut area) = (0.0f32, accel(open, split), 0.0f32);
+        x[open] = 0.0;
         for i in open + 1..=close {
             let du = accel(i, split);
             let u_next = u + 0.5 * dt_s * (du_prev + du);
             area += 0.5 * dt_s * (u + u_next);
             u = u_next;
+            x[i] = u;
             du_prev = du;
         }
         v0 = -area / ((close - open) as f32 * dt_s);
         // The turn: where the velocity first goes from backwards to forwards.
-        let (mut u, mut du_prev) = (0.0f32, accel(open, split));
-        turn = close;
-        for i in open + 1..=close {
-            let du = accel(i, split);
-            u += 0.5 * dt_s * (du_prev + du);
-            du_prev = du;
-            if v0 + u > 0.0 {
-                turn = i;
-                break;
-            }
-        }
+        turn = (open + 1..=close).find(|&i| v0 + x[i] > 0.0).unwrap_or(close);
     }
     let (mut v, mut du_prev) = (v0, accel(open, turn));
     x[open] = impact_m;
