@@ -95,6 +95,15 @@ pub fn characterise_spans(
     let look = (LOOK_AFTER_S as f64 / s.dt_s).ceil() as usize;
     let after = look + 64;
     let supply_abs = (r.supply_pa + P_ATM_PA as f64) as f32;
+    let f32s = |v: &[f64]| v[..n].iter().map(|&x| x as f32).collect::<Vec<f32>>();
+    let (p1, p2) = (f32s(s.p_rear_pa), f32s(s.p_front_pa));
+    // Each span's tracks once: a cycle reads its own and the next one's, so
+    // tracking per cycle would track every span twice.
+    let tracked = s.x_m.is_none().then(|| {
+        let accel = f32s(s.accel_mps2);
+        let t = span_tracks(s, r, chambers, (&p1, &p2, &accel), spans);
+        (accel, t)
+    });
     (0..spans.len())
         .map(|k| {
             let cur = spans[k];
@@ -113,24 +122,33 @@ pub fn characterise_spans(
                 return None;
             }
             let end = (close + after).min(following);
-            let f32s = |v: &[f64]| v[open..=following].iter().map(|&x| x as f32).collect::<Vec<f32>>();
-            let (p1, p2) = (f32s(s.p_rear_pa), f32s(s.p_front_pa));
             let window = |x: &[f32]| {
                 let w = Window {
                     dt_s: s.dt_s as f32,
-                    p_rear_pa: &p1[..=end - open],
-                    p_front_pa: &p2[..=end - open],
+                    p_rear_pa: &p1[open..=end],
+                    p_front_pa: &p2[open..=end],
                     x_m: &x[..=end - open],
                     open: 0,
                     close: close - open,
                 };
                 characterise(&w, chambers, supply_abs)
             };
-            match s.x_m {
-                Some(x) if x.len() > following => Some(window(&f32s(x))),
-                Some(_) => None,
-                None => {
-                    let (x_acc, x_force) = tracks(s, r, chambers, &p1, &p2, open, (cur, next));
+            match (s.x_m, &tracked) {
+                (Some(x), _) if x.len() > following => {
+                    let x: Vec<f32> = x[open..=following].iter().map(|&v| v as f32).collect();
+                    Some(window(&x))
+                }
+                (Some(_), _) | (None, None) => None,
+                (None, Some((accel, (all_acc, all_force, rebounds)))) => {
+                    let mut x_acc = all_acc[open..=following].to_vec();
+                    let mut x_force = all_force[open..=following].to_vec();
+                    if next.is_none() {
+                        let a_end = shock_end(s.accel_mps2, close, r.impact_threshold_mps2, s.dt_s) - open;
+                        let (accel, p2) = (&accel[open..=following], &p2[open..=following]);
+                        let (dt, c) = (s.dt_s as f32, close - open);
+                        tail_track(accel, p2, dt, chambers, c, a_end, rebounds[k][0], &mut x_acc);
+                        tail_track(accel, p2, dt, chambers, c, a_end, rebounds[k][1], &mut x_force);
+                    }
                     // The accelerometer's track is read; the spread to the
                     // force balance's widens the uncertainties.
                     Some(window(&x_acc).widened(&window(&x_force)))
@@ -140,52 +158,48 @@ pub fn characterise_spans(
         .collect()
 }
 
-/// The accelerometer's and the force balance's tracks over a span and the
-/// one after it (or, without one, the tail from rest), from sample `base`
-/// (where `p1`, `p2` start; they run to the end of what is tracked).
-fn tracks(
+/// Both tracks over the whole trace: the accelerometer's and the force
+/// balance's, each span's from where its opening contact ends to its
+/// closing impact (NaN where no span is), and each span's rebound on each
+/// (its velocity where the contact has ended), for a tail after its
+/// closing impact ([`tail_track`]).
+type Tracks = (Vec<f32>, Vec<f32>, Vec<[Option<f32>; 2]>);
+
+fn span_tracks(
     s: &Signals,
     r: &Reading,
     chambers: &ChamberGeometry,
-    p1: &[f32],
-    p2: &[f32],
-    base: usize,
-    (cur, next): (Span, Option<Span>),
-) -> (Vec<f32>, Vec<f32>) {
+    (p1, p2, accel): (&[f32], &[f32], &[f32]),
+    spans: &[Span],
+) -> Tracks {
     let index = |t: f64| (t / s.dt_s).round() as usize;
-    let accel: Vec<f32> = s.accel_mps2[base..base + p1.len()].iter().map(|&x| x as f32).collect();
+    let n = p1.len();
     let impact = chambers.impact_position_m as f32;
     let dt = s.dt_s as f32;
     let blank = (r.blank_after_s / s.dt_s).round() as usize;
-    let mut x_acc = vec![f32::NAN; p1.len()];
-    let mut x_force = vec![f32::NAN; p1.len()];
-    let close = index(cur.close_s) - base;
-    // Each track's rebound from the span's opening impact (its velocity
-    // where the contact has ended), for a tail after the closing one.
-    let mut rebound = [None; 2];
-    for span in [Some(cur), next].into_iter().flatten() {
+    let mut x_acc = vec![f32::NAN; n];
+    let mut x_force = vec![f32::NAN; n];
+    let mut rebounds = vec![[None; 2]; spans.len()];
+    for (j, span) in spans.iter().enumerate() {
         let (a, b) = (index(span.open_s), index(span.close_s));
+        if !(a < b && b < n) {
+            continue;
+        }
         // The tracks start where the contact has ended; during it the
         // piston is at the tool.
         let a_end = shock_end(s.accel_mps2, a, r.impact_threshold_mps2, s.dt_s).min(b - 1);
-        let (a, a_end, b) = (a - base, a_end - base, b - base);
         x_acc[a..a_end].fill(impact);
         x_force[a..a_end].fill(impact);
         let balance = || track::force_balance(p1, p2, &r.piston, span.friction);
         let tau = r.zero_shift_tau_s as f32;
-        let source = track::accelerometer(&accel, span.zero_shift_mps2, tau, dt, a, a + blank, balance());
+        let source = track::accelerometer(accel, span.zero_shift_mps2, tau, dt, a, a + blank, balance());
         track::closed(dt, impact, a_end, b, &mut x_acc, source);
         track::closed(dt, impact, a_end, b, &mut x_force, balance());
-        if rebound[0].is_none() && a_end + 1 < b {
-            rebound = [&x_acc, &x_force].map(|x| Some((x[a_end + 1] - x[a_end]) / dt).filter(|v| v.is_finite()));
+        if a_end + 1 < b {
+            rebounds[j] = [&x_acc, &x_force].map(|x| Some((x[a_end + 1] - x[a_end]) / dt).filter(|v| v.is_finite()));
         }
     }
-    if next.is_none() {
-        let a_end = shock_end(s.accel_mps2, close + base, r.impact_threshold_mps2, s.dt_s) - base;
-        tail_track(&accel, p2, dt, chambers, close, a_end, rebound[0], &mut x_acc);
-        tail_track(&accel, p2, dt, chambers, close, a_end, rebound[1], &mut x_force);
-    }
-    (x_acc, x_force)
+    (x_acc, x_force, rebounds)
 }
 
 /// How long after a shock the front chamber is taken as closed, to fit the
