@@ -54,6 +54,23 @@ pub fn estimator_config(
     Ok(c)
 }
 
+impl SimConfig {
+    /// The estimator configuration that reads this run's codes
+    /// ([`crate::Simulation::codes`]) as the board would: the hammer and
+    /// sensors simulated, the `[estimator]` table, the output rate, and the
+    /// supply pressure if the board is told it (`None`: unknown, as on a
+    /// board nobody configured).
+    pub fn estimator_config(&self, supply_bar: Option<f64>) -> Result<hammer_estimator::Config, ConfigError> {
+        estimator_config(
+            &self.hammer,
+            &self.sensors,
+            &self.estimator,
+            1.0 / self.solver.output_step_s,
+            supply_bar,
+        )
+    }
+}
+
 /// The lowest sample rate a trace is estimated at. The impact (steel on
 /// steel) lasts about 80 µs: at 20 kS/s (50 µs) every contact holds at least
 /// one sample, with margin for a recorder's anti-alias filter, which at
