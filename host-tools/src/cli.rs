@@ -458,18 +458,9 @@ fn estimate_cmd(args: &EstimateArgs) -> Result<()> {
     let summary = hammer_sim::estimation::stream_estimation(&args.trace, &file, args.supply_bar, |r| reports.push(r))?;
     // No-impact records are printed like cycles (they name the suspected
     // channel), but a trace with no cycle at all is still an error.
-    let no_cycle = !reports.iter().any(|r| r.is_cycle());
-    let no_cycle_error = || {
-        anyhow::anyhow!(
-            "{}: no impact cycle in {} samples ({:.3} s): no impact reached the estimator's threshold{}",
-            args.trace.display(),
-            summary.samples,
-            (summary.samples + summary.missing_samples) as f64 / summary.sample_rate_hz,
-            crate::report::no_impact_note(&reports, &summary.config)
-        )
-    };
+    let no_cycle = hammer_sim::estimation::no_cycle_message(&args.trace, &summary, &reports);
     if reports.is_empty() {
-        return Err(no_cycle_error());
+        return Err(anyhow::anyhow!(no_cycle.unwrap_or_default()));
     }
     use std::io::{IsTerminal as _, Write as _};
     if args.out.is_none() && args.format == Format::Parquet && std::io::stdout().is_terminal() {
@@ -517,8 +508,8 @@ fn estimate_cmd(args: &EstimateArgs) -> Result<()> {
                 .context("writing to standard output")?;
         }
     }
-    if no_cycle {
-        return Err(no_cycle_error());
+    if let Some(message) = no_cycle {
+        return Err(anyhow::anyhow!(message));
     }
     if let Some(hint) = crate::report::geometry_hint(&reports, &summary.config) {
         eprintln!("note: no valid cycle: {hint}");

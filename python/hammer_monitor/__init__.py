@@ -94,8 +94,8 @@ def estimate(
     The values are those of ``hammer estimate --format jsonl``, bit for bit:
     friction in N (``friction_n``, with ``friction_sd_n``), impact energy in J,
     frequency in Hz, ... ; ``valid`` is a bool and ``flags`` the list of the
-    record's flag names. A record of a trace with no impact (``no_impact``)
-    is returned like a cycle, as the CLI prints it.
+    record's flag names. A trace in which no impact cycle closes raises
+    ValueError with the CLI's message, which names what its no-impact records blame.
     """
     arrays = (t_s, p_rear_pa, p_front_pa, accel_mps2)
     if trace is None:

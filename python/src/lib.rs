@@ -22,7 +22,10 @@ use pyo3::types::{PyBytes, PyDict};
 use hammer_diagnose::engine::{diagnose_against, MeasuredInput, Options, PointWaves};
 use hammer_diagnose::gap::CycleSignals;
 use hammer_diagnose::input::read_input;
-use hammer_sim::estimation::{config_with_map, estimate_trace, sensors_for, stream_estimation};
+use hammer_estimator::CycleReport;
+use hammer_sim::estimation::{
+    config_with_map, estimate_trace, no_cycle_message, sensors_for, stream_estimation, StreamSummary,
+};
 use hammer_sim::params::RunOverrides;
 use hammer_sim::SimConfig;
 use hammer_trace::import::columns::Channel;
@@ -48,6 +51,18 @@ fn estimate_columns() -> Vec<String> {
         .split(',')
         .map(String::from)
         .collect()
+}
+
+/// The records as `hammer estimate --format jsonl` prints them, or its
+/// refusal of a trace in which no impact cycle closed.
+fn records(path: &Path, summary: &StreamSummary, reports: &[CycleReport]) -> Result<Vec<String>, String> {
+    if let Some(message) = no_cycle_message(path, summary, reports) {
+        return Err(message);
+    }
+    Ok(reports
+        .iter()
+        .map(|r| hammer_fleet::records::json_record(r).to_string())
+        .collect())
 }
 
 /// Reads a trace file (every format the CLI reads) into named f64 columns.
@@ -76,12 +91,9 @@ fn estimate_file(
 ) -> PyResult<Vec<String>> {
     let file = configuration(config.as_deref(), map.as_deref())?;
     run_interruptible(py, move || {
-        let mut lines = Vec::new();
-        stream_estimation(&path, &file, supply_bar, |r| {
-            lines.push(hammer_fleet::records::json_record(&r).to_string())
-        })
-        .map(|_| lines)
-        .map_err(|e| e.to_string())
+        let mut reports = Vec::new();
+        let summary = stream_estimation(&path, &file, supply_bar, |r| reports.push(r)).map_err(|e| e.to_string())?;
+        records(&path, &summary, &reports)
     })?
     .map_err(PyValueError::new_err)
 }
@@ -111,14 +123,8 @@ fn estimate_arrays(
     .collect();
     let trace = trace_from_channels("arrays", channels, None).map_err(refused)?;
     run_interruptible(py, move || {
-        estimate_trace(&trace, &file, supply_bar, "arrays")
-            .map(|reports| {
-                reports
-                    .iter()
-                    .map(|r| hammer_fleet::records::json_record(r).to_string())
-                    .collect()
-            })
-            .map_err(|e| e.to_string())
+        let (reports, summary) = estimate_trace(&trace, &file, supply_bar, "arrays").map_err(|e| e.to_string())?;
+        records(Path::new("arrays"), &summary, &reports)
     })?
     .map_err(PyValueError::new_err)
 }

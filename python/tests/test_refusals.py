@@ -85,3 +85,17 @@ def test_ctrl_c_interrupts_a_long_simulation():
     assert out.strip() == "interrupted"
     assert p.returncode == 0
     assert took < 2.0, f"the interrupt took {took:.1f} s"
+
+
+def test_a_trace_without_an_impact_is_the_clis_message(hammer, tmp_path):
+    # A hammer that does not run: 0.2 s of vented chambers and a still piston.
+    t = np.arange(20000) * 1e-5
+    still = tmp_path / "still.csv"
+    rows = np.column_stack([t, np.full_like(t, 200.0), np.full_like(t, -150.0), np.full_like(t, 0.5)])
+    np.savetxt(still, rows, delimiter=",", header="t_s,p_rear_pa,p_front_pa,accel_mps2", comments="", fmt="%.9g")
+    with pytest.raises(ValueError) as e:
+        hm.estimate(still)
+    assert "no impact cycle in 20000 samples" in str(e.value)
+    assert str(e.value) == hammer.error("estimate", still, "--format", "jsonl")
+    with pytest.raises(ValueError, match="arrays: no impact cycle in 20000 samples"):
+        hm.estimate(hm.read_trace(still))

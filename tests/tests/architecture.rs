@@ -8,7 +8,9 @@
 //! - the `hammer` binary sits on the library crates (issue 32): no crate's
 //!   `src` holds more than 25 % of the project's lines of Rust, the
 //!   diagnosis library has no argument parser, terminal or plotting, and its
-//!   stages do not import the engine that runs them.
+//!   stages do not import the engine that runs them; the simulator's
+//!   configuration does not import the run, the sensor chain or the
+//!   estimation path built on it.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -300,6 +302,31 @@ fn the_diagnosis_stages_do_not_import_the_engine() {
             for above in ["pipeline", "fitset", "model", "effects", "features", "gap"] {
                 if text.contains(&format!("super::{above}")) || text.contains(&format!("crate::{above}")) {
                     found.push(format!("{r} imports {above}"));
+                }
+            }
+        }
+    }
+    assert!(found.is_empty(), "imports against the layers:\n{}", found.join("\n"));
+}
+
+#[test]
+fn the_simulators_configuration_sits_below_its_run() {
+    let dir = root().join("host-tools/sim/src");
+    let mut found = vec![];
+    for name in ["params", "sensor_model", "effects/mod", "gas", "config"] {
+        let path = dir.join(format!("{name}.rs"));
+        if !path.exists() {
+            continue;
+        }
+        let text: String = code(&path)
+            .lines()
+            .filter(|l| !l.trim_start().starts_with("//"))
+            .collect::<Vec<_>>()
+            .join("\n");
+        for above in ["run", "sensor", "estimation", "simulate", "model"] {
+            for prefix in ["crate::", "super::"] {
+                if text.contains(&format!("{prefix}{above}::")) || text.contains(&format!("{prefix}{above};")) {
+                    found.push(format!("{name}.rs imports {above}"));
                 }
             }
         }

@@ -54,6 +54,23 @@ pub fn estimator_config(
     Ok(c)
 }
 
+impl SimConfig {
+    /// The estimator configuration that reads this run's codes
+    /// ([`crate::Simulation::codes`]) as the board would: the hammer and
+    /// sensors simulated, the `[estimator]` table, the output rate, and the
+    /// supply pressure if the board is told it (`None`: unknown, as on a
+    /// board nobody configured).
+    pub fn estimator_config(&self, supply_bar: Option<f64>) -> Result<hammer_estimator::Config, ConfigError> {
+        estimator_config(
+            &self.hammer,
+            &self.sensors,
+            &self.estimator,
+            1.0 / self.solver.output_step_s,
+            supply_bar,
+        )
+    }
+}
+
 /// The lowest sample rate a trace is estimated at. The impact (steel on
 /// steel) lasts about 80 µs: at 20 kS/s (50 µs) every contact holds at least
 /// one sample, with margin for a recorder's anti-alias filter, which at
@@ -493,13 +510,14 @@ pub fn config_with_map(config: Option<&Path>, map: Option<&Path>) -> Result<SimC
 /// The estimator over a trace held in memory (a script's arrays), read with
 /// `file`'s hammer, sensors and estimator table and the rules of
 /// [`open_for_estimation`] (gauge check, the recorder's rails); `label`
-/// names it in messages.
+/// names it in messages. With the records, what the run went through, as
+/// [`stream_estimation`] tells it.
 pub fn estimate_trace(
     trace: &Trace,
     file: &SimConfig,
     supply_bar: Option<f64>,
     label: &str,
-) -> Result<Vec<CycleReport>, OpenError> {
+) -> Result<(Vec<CycleReport>, StreamSummary), OpenError> {
     if trace.len() < 2 || !(trace.dt_s > 0.0) {
         return Err(OpenError::Refused(format!(
             "{label}: {} samples: a trace needs at least two, evenly spaced in time",
@@ -515,7 +533,15 @@ pub fn estimate_trace(
         supply_bar,
     )?;
     let (config, codes) = checked_codes(trace, config, Path::new(label))?;
-    Ok(run_with_gaps(&codes, &trace.gaps, config)?)
+    let reports = run_with_gaps(&codes, &trace.gaps, config)?;
+    let summary = StreamSummary {
+        samples: trace.len() as u64,
+        missing_samples: trace.gaps.iter().map(|g| g.missing).sum(),
+        sample_rate_hz: 1.0 / trace.dt_s,
+        supply_bar,
+        config,
+    };
+    Ok((reports, summary))
 }
 
 /// A trace in memory checked for gauge pressures, `config` set to the
@@ -538,6 +564,70 @@ fn checked_codes(trace: &Trace, mut config: Config, path: &Path) -> Result<(Conf
     at_recorder_rails(&mut config, &scans);
     let codes = to_codes(trace, &config);
     Ok((config, codes))
+}
+
+/// What the estimator's no-impact records blame, for an error that would
+/// otherwise only say "no cycle".
+/// When no cycle is valid and the records say the force balance is far off
+/// (the accelerometer at odds with the pressure force, or cycles whose
+/// friction is implausible), the likeliest cause on sound sensors is the
+/// wrong hammer: names the geometry in use and how to give the right one.
+pub fn geometry_hint(reports: &[hammer_estimator::CycleReport], config: &hammer_estimator::Config) -> Option<String> {
+    use hammer_estimator::Flags;
+    if reports.is_empty() || reports.iter().any(|r| r.is_valid()) {
+        return None;
+    }
+    let off = reports
+        .iter()
+        .all(|r| r.flags.contains(Flags::ACCEL_FAULT) || (r.is_cycle() && r.flags.contains(Flags::IMPLAUSIBLE)));
+    if !off {
+        return None;
+    }
+    let g = config.geometry;
+    let paper = g == hammer_estimator::Geometry::PAPER;
+    Some(format!(
+        "the force balance (pressures × areas against mass × acceleration) is far off with the hammer geometry in use: piston {} kg, bore {} mm, rod {} mm{}; give your hammer's [hammer] piston_mass_kg, bore_diameter_m, rod_diameter_m with --config FILE",
+        g.piston_mass_kg,
+        g.bore_diameter_m * 1e3,
+        g.rod_diameter_m * 1e3,
+        if paper { " (the paper's hammer, the default)" } else { "" }
+    ))
+}
+
+pub fn no_impact_note(reports: &[hammer_estimator::CycleReport], config: &hammer_estimator::Config) -> String {
+    let flags = reports
+        .iter()
+        .filter(|r| !r.is_cycle())
+        .fold(hammer_estimator::Flags::default(), |f, r| f | r.flags);
+    if reports.is_empty() {
+        return String::new();
+    }
+    let mut note = format!(
+        "; {} no-impact record(s) flagged {}",
+        reports.len(),
+        flags.names().collect::<Vec<_>>().join(",")
+    );
+    if let Some(hint) = geometry_hint(reports, config) {
+        note.push_str("; ");
+        note.push_str(&hint);
+    }
+    note
+}
+
+/// `hammer estimate`'s refusal of a trace in which no impact cycle closed
+/// (its no-impact records are still given first), naming what they blame;
+/// `None` when a cycle closed.
+pub fn no_cycle_message(path: &Path, summary: &StreamSummary, reports: &[CycleReport]) -> Option<String> {
+    if reports.iter().any(|r| r.is_cycle()) {
+        return None;
+    }
+    Some(format!(
+        "{}: no impact cycle in {} samples ({:.3} s): no impact reached the estimator's threshold{}",
+        path.display(),
+        summary.samples,
+        (summary.samples + summary.missing_samples) as f64 / summary.sample_rate_hz,
+        no_impact_note(reports, &summary.config)
+    ))
 }
 
 #[cfg(test)]

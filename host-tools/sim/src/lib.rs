@@ -8,7 +8,8 @@
 //! - [`gas`], [`model`]: the equations (`docs/model.md`), [`solver`]: Dormand–Prince 5(4);
 //! - [`run`]: one solution with events, per-cycle truth and balances, handed to a sink as it is produced;
 //! - [`rng`]: the seeded random numbers (xoshiro256++, ziggurat normal deviates);
-//! - [`sensor`]: bandwidth, noise, clipping, quantisation and the sensor-side effects;
+//! - [`sensor`]: bandwidth, noise, clipping, quantisation and the sensor-side effects
+//!   (the channels' settings in [`sensor_model`], below [`params`], which holds them);
 //! - [`simulate`]: a complete simulated measurement as a trace plus sidecar, kept in memory or streamed to disk;
 //! - [`estimation`]: the one path from any trace to the estimator's ADC codes and calibration;
 //! - [`characteristics`]: per-cycle chamber characteristics of a trace, measured or true.
@@ -24,6 +25,7 @@ pub mod params;
 pub mod rng;
 pub mod run;
 pub mod sensor;
+pub mod sensor_model;
 pub mod simulate;
 pub mod solver;
 

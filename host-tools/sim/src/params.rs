@@ -6,7 +6,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::effects::Effects;
-use super::sensor::SensorModel;
+use super::sensor_model::SensorModel;
 use crate::config::{check_range, ConfigError};
 
 /// Geometry and masses of the hammer (the paper, section 3.1.3, unless noted).
@@ -314,21 +314,6 @@ impl SimConfig {
         let mut c = Self::default();
         c.supply.pressure_bar = supply_bar;
         c
-    }
-
-    /// The estimator configuration that reads this run's codes
-    /// ([`crate::Simulation::codes`]) as the board would: the hammer and
-    /// sensors simulated, the `[estimator]` table, the output rate, and the
-    /// supply pressure if the board is told it (`None`: unknown, as on a
-    /// board nobody configured).
-    pub fn estimator_config(&self, supply_bar: Option<f64>) -> Result<hammer_estimator::Config, ConfigError> {
-        crate::estimation::estimator_config(
-            &self.hammer,
-            &self.sensors,
-            &self.estimator,
-            1.0 / self.solver.output_step_s,
-            supply_bar,
-        )
     }
 
     pub fn validate(&self) -> Result<(), ConfigError> {

@@ -9,6 +9,7 @@ use hammer_estimator::{Config, CycleReport};
 use indicatif::ProgressBar;
 
 use super::{stage, ReportArgs};
+use hammer_sim::estimation::no_impact_note;
 use hammer_sim::estimation::open_for_estimation;
 use hammer_sim::simulate::{Sidecar, SimulationInfo};
 use hammer_sim::{CycleTruth, SimConfig};
@@ -225,52 +226,4 @@ pub fn truth_summary(matched: &[Matched]) -> TruthSummary {
         frequency_error_hz: avg(&|m| m.report.frequency_hz as f64 - m.truth.frequency_hz),
         friction_work_ratio: avg(&|m| m.truth.friction_work_stroke_j) / energy_j,
     }
-}
-
-/// What the estimator's no-impact records blame, for an error that would
-/// otherwise only say "no cycle".
-/// When no cycle is valid and the records say the force balance is far off
-/// (the accelerometer at odds with the pressure force, or cycles whose
-/// friction is implausible), the likeliest cause on sound sensors is the
-/// wrong hammer: names the geometry in use and how to give the right one.
-pub fn geometry_hint(reports: &[hammer_estimator::CycleReport], config: &hammer_estimator::Config) -> Option<String> {
-    use hammer_estimator::Flags;
-    if reports.is_empty() || reports.iter().any(|r| r.is_valid()) {
-        return None;
-    }
-    let off = reports
-        .iter()
-        .all(|r| r.flags.contains(Flags::ACCEL_FAULT) || (r.is_cycle() && r.flags.contains(Flags::IMPLAUSIBLE)));
-    if !off {
-        return None;
-    }
-    let g = config.geometry;
-    let paper = g == hammer_estimator::Geometry::PAPER;
-    Some(format!(
-        "the force balance (pressures × areas against mass × acceleration) is far off with the hammer geometry in use: piston {} kg, bore {} mm, rod {} mm{}; give your hammer's [hammer] piston_mass_kg, bore_diameter_m, rod_diameter_m with --config FILE",
-        g.piston_mass_kg,
-        g.bore_diameter_m * 1e3,
-        g.rod_diameter_m * 1e3,
-        if paper { " (the paper's hammer, the default)" } else { "" }
-    ))
-}
-
-pub fn no_impact_note(reports: &[hammer_estimator::CycleReport], config: &hammer_estimator::Config) -> String {
-    let flags = reports
-        .iter()
-        .filter(|r| !r.is_cycle())
-        .fold(hammer_estimator::Flags::default(), |f, r| f | r.flags);
-    if reports.is_empty() {
-        return String::new();
-    }
-    let mut note = format!(
-        "; {} no-impact record(s) flagged {}",
-        reports.len(),
-        flags.names().collect::<Vec<_>>().join(",")
-    );
-    if let Some(hint) = geometry_hint(reports, config) {
-        note.push_str("; ");
-        note.push_str(&hint);
-    }
-    note
 }

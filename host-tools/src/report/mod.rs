@@ -22,10 +22,8 @@ use std::time::Duration;
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
-pub use analysis::{
-    geometry_hint, match_truth, no_impact_note, summarize, truth_summary, Matched, Summary, TruthSummary,
-    MATCH_TOLERANCE_S,
-};
+pub use analysis::{match_truth, summarize, truth_summary, Matched, Summary, TruthSummary, MATCH_TOLERANCE_S};
+pub use hammer_sim::estimation::{geometry_hint, no_impact_note};
 
 pub const CYCLE_PNG: &str = "cycle.png";
 pub const RUN_PNG: &str = "run.png";
