@@ -305,6 +305,18 @@ fn the_diagnosis_stages_do_not_import_the_engine() {
                 }
             }
         }
+        // The candidate models, then the statistics, then the effects'
+        // hooks (which read the fit set and run the model): one way.
+        let above: &[&str] = match name.as_str() {
+            "model" => &["fitset", "effects", "pipeline"],
+            "fitset" => &["effects", "pipeline"],
+            _ => &[],
+        };
+        for a in above {
+            if text.contains(&format!("super::{a}")) || text.contains(&format!("crate::{a}")) {
+                found.push(format!("{r} imports {a}"));
+            }
+        }
     }
     assert!(found.is_empty(), "imports against the layers:\n{}", found.join("\n"));
 }

@@ -29,11 +29,13 @@
 //!    included), apart so a schema change is one diff;
 //! 3. [`gap`], [`features`]: what is compared — cycles cut from traces and
 //!    their waveforms, per-cycle features and the extractor for a config;
-//! 4. [`model`], `fitset`, `effects`: the candidate models, the statistics
-//!    (weights, nuisance profile, recalibration) in one place so every stage
-//!    weighs a residual the same way, and the catalogue's diagnosis hooks
-//!    (start values, evidence). The hooks read the fit set and the model
-//!    asks the hooks how an effect is fitted, so these three import each other;
+//! 4. [`model`], then `fitset`, then `effects`: the candidate models, the
+//!    statistics (weights, nuisance profile, recalibration) in one place so
+//!    every stage weighs a residual the same way, and the catalogue's
+//!    diagnosis hooks (free parameters, start values, evidence), which read
+//!    the fit set and run the model. The model reads a candidate's sensor
+//!    effects through [`model::SensorReads`], which the catalogue supplies
+//!    (`ModelRunner::new` is defined with the hooks), so it imports neither;
 //! 5. `pipeline`: the stages above;
 //! 6. [`engine`]: the entry point, re-exporting the vocabulary of rows 1–3;
 //! 7. [`bench`](mod@bench), [`isolability`]: proving it on generated data;

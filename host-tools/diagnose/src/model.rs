@@ -1,9 +1,7 @@
 //! The model side of the diagnosis: the nominal simulator plus candidate
 //! effects, read by the same feature extractor as the measurement.
 
-use super::effects::{diagnosis, pressure_reading_factors, shift_expected_features};
 use super::features::{summarize, Extractor, Signals, N_FEATURES};
-use super::fit::ParamSpec;
 pub use super::report::Candidate;
 use hammer_sim::effects::Effects;
 use hammer_sim::run::TruthTrace;
@@ -11,26 +9,6 @@ use hammer_sim::{simulate_truth, SimConfig};
 
 /// E[u²] of the zero-shift magnitude factor u ~ U(0.5, 1.5) (`sim::sensor`).
 pub const ZERO_SHIFT_SQ_FACTOR: f64 = 1.0 + 1.0 / 12.0;
-
-/// The free parameters the diagnosis fits for an effect (see
-/// [`super::effects`]); none for an unknown name.
-pub fn free_params(name: &str, distinct_pressures: usize) -> Vec<ParamSpec> {
-    diagnosis(name).map_or_else(Vec::new, |d| d.free_params(distinct_pressures))
-}
-
-/// Writes fitted values `theta` of `name` into `effects`. `pressures` are the
-/// lowest and highest supply pressures of the fit set, bar.
-pub fn apply(effects: &mut Effects, name: &str, theta: &[f64], pressures: (f64, f64)) {
-    if let Some(d) = diagnosis(name) {
-        d.apply(effects, theta, pressures);
-    }
-}
-
-/// The catalogue parameters of an effect as they would go in a config file.
-pub fn catalogue_params(effects: &Effects, name: &str) -> serde_json::Value {
-    let v = serde_json::to_value(effects).unwrap_or_default();
-    v.get(name).cloned().unwrap_or(serde_json::Value::Null)
-}
 
 /// The nominal parameters a modeller knows only to a few percent (calibrated
 /// or estimated in docs/model.md): the diagnosis lets each of them move
@@ -48,26 +26,32 @@ pub const NUISANCE: [(&str, fn(&mut SimConfig) -> &mut f64); 9] = [
     ("contact.restitution", |c| &mut c.contact.restitution),
 ];
 
-/// Runs the model at operating points and reads it like a measurement.
+/// How a candidate's sensor effects read a model: the factors on the
+/// pressure readings and the expected shift of the mean features (what
+/// the extractor cannot see in a noiseless solution). The catalogue's
+/// diagnosis hooks supply it ([`crate::effects`]), so the model imports no
+/// effect, and the effects, which read the fit set and run the model, sit
+/// above it.
+pub trait SensorReads: Sync + std::fmt::Debug {
+    fn pressure_reading_factors(&self, effects: &Effects) -> (f64, f64);
+    fn shift_expected_features(&self, effects: &Effects, mean: &mut [f64]);
+}
+
+/// Runs the model at operating points and reads it like a measurement
+/// (`ModelRunner::new`, in [`crate::effects`], reads it through the
+/// catalogue's sensor effects).
 #[derive(Debug, Clone)]
 pub struct ModelRunner {
     pub base: SimConfig,
     pub extractor: Extractor,
+    /// How the candidate's sensor effects read the model.
+    pub reads: &'static dyn SensorReads,
     /// Simulated time per run; the cycles after `settle_s` are averaged.
     pub duration_s: f64,
     pub settle_s: f64,
 }
 
 impl ModelRunner {
-    pub fn new(base: SimConfig, extractor: Extractor) -> Self {
-        Self {
-            base,
-            extractor,
-            duration_s: 0.45,
-            settle_s: 0.27,
-        }
-    }
-
     pub fn config(&self, supply_bar: f64, effects: &Effects) -> SimConfig {
         let mut c = self.base.clone();
         c.supply.pressure_bar = supply_bar;
@@ -100,7 +84,7 @@ impl ModelRunner {
     /// Whether the measurement's transducers read the model's pressures as
     /// they are (no gain effect, no floor): then they need no copy.
     fn reads_as_is(&self, effects: &Effects) -> bool {
-        pressure_reading_factors(effects) == (1.0, 1.0)
+        self.reads.pressure_reading_factors(effects) == (1.0, 1.0)
             && self.extractor.pressure_floor_pa.iter().all(|f| !f.is_finite())
     }
 
@@ -108,7 +92,7 @@ impl ModelRunner {
     /// candidate's sensor gains, then the transducers' floor. Every model
     /// signal compared with the measurement goes through here.
     pub fn read_pressures(&self, effects: &Effects, p_rear_pa: &mut [f64], p_front_pa: &mut [f64]) {
-        let (f1, f2) = pressure_reading_factors(effects);
+        let (f1, f2) = self.reads.pressure_reading_factors(effects);
         let [floor1, floor2] = self.extractor.pressure_floor_pa;
         p_rear_pa.iter_mut().for_each(|p| *p = (*p * f1).max(floor1));
         p_front_pa.iter_mut().for_each(|p| *p = (*p * f2).max(floor2));
@@ -142,7 +126,7 @@ impl ModelRunner {
             return None;
         }
         let mut mean = summarize(&cycles).mean;
-        shift_expected_features(effects, &mut mean);
+        self.reads.shift_expected_features(effects, &mut mean);
         debug_assert_eq!(mean.len(), N_FEATURES);
         Some(mean)
     }

@@ -10,10 +10,13 @@
 
 use std::marker::PhantomData;
 
+use super::features::Extractor;
 use super::fit::ParamSpec;
 use super::fitset::FitSet;
+use super::model::{ModelRunner, SensorReads};
 use hammer_sim::effects::{Effect, Effects, N_EFFECTS};
 use hammer_sim::sensor::Rng;
+use hammer_sim::SimConfig;
 
 /// One module per effect (`NAME.rs`, an `impl Diagnosed`), and [`DIAGNOSIS`],
 /// from the simulator's catalogue list.
@@ -27,6 +30,53 @@ macro_rules! diagnosis_catalogue {
 }
 
 hammer_sim::with_catalogue!(diagnosis_catalogue);
+
+/// The free parameters the diagnosis fits for an effect (see
+/// [`super::effects`]); none for an unknown name.
+pub fn free_params(name: &str, distinct_pressures: usize) -> Vec<ParamSpec> {
+    diagnosis(name).map_or_else(Vec::new, |d| d.free_params(distinct_pressures))
+}
+
+/// Writes fitted values `theta` of `name` into `effects`. `pressures` are the
+/// lowest and highest supply pressures of the fit set, bar.
+pub fn apply(effects: &mut Effects, name: &str, theta: &[f64], pressures: (f64, f64)) {
+    if let Some(d) = diagnosis(name) {
+        d.apply(effects, theta, pressures);
+    }
+}
+
+/// The catalogue parameters of an effect as they would go in a config file.
+pub fn catalogue_params(effects: &Effects, name: &str) -> serde_json::Value {
+    let v = serde_json::to_value(effects).unwrap_or_default();
+    v.get(name).cloned().unwrap_or(serde_json::Value::Null)
+}
+
+/// The catalogue's sensor effects, as the model reads through them.
+#[derive(Debug)]
+struct CatalogueReads;
+
+impl SensorReads for CatalogueReads {
+    fn pressure_reading_factors(&self, effects: &Effects) -> (f64, f64) {
+        pressure_reading_factors(effects)
+    }
+    fn shift_expected_features(&self, effects: &Effects, mean: &mut [f64]) {
+        shift_expected_features(effects, mean)
+    }
+}
+
+impl ModelRunner {
+    /// The model `base`, read by `extractor` through the catalogue's
+    /// sensor effects.
+    pub fn new(base: SimConfig, extractor: Extractor) -> Self {
+        Self {
+            base,
+            extractor,
+            reads: &CatalogueReads,
+            duration_s: 0.45,
+            settle_s: 0.27,
+        }
+    }
+}
 
 /// The diagnosis of effect `name`.
 pub(super) fn diagnosis(name: &str) -> Option<&'static dyn DiagnosisEntry> {

@@ -6,11 +6,11 @@
 use std::collections::BTreeMap;
 use std::sync::atomic::Ordering;
 
-use crate::effects::diagnosis;
+use crate::effects::{apply, catalogue_params, diagnosis, free_params};
 use crate::features::{feature_name, wave_of, Extractor, BINS, N_FEATURES, WAVE_SIGNALS};
 use crate::fit::{levenberg_marquardt, FitResult};
 use crate::fitset::{residual, FitSet};
-use crate::model::{apply, catalogue_params, free_params, Candidate};
+use crate::model::Candidate;
 use crate::options::Options;
 use crate::report::{EffectResult, FittedParam};
 use crate::stages::Stage;

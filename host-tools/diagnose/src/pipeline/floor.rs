@@ -13,9 +13,9 @@
 //! cannot exclude the effect; above it, it would have named it.
 
 use super::rank::Ranking;
-use crate::effects::diagnosis;
+use crate::effects::{apply, diagnosis, free_params};
 use crate::fitset::FitSet;
-use crate::model::{apply, free_params, Candidate};
+use crate::model::Candidate;
 use crate::options::Options;
 use crate::parallel::parallel;
 use crate::report::DetectionFloor;
