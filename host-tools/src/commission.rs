@@ -17,8 +17,7 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 
 use crate::client::Client;
-pub use crate::reference_record::{is_record, PointRecord, Record, RECORD_FILE};
-use crate::reference_record::{RECORD_FORMAT, RECORD_VERSION};
+use hammer_diagnose::record::{is_record, PointRecord, Record, RECORD_FILE, RECORD_FORMAT, RECORD_VERSION};
 use hammer_trace::trace::{write_csv, write_sidecar};
 
 #[derive(Args, Debug)]

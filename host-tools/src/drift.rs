@@ -36,7 +36,7 @@ use serde::Serialize;
 
 use crate::diagnose::engine::extractor_for;
 use crate::diagnose::features::{feature_name, steady_from, CycleFeatures, Extractor, Signals, CHAMBER_FEATURES};
-use crate::reference_record::Record;
+use crate::diagnose::record::Record;
 
 /// Characteristics read, in [`CHAMBER_FEATURES`] order.
 pub const N_CHARACTERISTICS: usize = CHAMBER_FEATURES.len();
@@ -135,13 +135,13 @@ impl Commissioned {
                     .with_context(|| format!("reading {}", path.display()))?;
                 cycles.extend(cycles_of(&extractor, &trace, point.supply_bar));
             }
-            let values =
-                |j: usize| -> Vec<f64> { cycles.iter().map(|c| c.values[j]).filter(|x| x.is_finite()).collect() };
+            let values = CHAMBER_FEATURES
+                .map(|j| -> Vec<f64> { cycles.iter().map(|c| c.values[j]).filter(|x| x.is_finite()).collect() });
             let b = Baseline {
                 supply_bar: point.supply_bar,
-                median: CHAMBER_FEATURES.map(|j| median(&values(j))),
-                spread: CHAMBER_FEATURES.map(|j| robust_sd(&values(j))),
-                cycles: CHAMBER_FEATURES.map(|j| values(j).len()),
+                median: values.each_ref().map(|v| median(v)),
+                spread: values.each_ref().map(|v| robust_sd(v)),
+                cycles: values.each_ref().map(Vec::len),
             };
             if b.cycles.iter().all(|&n| n < 2) {
                 bail!(

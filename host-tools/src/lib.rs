@@ -18,8 +18,8 @@
 //! - [`chambers`]: the chamber characteristics against their truth on both model families;
 //! - [`diagnose`]: `hammer diagnose` and `diagnose-bench` over `hammer-diagnose`
 //!   (re-exported in it), and the report for people;
-//! - [`reference_record`], [`drift`]: the hammer's commissioning record, and
-//!   the chamber characteristics of live captures read against it;
+//! - [`drift`]: the chamber characteristics of live captures read against
+//!   the hammer's commissioning record (`hammer_diagnose::record`);
 //! - [`flash`], [`capture`], [`calibrate`], [`selftest`], [`demo`], [`soak`], [`monitor`]: live: raw captures, calibration, the
 //!   no-hardware demo, the full-rate soak, the dashboard, logs and replay;
 //! - [`commission`]: the hammer's reference record, from the board's raw captures;
@@ -44,7 +44,6 @@ pub mod flash;
 pub mod import;
 pub mod monitor;
 pub mod plot;
-pub mod reference_record;
 pub mod report;
 pub mod selftest;
 pub mod soak;

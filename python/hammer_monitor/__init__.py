@@ -200,9 +200,12 @@ def diagnose(
     """The sim-to-real gap diagnosis, as ``hammer diagnose`` runs it (docs/diagnosis.md).
 
     ``measured`` lists trace files, each a path (its supply pressure from the
-    sidecar) or ``(path, supply_bar)`` with the gauge supply pressure in bar;
+    sidecar) or ``(path, supply_bar)`` with the gauge supply pressure in bar,
+    or folders ``hammer commission`` wrote (all their captures);
     ``reference`` likewise lists records of the same hammer when it was known
-    sound (the change from them is diagnosed); ``fit_on`` the measured traces
+    sound (the change from them is diagnosed; a commissioning folder made
+    with another calibration than the measured captures is refused as
+    stale); ``fit_on`` the measured traces
     to fit on (default: the first; the others are held out). ``config`` is the
     nominal model's TOML file, ``nominal_uncertainty`` the relative standard
     deviation of the parameters the model is unsure of.

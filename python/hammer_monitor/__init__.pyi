@@ -59,4 +59,5 @@ def diagnose(
 ) -> dict[str, Any] | tuple[dict[str, Any], list[dict[str, Any]]]:
     """`hammer diagnose`: report.json's content as a dict; with figures=True also the
     waveforms per operating point (t_s in s, pressures in Pa gauge, accel_mps2, velocity_mps).
+    measured and reference take trace files or `hammer commission` folders.
     supply_bar in bar. Raises ValueError with the CLI's message."""

@@ -19,13 +19,11 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict};
 
-use hammer_diagnose::engine::{diagnose_against, MeasuredInput, Options, PointWaves};
+use hammer_diagnose::engine::{diagnose_against, Options, PointWaves};
 use hammer_diagnose::gap::CycleSignals;
-use hammer_diagnose::input::read_input;
+use hammer_diagnose::input::{read_request, Request};
 use hammer_estimator::CycleReport;
-use hammer_sim::estimation::{
-    config_with_map, estimate_trace, no_cycle_message, sensors_for, stream_estimation, StreamSummary,
-};
+use hammer_sim::estimation::{config_with_map, estimate_trace, no_cycle_message, stream_estimation, StreamSummary};
 use hammer_sim::params::RunOverrides;
 use hammer_sim::SimConfig;
 use hammer_trace::import::columns::Channel;
@@ -186,34 +184,15 @@ fn diagnose(
     figures: bool,
 ) -> PyResult<(String, Option<String>)> {
     let run = move || -> anyhow::Result<(String, Option<String>)> {
-        let mut base: SimConfig = match &config {
-            Some(p) => hammer_trace::config::load_toml(p)?,
-            None => SimConfig::default(),
-        };
-        base.validate()?;
-        let same =
-            |a: &Path, b: &Path| a == b || a.canonicalize().ok().is_some_and(|x| b.canonicalize().ok() == Some(x));
-        let mut inputs = Vec::new();
-        for (path, bar) in &measured {
-            let (input, sidecar) = read_input(path, *bar, base.import.as_ref())?;
-            // As the CLI: without a config, the first trace's sidecar names the sensors.
-            if inputs.is_empty() && config.is_none() {
-                base.sensors = sensors_for(sidecar.as_ref(), &base.sensors);
-            }
-            inputs.push(MeasuredInput {
-                fit: fit_on.iter().any(|f| same(f, path)),
-                ..input
-            });
-        }
-        let references = reference
-            .iter()
-            .map(|(path, bar)| Ok(read_input(path, *bar, base.import.as_ref())?.0))
-            .collect::<anyhow::Result<Vec<_>>>()?;
-        for f in &fit_on {
-            if !measured.iter().any(|(m, _)| same(f, m)) {
-                anyhow::bail!("--fit-on {}: not among the --measured traces", f.display());
-            }
-        }
+        // The CLI's reading of its inputs (commissioning folders included).
+        let read = read_request(&Request {
+            measured,
+            reference,
+            fit_on,
+            config,
+            allow_stale_reference: false,
+        })?;
+        let (inputs, references, base) = (read.inputs, read.references, read.base);
         let opts = Options {
             nominal_uncertainty,
             figures,

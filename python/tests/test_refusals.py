@@ -1,5 +1,6 @@
 """Bad input raises ValueError with the CLI's message, never a crash of the interpreter."""
 
+import json
 import os
 import signal
 import subprocess
@@ -99,3 +100,19 @@ def test_a_trace_without_an_impact_is_the_clis_message(hammer, tmp_path):
     assert str(e.value) == hammer.error("estimate", still, "--format", "jsonl")
     with pytest.raises(ValueError, match="arrays: no impact cycle in 20000 samples"):
         hm.estimate(hm.read_trace(still))
+
+
+def test_a_stale_commissioning_record_is_the_clis_message(hammer, tmp_path):
+    """Commissioning folders read as the CLI reads them: a record made
+    before a recalibration is refused as stale, with the CLI's words."""
+    ref, now = tmp_path / "ref", tmp_path / "now"
+    for out in (ref, now):
+        hammer.run("commission", "--demo", "--native", "--supply-bar", "4", "--cycles", "3", "--out", out)
+    side = now / "4.0bar" / "cycle-000.json"
+    sidecar = json.loads(side.read_text())
+    sidecar["calibration_hash"] = 12345
+    side.write_text(json.dumps(sidecar))
+    with pytest.raises(ValueError) as e:
+        hm.diagnose([now], reference=[ref])
+    assert "stale" in str(e.value)
+    assert str(e.value) == hammer.error("diagnose", "--measured", now, "--reference", ref, "--out", tmp_path / "d")

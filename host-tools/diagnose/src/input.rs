@@ -2,11 +2,16 @@
 //! reports progress, and what it refuses. Apart from the engine so the
 //! stages that read the inputs need not import the engine that runs them.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
+use hammer_sim::estimation::sensors_for;
 use hammer_sim::simulate::{read_simulated_sidecar, Sidecar};
+use hammer_sim::SimConfig;
+use hammer_trace::config::load_toml;
 use hammer_trace::trace::Trace;
+
+use crate::record::{is_record, Record};
 
 /// One measured trace and its role.
 #[derive(Debug, Clone)]
@@ -64,4 +69,101 @@ pub fn read_input(
         fit: false,
     };
     Ok((input, sidecar))
+}
+
+/// What a diagnosis is asked to read: measured traces or commissioning
+/// folders, each with the supply pressure given after it (bar; `None`:
+/// from its sidecar), the same for the references, the traces to fit on,
+/// the nominal model's file.
+#[derive(Debug, Clone, Default)]
+pub struct Request {
+    pub measured: Vec<(PathBuf, Option<f64>)>,
+    pub reference: Vec<(PathBuf, Option<f64>)>,
+    pub fit_on: Vec<PathBuf>,
+    pub config: Option<PathBuf>,
+    /// Read against a commissioning record made with another calibration.
+    pub allow_stale_reference: bool,
+}
+
+/// A [`Request`] read: the inputs, the references, the nominal model (its
+/// sensors from the first trace's sidecar when no file names them), and
+/// warnings for the caller to show.
+#[derive(Debug)]
+pub struct Read {
+    pub inputs: Vec<MeasuredInput>,
+    pub references: Vec<MeasuredInput>,
+    pub base: SimConfig,
+    pub warnings: Vec<String>,
+}
+
+/// Reads what `req` names, as `hammer diagnose` and the Python package do:
+/// a commissioning folder stands for all its traces (all fitted unless
+/// `fit_on` says otherwise), and one recorded with another calibration
+/// than the measured captures is refused as stale unless allowed.
+pub fn read_request(req: &Request) -> Result<Read> {
+    let mut base: SimConfig = match &req.config {
+        Some(p) => load_toml(p)?,
+        None => SimConfig::default(),
+    };
+    base.validate()?;
+    let same = |a: &Path, b: &Path| a == b || a.canonicalize().ok().is_some_and(|x| b.canonicalize().ok() == Some(x));
+    let mut inputs = Vec::new();
+    let mut warnings = Vec::new();
+    // The calibrations the measured traces were made with (device captures).
+    let mut measured_hashes = Vec::new();
+    for (path, bar) in &req.measured {
+        let folder = is_record(path).then(|| Record::load(path)).transpose()?;
+        let traces = match &folder {
+            Some(r) => r.traces(path).into_iter().map(|(p, b)| (p, Some(b))).collect(),
+            None => vec![(path.clone(), *bar)],
+        };
+        // A folder's traces are one cycle each: all fitted unless told.
+        let fit_folder = folder.is_some() && (req.fit_on.is_empty() || req.fit_on.iter().any(|f| same(f, path)));
+        for (trace, bar) in traces {
+            let (input, sidecar) = read_input(&trace, bar, base.import.as_ref())?;
+            if inputs.is_empty() && req.config.is_none() {
+                base.sensors = sensors_for(sidecar.as_ref(), &base.sensors);
+            }
+            measured_hashes.extend(sidecar.as_ref().and_then(|s| s.calibration_hash));
+            inputs.push(MeasuredInput {
+                fit: fit_folder || req.fit_on.iter().any(|f| same(f, &trace)),
+                ..input
+            });
+        }
+    }
+    let mut references = Vec::new();
+    for (path, bar) in &req.reference {
+        if !is_record(path) {
+            references.push(read_input(path, *bar, base.import.as_ref())?.0);
+            continue;
+        }
+        let record = Record::load(path)?;
+        if let Some(h) = measured_hashes.iter().find(|&&h| h != record.calibration_hash) {
+            let what = format!(
+                "{} was commissioned with calibration {:08x}; the measured traces were recorded with {h:08x}: the board was recalibrated since, so the record is stale",
+                path.display(),
+                record.calibration_hash
+            );
+            if !req.allow_stale_reference {
+                bail!("{what}. Commission again, or pass --allow-stale-reference to read the change against it anyway");
+            }
+            warnings.push(format!(
+                "{what}; the change read includes the recalibration's (--allow-stale-reference)"
+            ));
+        }
+        for (trace, bar) in record.traces(path) {
+            references.push(read_input(&trace, Some(bar), base.import.as_ref())?.0);
+        }
+    }
+    for f in &req.fit_on {
+        if !req.measured.iter().any(|(m, _)| same(f, m)) && !inputs.iter().any(|i| same(f, Path::new(&i.label))) {
+            bail!("--fit-on {}: not among the --measured traces", f.display());
+        }
+    }
+    Ok(Read {
+        inputs,
+        references,
+        base,
+        warnings,
+    })
 }

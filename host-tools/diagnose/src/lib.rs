@@ -22,9 +22,10 @@
 //! (the rows of one layer may import each other, as noted), so the stages
 //! never import the engine that runs them:
 //!
-//! 1. [`stages`], [`fit`], `parallel`, [`options`], [`input`]: the cycle's
-//!    stages (a)–(f), the optimiser, the thread pool, the tunables, and what
-//!    the diagnosis is given (traces, progress, refusals);
+//! 1. [`stages`], [`fit`], `parallel`, [`options`], [`record`], [`input`]:
+//!    the cycle's stages (a)–(f), the optimiser, the thread pool, the
+//!    tunables, the commissioning record's format, and what the diagnosis is
+//!    given (traces or commissioning folders, progress, refusals);
 //! 2. [`report`]: the schema of `report.json` (the candidate models
 //!    included), apart so a schema change is one diff;
 //! 3. [`gap`], [`features`]: what is compared — cycles cut from traces and
@@ -59,6 +60,7 @@ pub mod model;
 pub mod options;
 mod parallel;
 mod pipeline;
+pub mod record;
 pub mod report;
 pub mod stages;
 pub mod valve_timing;

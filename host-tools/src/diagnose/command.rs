@@ -8,13 +8,9 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use super::bench::{render, run_case, summarize, BenchOptions};
-use super::engine::{diagnose_against, MeasuredInput, Options};
-use super::input::read_input;
+use super::engine::{diagnose_against, Options};
+use super::input::{read_request, Request};
 use super::output::{summary, write_all};
-use crate::commission;
-use hammer_sim::estimation::sensors_for;
-use hammer_sim::SimConfig;
-use hammer_trace::config::load_toml;
 
 #[derive(Args, Debug)]
 pub struct DiagnoseArgs {
@@ -151,64 +147,17 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
     if bars.iter().all(Option::is_none) && args.supply_bar.len() == args.measured.len() && args.reference.is_empty() {
         bars = args.supply_bar.iter().map(|b| Some(*b)).collect();
     }
-    let mut base: SimConfig = match &args.config {
-        Some(p) => load_toml(p)?,
-        None => SimConfig::default(),
-    };
-    base.validate()?;
-    let same = |a: &Path, b: &Path| a == b || a.canonicalize().ok().is_some_and(|x| b.canonicalize().ok() == Some(x));
-    let mut inputs = Vec::new();
-    // The calibrations the measured traces were made with (device captures).
-    let mut measured_hashes = Vec::new();
-    for (k, path) in args.measured.iter().enumerate() {
-        let folder = commission::is_record(path)
-            .then(|| commission::Record::load(path))
-            .transpose()?;
-        let traces = match &folder {
-            Some(r) => r.traces(path).into_iter().map(|(p, b)| (p, Some(b))).collect(),
-            None => vec![(path.clone(), bars[k])],
-        };
-        // A folder's traces are one cycle each: all fitted unless told.
-        let fit_folder = folder.is_some() && (args.fit_on.is_empty() || args.fit_on.iter().any(|f| same(f, path)));
-        for (trace, bar) in traces {
-            let (input, sidecar) = read_input(&trace, bar, base.import.as_ref())?;
-            if inputs.is_empty() && args.config.is_none() {
-                base.sensors = sensors_for(sidecar.as_ref(), &base.sensors);
-            }
-            measured_hashes.extend(sidecar.as_ref().and_then(|s| s.calibration_hash));
-            inputs.push(MeasuredInput {
-                fit: fit_folder || args.fit_on.iter().any(|f| same(f, &trace)),
-                ..input
-            });
-        }
+    let read = read_request(&Request {
+        measured: args.measured.iter().cloned().zip(bars).collect(),
+        reference: args.reference.iter().cloned().zip(ref_bars).collect(),
+        fit_on: args.fit_on.clone(),
+        config: args.config.clone(),
+        allow_stale_reference: args.allow_stale_reference,
+    })?;
+    for w in &read.warnings {
+        eprintln!("warning: {w}");
     }
-    let mut references = Vec::new();
-    for (k, path) in args.reference.iter().enumerate() {
-        if commission::is_record(path) {
-            let record = commission::Record::load(path)?;
-            if let Some(h) = measured_hashes.iter().find(|&&h| h != record.calibration_hash) {
-                let what = format!(
-                    "{} was commissioned with calibration {:08x}; the measured traces were recorded with {h:08x}: the board was recalibrated since, so the record is stale",
-                    path.display(),
-                    record.calibration_hash
-                );
-                if !args.allow_stale_reference {
-                    bail!("{what}. Commission again, or pass --allow-stale-reference to read the change against it anyway");
-                }
-                eprintln!("warning: {what}; the change read includes the recalibration's (--allow-stale-reference)");
-            }
-            for (trace, bar) in record.traces(path) {
-                references.push(read_input(&trace, Some(bar), base.import.as_ref())?.0);
-            }
-        } else {
-            references.push(read_input(path, ref_bars[k], base.import.as_ref())?.0);
-        }
-    }
-    for f in &args.fit_on {
-        if !args.measured.iter().any(|m| same(f, m)) && !inputs.iter().any(|i| same(f, Path::new(&i.label))) {
-            bail!("--fit-on {}: not among the --measured traces", f.display());
-        }
-    }
+    let (inputs, references, base) = (read.inputs, read.references, read.base);
     let opts = Options {
         nominal_uncertainty: args.nominal_uncertainty,
         ..Options::default()

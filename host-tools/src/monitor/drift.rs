@@ -92,10 +92,6 @@ impl Watch {
     /// it (a drift reading, notes).
     pub fn see(&mut self, ev: &Stamped) -> Vec<Event> {
         match &ev.event {
-            Event::Connected { .. } => {
-                self.reconnected();
-                vec![]
-            }
             Event::Msg(DeviceMsg::Config(c)) => self.configured(Config::default().with_device(c)),
             Event::Msg(DeviceMsg::Rejected {
                 command: CommandKind::StartCapture,

@@ -1,7 +1,8 @@
 //! The hammer's reference record: what `hammer commission` writes into its
 //! folder (`commission.json` beside one trace per captured cycle), read by
-//! `hammer diagnose --reference` and by the monitor's drift since
-//! commissioning ([`crate::drift`]).
+//! the diagnosis' inputs ([`crate::input::read_request`]: `hammer diagnose
+//! --reference`, the Python package) and by the monitor's drift since
+//! commissioning.
 
 use std::path::{Path, PathBuf};
 
@@ -10,8 +11,8 @@ use serde::{Deserialize, Serialize};
 
 /// The record's file in a commissioning folder.
 pub const RECORD_FILE: &str = "commission.json";
-pub(crate) const RECORD_FORMAT: &str = "hammer-commission";
-pub(crate) const RECORD_VERSION: u32 = 1;
+pub const RECORD_FORMAT: &str = "hammer-commission";
+pub const RECORD_VERSION: u32 = 1;
 
 /// What `commission.json` holds.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
