@@ -120,6 +120,9 @@ pub struct Feed {
     /// energy equation against the supply pressure (NaN without one).
     pub feed_area_m2: f32,
     pub feed_area_uncertainty_m2: f32,
+    /// The correction to the chamber's dead volume its closed phase asks
+    /// for (`closed::dead_volume_offset`), m³; NaN where it cannot tell.
+    pub dead_volume_offset_m3: f32,
 }
 
 /// Both chambers' feeds of one cycle; `None` where a chamber showed no
@@ -263,6 +266,7 @@ fn feed(
         closed_exponent_uncertainty: o.exponent_uncertainty,
         feed_area_m2: area.area_m2,
         feed_area_uncertainty_m2: u_area,
+        dead_volume_offset_m3: closed::dead_volume_offset(p, x, &volume, w.dt_s, &o).unwrap_or(f32::NAN),
     })
 }
 

@@ -2,7 +2,7 @@
 //! effect's score and explained share, the model-form factors, the
 //! recalibration and the remainder. For finding why a case is misnamed.
 //!
-//! `cargo run --release -p hammer-host --example bench_case -- [--structural] SEED INDEX...`
+//! `cargo run --release -p hammer-host --example bench_case -- [--structural] [--reference] SEED INDEX...`
 
 use hammer_host::diagnose::bench::{run_case, BenchOptions};
 use hammer_host::diagnose::engine::Options;
@@ -10,11 +10,13 @@ use hammer_host::diagnose::engine::Options;
 fn main() {
     let mut args: Vec<String> = std::env::args().skip(1).collect();
     let structural = args.iter().any(|a| a == "--structural");
-    args.retain(|a| a != "--structural");
+    let reference = args.iter().any(|a| a == "--reference");
+    args.retain(|a| a != "--structural" && a != "--reference");
     let seed: u64 = args.first().and_then(|s| s.parse().ok()).unwrap_or(7);
     let bench = BenchOptions {
         seed,
         structural,
+        reference,
         jitter: if structural { 0.1 } else { 0.03 },
         ..BenchOptions::default()
     };

@@ -286,7 +286,8 @@ fn the_second_familys_valve_is_earlier_than_the_models_even_when_delayed() {
 /// the model alone said `none` (a supply restriction, case 5) or named the
 /// wrong member of the cluster (a leak named `heat_transfer`, case 13), the
 /// hidden effect is named, its magnitude within 15 %; a control (case 8)
-/// stays `none`.
+/// stays `none`; a valve delay (case 3) the configured dead volumes hid is
+/// named, each hammer's front dead volume read from its record.
 #[test]
 fn against_its_own_record_a_hammer_of_another_form_shows_what_changed() {
     use hammer_host::diagnose::bench::{run_case, BenchOptions};
@@ -301,14 +302,28 @@ fn against_its_own_record_a_hammer_of_another_form_shows_what_changed() {
         figures: false,
         ..Options::default()
     };
-    for (index, hidden) in [(5, "supply_restriction"), (13, "leakage"), (8, "none")] {
+    for (index, hidden) in [(5, "supply_restriction"), (13, "leakage"), (8, "none"), (3, "valve_delay")] {
         let c = run_case(&bench, index, &opts).unwrap();
         println!(
-            "case {index} ({:?}): named {:?}, parameter errors {:?}",
-            c.variants, c.named, c.param_errors
+            "case {index} ({:?}): named {:?}, parameter errors {:?}, front dead volume {:?}",
+            c.variants, c.named, c.param_errors, c.front_dead_volume_error
         );
+        // The generator's front dead volume is 17 cm³ ± 10 %, the
+        // configuration's 19.9 cm³: the record's closed phases give the
+        // hammer's own within 2 %.
+        let dead = c.front_dead_volume_error.expect("read against a record");
+        assert!(dead.abs() < 0.02, "case {index}: front dead volume off by {:.1} %", 100.0 * dead);
         if hidden == "none" {
             assert!(c.named.is_empty(), "case {index}: a control named {:?}", c.named);
+            continue;
+        }
+        if hidden == "valve_delay" {
+            // A delay of 2.3 ms on a polytropic hammer with a supply hose:
+            // read through the configured dead volumes its front feed came
+            // out 3–8 ms earlier than in the record. It is named; its size
+            // comes from the model's signature, whose form differs
+            // (docs/diagnosis.md), so it is not asserted.
+            assert_eq!(c.named, [hidden], "case {index}");
             continue;
         }
         assert_eq!(c.named, [hidden], "case {index}");

@@ -220,6 +220,10 @@ pub struct CaseResult {
     /// How large each unseen effect would have had to be to be named.
     #[serde(default)]
     pub detection_floors: Vec<super::report::DetectionFloor>,
+    /// The front dead volume the reference's closed phases gave, relative
+    /// to the generator's (structural benchmark with references only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub front_dead_volume_error: Option<f64>,
     #[serde(skip)]
     pub report: Option<super::engine::Report>,
 }
@@ -293,6 +297,10 @@ pub fn run_case(opts: &BenchOptions, index: usize, diag: &Options) -> anyhow::Re
         }
     }
     let s = &r.shrink;
+    let front_dead_volume_error = match (&structural, r.dead_volumes.iter().find(|d| d.chamber == "front")) {
+        (Some((_, p)), Some(d)) => Some(d.used_m3 / p.front_dead_m3 - 1.0),
+        _ => None,
+    };
     Ok(CaseResult {
         index,
         variants: structural.map_or_else(Vec::new, |(st, _)| {
@@ -316,6 +324,7 @@ pub fn run_case(opts: &BenchOptions, index: usize, diag: &Options) -> anyhow::Re
         model_free: r.model_free.clone(),
         model_form: r.model_form.clone(),
         detection_floors: r.detection_floors.clone(),
+        front_dead_volume_error,
         report: Some(out.report),
     })
 }
@@ -590,6 +599,17 @@ pub fn render(s: &BenchSummary) -> String {
         s.cautioned,
         s.cases.len()
     );
+    let mut dead: Vec<f64> = s.cases.iter().filter_map(|c| c.front_dead_volume_error).map(f64::abs).collect();
+    if !dead.is_empty() {
+        dead.sort_by(f64::total_cmp);
+        let _ = writeln!(
+            out,
+            "front dead volume read from each case's record, against the generator's: error median {:.1} %, max {:.1} % over {} cases",
+            100.0 * dead[dead.len() / 2],
+            100.0 * dead[dead.len() - 1],
+            dead.len()
+        );
+    }
     misnamed(&mut out, s);
     out
 }

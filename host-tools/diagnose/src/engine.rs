@@ -26,7 +26,7 @@ pub use super::features::extractor_for;
 pub use super::input::{DiagnoseError, MeasuredInput, Progress};
 pub use super::options::{Floors, Options};
 pub use super::report::{
-    EffectResult, FittedParam, InputInfo, ModelForm, ModelFreeStat, PointShrink, Recalibration, Remainder, Report,
+    DeadVolume, EffectResult, FittedParam, InputInfo, ModelForm, ModelFreeStat, PointShrink, Recalibration, Remainder, Report,
     Shrink, Verdict, WhereCell,
 };
 
@@ -69,7 +69,31 @@ pub fn diagnose_against(
     let front: Vec<&[f64]> = all().map(|i| i.trace.p_front_pa.as_slice()).collect();
     extractor.pressure_floor_pa = [pressure_floor(&rear), pressure_floor(&front)];
     let runner = ModelRunner::new(base.clone(), extractor);
-    let mut grouped = group::group(inputs, &runner.extractor)?;
+    // Against a reference the hammer's records are read through the dead
+    // volumes its reference shows; the model keeps its own.
+    let hammer = if references.is_empty() {
+        runner.extractor
+    } else {
+        let read = group::group(references, &runner.extractor)?;
+        let cycles: Vec<_> = read.points.iter().flat_map(|p| p.fit.iter().chain(&p.held)).cloned().collect();
+        runner.extractor.calibrated(&cycles)
+    };
+    let dead_volumes = match (references.is_empty(), runner.extractor.chambers, hammer.chambers) {
+        (false, Some(nominal), Some(used)) => vec![
+            DeadVolume {
+                chamber: "rear".into(),
+                nominal_m3: nominal.rear_dead_m3,
+                used_m3: used.rear_dead_m3,
+            },
+            DeadVolume {
+                chamber: "front".into(),
+                nominal_m3: nominal.front_dead_m3,
+                used_m3: used.front_dead_m3,
+            },
+        ],
+        _ => Vec::new(),
+    };
+    let mut grouped = group::group(inputs, &hammer)?;
     let total_steps = grouped.points.len() + EFFECT_NAMES.len() + 3;
     let done = AtomicUsize::new(0);
     let step = |what: &str| {
@@ -80,7 +104,7 @@ pub fn diagnose_against(
     let nominal = nominal::nominal(&grouped.points, &runner, opts, &step)?;
     let mut reference_infos = Vec::new();
     if !references.is_empty() {
-        let (baselines, infos) = reference::baselines(references, &runner.extractor)?;
+        let (baselines, infos) = reference::baselines(references, &hammer)?;
         reference::transplant(&mut grouped.points, &nominal.features, &baselines)?;
         reference_infos = infos;
     }
@@ -109,6 +133,7 @@ pub fn diagnose_against(
             tool: format!("hammer diagnose {}", env!("CARGO_PKG_VERSION")),
             inputs: grouped.infos,
             references: reference_infos,
+            dead_volumes,
             fit_points: fs.bars(),
             where_: located.where_,
             verdict: ranking.verdict_report(),

@@ -149,6 +149,9 @@ pub struct Extractor {
     pub chambers: Option<ChamberGeometry>,
 }
 
+/// Cycles that must read a chamber's dead volume for [`Extractor::calibrated`] to use it.
+pub const MIN_CALIBRATION_CYCLES: usize = 5;
+
 /// A channel's clipping floor, if its readings show one: the lowest reading
 /// held by at least 0.1 % of the samples. A smooth signal touches its
 /// minimum for a few samples; a transducer at the end of its range sits there.
@@ -184,6 +187,32 @@ impl Extractor {
             pressure_floor_pa: [f64::NEG_INFINITY; 2],
             chambers: None,
         }
+    }
+
+    /// This extractor with the chambers' dead volumes a record of the hammer
+    /// asks for: each chamber's by the median of its cycles' corrections
+    /// (`hammer_estimator::chambers::closed::dead_volume_offset`), where at
+    /// least [`MIN_CALIBRATION_CYCLES`] read one; else as it was. Why: the
+    /// dead volumes are drawing estimates, and near the impact a tenth off
+    /// moves a late feed's onset by milliseconds. A hammer read against its
+    /// own record reads both through the volumes the record shows.
+    pub fn calibrated(&self, cycles: &[CycleFeatures]) -> Extractor {
+        let mut out = self.clone();
+        let Some(ch) = out.chambers.as_mut() else {
+            return out;
+        };
+        for (k, dead) in [&mut ch.rear_dead_m3, &mut ch.front_dead_m3].into_iter().enumerate() {
+            let mut d: Vec<f64> = cycles
+                .iter()
+                .map(|c| c.dead_volume_offset_m3[k])
+                .filter(|d| d.is_finite())
+                .collect();
+            if d.len() >= MIN_CALIBRATION_CYCLES {
+                d.sort_by(f64::total_cmp);
+                *dead += d[d.len() / 2];
+            }
+        }
+        out
     }
 
     /// Impact times (s, interpolated between samples) where the acceleration
@@ -274,11 +303,13 @@ impl Extractor {
                 c.values[FRONT_FEED] = f.onset_s as f64;
                 c.values[FRONT_EXPONENT] = f.closed_exponent as f64;
                 c.values[FRONT_AREA] = f.feed_area_m2 as f64;
+                c.dead_volume_offset_m3[1] = f.dead_volume_offset_m3 as f64;
             }
             if let Some(r) = ch.rear {
                 c.values[REAR_FEED] = r.onset_s as f64;
                 c.values[REAR_EXPONENT] = r.closed_exponent as f64;
                 c.values[REAR_AREA] = r.feed_area_m2 as f64;
+                c.dead_volume_offset_m3[0] = r.dead_volume_offset_m3 as f64;
             }
         }
     }
@@ -371,6 +402,7 @@ impl Extractor {
             t_impact_s: t0,
             values: f,
             zero_shift_mps2: z,
+            dead_volume_offset_m3: [f64::NAN; 2],
         })
     }
     /// Least-squares fit of the force balance over the flight samples of one
@@ -465,6 +497,9 @@ pub struct CycleFeatures {
     pub values: [f64; N_FEATURES],
     /// The accelerometer's zero shift the force balance fitted (at the impact).
     pub zero_shift_mps2: f64,
+    /// The rear and front chambers' dead-volume corrections their closed
+    /// phases ask for, m³ (NaN where not read): see [`Extractor::calibrated`].
+    pub dead_volume_offset_m3: [f64; 2],
 }
 
 /// Inverse of a small symmetric matrix by Gauss–Jordan with partial pivoting;

@@ -253,6 +253,19 @@ pub struct DetectionFloor {
     pub statement: String,
 }
 
+/// A chamber's dead volume as the hammer's records were read through it
+/// (`features::Extractor::calibrated`): against a reference, the one its
+/// closed phases ask for.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct DeadVolume {
+    /// `rear` or `front`.
+    pub chamber: String,
+    /// The configuration's (a drawing's estimate).
+    pub nominal_m3: f64,
+    /// The one the records were read through.
+    pub used_m3: f64,
+}
+
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Report {
     pub tool: String,
@@ -261,6 +274,10 @@ pub struct Report {
     /// from them (empty: against the model alone).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub references: Vec<InputInfo>,
+    /// The chambers' dead volumes the measurement and the references were
+    /// read through (empty: the configuration's, against the model alone).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub dead_volumes: Vec<DeadVolume>,
     pub fit_points: Vec<f64>,
     #[serde(rename = "where")]
     pub where_: Vec<WhereCell>,

@@ -211,6 +211,26 @@ fn inputs_md(s: &mut String, report: &Report) {
             refs.join(", ")
         );
         line!(s);
+        let dead: Vec<String> = report
+            .dead_volumes
+            .iter()
+            .map(|d| {
+                format!(
+                    "{} {:.2} cm³ (configured {:.2} cm³)",
+                    d.chamber,
+                    1e6 * d.used_m3,
+                    1e6 * d.nominal_m3
+                )
+            })
+            .collect();
+        if !dead.is_empty() {
+            line!(
+                s,
+                "Both records were read through the dead volumes the reference's closed phases ask for: {}. Near the impact most of the front chamber is dead volume, and a drawing's estimate a tenth off moves a late feed's onset by milliseconds.",
+                dead.join(", ")
+            );
+            line!(s);
+        }
     }
     line!(
         s,

@@ -97,6 +97,7 @@ mod tests {
                 held_out_cycles: 13,
             }],
             references: Vec::new(),
+            dead_volumes: Vec::new(),
             fit_points: vec![4.0],
             where_: vec![
                 WhereCell {
