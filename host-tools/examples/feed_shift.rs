@@ -87,10 +87,21 @@ fn main() {
         for bar in POINTS {
             let s = rng.next_u64();
             let measured = generate(&params, structure, &gen.effects, bar, 1.0, s).trace;
-            let reference = generate(&params, structure, &Effects::default(), bar, 1.0, s ^ 0x5EED_5EED_5EED_5EED).trace;
+            let reference = generate(
+                &params,
+                structure,
+                &Effects::default(),
+                bar,
+                1.0,
+                s ^ 0x5EED_5EED_5EED_5EED,
+            )
+            .trace;
             traces.push((bar, measured, reference));
         }
-        let record: Vec<CycleFeatures> = traces.iter().flat_map(|(bar, _, r)| cycles(&nominal, r, *bar)).collect();
+        let record: Vec<CycleFeatures> = traces
+            .iter()
+            .flat_map(|(bar, _, r)| cycles(&nominal, r, *bar))
+            .collect();
         let calibrated = nominal.calibrated(&record);
         let (n, c) = (nominal.chambers.unwrap(), calibrated.chambers.unwrap());
         println!(
@@ -109,7 +120,8 @@ fn main() {
                 let feed = |t: &Trace| median(cycles(ex, t, *bar).iter().map(|c| c.values[FRONT_FEED]).collect());
                 1e3 * (feed(m) - feed(r))
             };
-            let truth = 1e3 * (true_opening_s(m, &cycles(&nominal, m, *bar)) - true_opening_s(r, &cycles(&nominal, r, *bar)));
+            let truth =
+                1e3 * (true_opening_s(m, &cycles(&nominal, m, *bar)) - true_opening_s(r, &cycles(&nominal, r, *bar)));
             println!(
                 "  {bar:>4} bar  {:+6.2} | {:+6.2} | {:+6.2}",
                 shift(&nominal),

@@ -302,7 +302,12 @@ fn against_its_own_record_a_hammer_of_another_form_shows_what_changed() {
         figures: false,
         ..Options::default()
     };
-    for (index, hidden) in [(5, "supply_restriction"), (13, "leakage"), (8, "none"), (3, "valve_delay")] {
+    for (index, hidden) in [
+        (5, "supply_restriction"),
+        (13, "leakage"),
+        (8, "none"),
+        (3, "valve_delay"),
+    ] {
         let c = run_case(&bench, index, &opts).unwrap();
         println!(
             "case {index} ({:?}): named {:?}, parameter errors {:?}, front dead volume {:?}",
@@ -312,7 +317,11 @@ fn against_its_own_record_a_hammer_of_another_form_shows_what_changed() {
         // configuration's 19.9 cm³: the record's closed phases give the
         // hammer's own within 2 %.
         let dead = c.front_dead_volume_error.expect("read against a record");
-        assert!(dead.abs() < 0.02, "case {index}: front dead volume off by {:.1} %", 100.0 * dead);
+        assert!(
+            dead.abs() < 0.02,
+            "case {index}: front dead volume off by {:.1} %",
+            100.0 * dead
+        );
         if hidden == "none" {
             assert!(c.named.is_empty(), "case {index}: a control named {:?}", c.named);
             continue;

@@ -93,7 +93,10 @@ pub fn onset(p: &[f32], x: &[f32], volume: &impl Fn(f32) -> f32, dt_s: f32) -> O
 /// plausible range (−60 % … +100 % of the smallest volume).
 pub fn dead_volume_offset(p: &[f32], x: &[f32], volume: &impl Fn(f32) -> f32, dt_s: f32, o: &Onset) -> Option<f32> {
     let hold = ((HOLD_S / dt_s) as usize).max(3);
-    let len = ((o.onset_s / dt_s) as usize).saturating_sub(hold).min(p.len()).min(x.len());
+    let len = ((o.onset_s / dt_s) as usize)
+        .saturating_sub(hold)
+        .min(p.len())
+        .min(x.len());
     if len < ((MIN_CLOSED_S / dt_s) as usize).max(8) {
         return None;
     }

@@ -599,7 +599,12 @@ pub fn render(s: &BenchSummary) -> String {
         s.cautioned,
         s.cases.len()
     );
-    let mut dead: Vec<f64> = s.cases.iter().filter_map(|c| c.front_dead_volume_error).map(f64::abs).collect();
+    let mut dead: Vec<f64> = s
+        .cases
+        .iter()
+        .filter_map(|c| c.front_dead_volume_error)
+        .map(f64::abs)
+        .collect();
     if !dead.is_empty() {
         dead.sort_by(f64::total_cmp);
         let _ = writeln!(

@@ -26,8 +26,8 @@ pub use super::features::extractor_for;
 pub use super::input::{DiagnoseError, MeasuredInput, Progress};
 pub use super::options::{Floors, Options};
 pub use super::report::{
-    DeadVolume, EffectResult, FittedParam, InputInfo, ModelForm, ModelFreeStat, PointShrink, Recalibration, Remainder, Report,
-    Shrink, Verdict, WhereCell,
+    DeadVolume, EffectResult, FittedParam, InputInfo, ModelForm, ModelFreeStat, PointShrink, Recalibration, Remainder,
+    Report, Shrink, Verdict, WhereCell,
 };
 
 #[derive(Debug, Clone)]
@@ -75,7 +75,12 @@ pub fn diagnose_against(
         runner.extractor
     } else {
         let read = group::group(references, &runner.extractor)?;
-        let cycles: Vec<_> = read.points.iter().flat_map(|p| p.fit.iter().chain(&p.held)).cloned().collect();
+        let cycles: Vec<_> = read
+            .points
+            .iter()
+            .flat_map(|p| p.fit.iter().chain(&p.held))
+            .cloned()
+            .collect();
         runner.extractor.calibrated(&cycles)
     };
     let dead_volumes = match (references.is_empty(), runner.extractor.chambers, hammer.chambers) {
