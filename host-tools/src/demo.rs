@@ -480,6 +480,7 @@ fn run_fleet(args: &DemoArgs, headless: bool) -> Result<()> {
             Box::new(DemoConnector {
                 port: Some(port),
                 describe,
+                supply_bar: member.supply_bar,
             }),
         ));
         streams.push(fr);
@@ -584,6 +585,8 @@ fn headless_loop(port: SharedPort, args: &DemoArgs, stimulus: Option<&Stimulus>)
 struct DemoConnector {
     port: Option<SharedPort>,
     describe: String,
+    /// The simulated hammer's supply pressure (its board holds none).
+    supply_bar: f64,
 }
 
 impl crate::monitor::Connector for DemoConnector {
@@ -600,6 +603,10 @@ impl crate::monitor::Connector for DemoConnector {
     fn describe(&self) -> String {
         self.describe.clone()
     }
+
+    fn supply_bar(&self) -> Option<f64> {
+        Some(self.supply_bar)
+    }
 }
 
 /// The monitor on the demo board: its dashboard, or headless (with
@@ -610,11 +617,7 @@ fn dashboard(port: SharedPort, board: &Board, demo: &DemoArgs, headless: bool) -
         export: demo.export.clone(),
         headless,
         exit_after_reports: headless.then_some(demo.cycles as u64),
-        drift: crate::drift::DriftArgs {
-            // The demo's board holds no supply pressure; its hammer's is known.
-            point_bar: demo.drift.point_bar.or(Some(demo.supply_bar)),
-            ..demo.drift.clone()
-        },
+        drift: demo.drift.clone(),
         ..Default::default()
     };
     let describe = match board {
@@ -625,6 +628,8 @@ fn dashboard(port: SharedPort, board: &Board, demo: &DemoArgs, headless: bool) -
         Box::new(DemoConnector {
             port: Some(port),
             describe,
+            // The demo's board holds no supply pressure; its hammer's is known.
+            supply_bar: demo.supply_bar,
         }),
         &args,
     )

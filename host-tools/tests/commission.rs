@@ -131,3 +131,74 @@ fn a_valve_delay_is_named_against_the_commissioning_record_and_a_stale_one_is_re
         let _ = std::fs::remove_dir_all(d);
     }
 }
+
+/// A fleet read against a record of two operating points: `hammer demo
+/// --devices 2` runs one emulated board at 4 bar and one at 7 bar (QEMU,
+/// real time), neither board's configuration holds its supply pressure,
+/// and each is read against the record's point at its own pressure (the
+/// demo's link knows it). With a hidden 1.5 ms valve delay both front
+/// feeds drift later by about the delay (true shift 1.3–1.5 ms at 4 bar,
+/// 1.8 at 7 on the model; docs/estimator.md), beyond their uncertainty,
+/// and both raise the alarm.
+#[test]
+fn a_fleet_reads_each_board_against_the_records_point_at_its_own_pressure() {
+    let emulated = hammer_host::emulator::qemu_available() && hammer_host::emulator::firmware_elf().exists();
+    if !emulated {
+        eprintln!("skipped: no emulated board (CI builds it and installs qemu-system-arm)");
+        return;
+    }
+    let dir = tmp_dir("fleet");
+    let reference = dir.join("ref");
+    commission(&reference, None);
+    let out = Command::new(env!("CARGO_BIN_EXE_hammer"))
+        .args([
+            "demo",
+            "--headless",
+            "--real-time",
+            "--devices",
+            "2",
+            "--supply-bar",
+            "4",
+        ])
+        .args([
+            "--cycles",
+            "300",
+            "--drift-cycles",
+            "5",
+            "--effect",
+            "valve_delay:tau_s=0.0015",
+        ])
+        .arg("--reference")
+        .arg(&reference)
+        .output()
+        .expect("runs");
+    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(out.status.success(), "{stdout}\n{stderr}");
+    for (device, bar) in [("demo1-4.0bar", "4"), ("demo2-7.0bar", "7")] {
+        let lines: Vec<&str> = stdout
+            .lines()
+            .filter(|l| l.starts_with(&format!("[{device}]")) && l.contains("drift since commissioning"))
+            .collect();
+        assert!(
+            lines.len() >= 3,
+            "{device}: {} drift lines\n{stdout}\n{stderr}",
+            lines.len()
+        );
+        for l in &lines {
+            assert!(l.contains(&format!("at {bar} bar")), "{l}");
+            // "front_feed_s +1.514±0.032 ms"
+            let v = l.split("front_feed_s ").nth(1).expect("front feed drift");
+            let (shift, rest) = v.split_once('±').expect("±");
+            let u: f64 = rest.split_whitespace().next().unwrap().parse().unwrap();
+            let shift: f64 = shift.parse().unwrap();
+            assert!((1.0..2.2).contains(&shift) && u < 0.3 && shift > u, "{l}");
+        }
+        assert!(
+            lines.last().unwrap().contains("front_feed_s") && lines.last().unwrap().contains("ALARM"),
+            "{device}: {}",
+            lines.last().unwrap()
+        );
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

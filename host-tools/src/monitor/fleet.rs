@@ -59,7 +59,12 @@ pub fn run(devices: Vec<(String, Box<dyn Connector>)>, args: &MonitorArgs, headl
         let export = exports.clone().map(|x| DeviceExport::new(&name, x));
         let (tx, rx) = mpsc::sync_channel(EVENT_QUEUE);
         let title = connector.describe();
-        let watch = reference.clone().map(|c| super::drift::Watch::new(c, &args.drift));
+        // Each member at its own point: `--point-bar`, else what its link knows.
+        let drift = crate::drift::DriftArgs {
+            point_bar: args.drift.point_bar.or(connector.supply_bar()),
+            ..args.drift.clone()
+        };
+        let watch = reference.clone().map(|c| super::drift::Watch::new(c, &drift));
         readers.push(reader::spawn(connector, logger, export, watch, tx, stop.clone())?);
         members.push(Member {
             name,

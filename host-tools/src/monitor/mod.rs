@@ -37,6 +37,13 @@ pub use connect::connector_for;
 pub trait Connector: Send {
     fn connect(&mut self) -> std::io::Result<Box<dyn Port>>;
     fn describe(&self) -> String;
+    /// The hammer's supply pressure where the link knows it and the board's
+    /// configuration may not (a demo board's simulated hammer): the
+    /// commissioning record's point its drift is read at, unless
+    /// `--point-bar` says otherwise.
+    fn supply_bar(&self) -> Option<f64> {
+        None
+    }
 }
 
 /// A byte stream to a device. Reads must time out (short read timeout) so the
@@ -222,7 +229,11 @@ pub fn run_with(connector: Box<dyn Connector>, args: &MonitorArgs) -> Result<()>
         .clone()
         .unwrap_or_else(|| device_name(&connector.describe()));
     let device_export = exports.clone().map(|x| export::DeviceExport::new(&device, x));
-    let watch = commissioned(&args.drift)?.map(|c| drift::Watch::new(c, &args.drift));
+    let drift_args = crate::drift::DriftArgs {
+        point_bar: args.drift.point_bar.or(connector.supply_bar()),
+        ..args.drift.clone()
+    };
+    let watch = commissioned(&args.drift)?.map(|c| drift::Watch::new(c, &drift_args));
     let (tx, rx) = mpsc::sync_channel(EVENT_QUEUE);
     let stop = Arc::new(AtomicBool::new(false));
     let reader = reader::spawn(connector, logger, device_export, watch, tx, stop.clone())?;
