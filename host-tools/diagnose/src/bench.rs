@@ -339,6 +339,10 @@ fn magnitude_error(truth: &Effects, name: &str, fitted: &serde_json::Value, poin
 pub struct BenchSummary {
     pub options: BenchOptions,
     pub cases: Vec<CaseResult>,
+    /// Cases the generator could not make (a jittered hammer that does not
+    /// run at some point): left out of every count, each with why.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub not_run: Vec<(usize, String)>,
     /// Rows: what was hidden (an effect, `none`, `pair`); columns: what was named.
     pub confusion: BTreeMap<String, BTreeMap<String, usize>>,
     pub single_right: (usize, usize),
@@ -393,7 +397,7 @@ pub fn above_floor(c: &CaseResult) -> Option<bool> {
     })
 }
 
-pub fn summarize(options: &BenchOptions, cases: Vec<CaseResult>) -> BenchSummary {
+pub fn summarize(options: &BenchOptions, cases: Vec<CaseResult>, not_run: Vec<(usize, String)>) -> BenchSummary {
     let mut confusion: BTreeMap<String, BTreeMap<String, usize>> = BTreeMap::new();
     let (mut single, mut none, mut pair, mut params) = ((0, 0), (0, 0), (0, 0), (0, 0));
     let mut params15 = (0, 0);
@@ -481,6 +485,7 @@ pub fn summarize(options: &BenchOptions, cases: Vec<CaseResult>) -> BenchSummary
         floor_below,
         cautioned: cases.iter().filter(|c| c.cautioned).count(),
         cases,
+        not_run,
     }
 }
 
@@ -614,6 +619,9 @@ pub fn render(s: &BenchSummary) -> String {
             100.0 * dead[dead.len() - 1],
             dead.len()
         );
+    }
+    for (index, why) in &s.not_run {
+        let _ = writeln!(out, "case {index} not run (left out of every count): {why}");
     }
     misnamed(&mut out, s);
     out

@@ -37,6 +37,13 @@ pub enum DiagnoseError {
     NoReference(f64),
 }
 
+impl DiagnoseError {
+    /// A trace that holds no complete cycle (a hammer that does not run).
+    pub fn is_no_cycles(&self) -> bool {
+        matches!(self, DiagnoseError::NoCycles(_))
+    }
+}
+
 /// Progress: (done, total, what is running).
 pub type Progress<'a> = &'a (dyn Fn(usize, usize, &str) + Sync);
 
