@@ -601,6 +601,21 @@ fn diagnose_reads_a_change_from_a_reference_record() {
     assert!((c - 3.0).abs() < 0.3, "{c}");
     let md = std::fs::read_to_string(out.join("report.md")).unwrap();
     assert!(md.contains("reference record"), "{md}");
+    // Both records are read through the dead volumes the reference's
+    // closed phases ask for; the simulator is the diagnosis' own model, so
+    // its record gives the configured front dead volume back.
+    let dead = json["dead_volumes"].as_array().expect("dead_volumes");
+    let front = dead.iter().find(|d| d["chamber"] == "front").expect("front");
+    let (used, nominal) = (
+        front["used_m3"].as_f64().unwrap(),
+        front["nominal_m3"].as_f64().unwrap(),
+    );
+    println!("front dead volume {used:e} m³ against the configured {nominal:e}");
+    assert!((used / nominal - 1.0).abs() < 0.03, "{used} against {nominal}");
+    assert!(
+        md.contains("dead volumes the reference's closed phases ask for"),
+        "{md}"
+    );
     let (code, _, err) = hammer(&[
         "diagnose",
         "--measured",

@@ -225,7 +225,10 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
             }
             // A generated hammer that does not run: the case is not a test
             // of the diagnosis. Said, and left out of the counts.
-            Err(e) if e.downcast_ref::<DiagnoseError>().is_some_and(DiagnoseError::is_no_cycles) => {
+            Err(e)
+                if e.downcast_ref::<DiagnoseError>()
+                    .is_some_and(DiagnoseError::is_no_cycles) =>
+            {
                 pb.println(format!("case {i} not run: {e:#}"));
                 not_run.push((i, format!("{e:#}")));
             }
@@ -236,7 +239,12 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
     }
     pb.finish_and_clear();
     if not_run.len() * 10 > args.cases {
-        bail!("{} of {} cases could not be generated: {:?}", not_run.len(), args.cases, not_run);
+        bail!(
+            "{} of {} cases could not be generated: {:?}",
+            not_run.len(),
+            args.cases,
+            not_run
+        );
     }
     let s = summarize(&opts, cases, not_run);
     let text = render(&s);
