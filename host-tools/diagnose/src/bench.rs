@@ -604,6 +604,15 @@ pub fn render(s: &BenchSummary) -> String {
         s.cautioned,
         s.cases.len()
     );
+    calibration_and_gaps(&mut out, s);
+    misnamed(&mut out, s);
+    out
+}
+
+/// How well the records gave each hammer's front dead volume, and the cases
+/// the generator could not make.
+fn calibration_and_gaps(out: &mut String, s: &BenchSummary) {
+    use std::fmt::Write as _;
     let mut dead: Vec<f64> = s
         .cases
         .iter()
@@ -623,8 +632,6 @@ pub fn render(s: &BenchSummary) -> String {
     for (index, why) in &s.not_run {
         let _ = writeln!(out, "case {index} not run (left out of every count): {why}");
     }
-    misnamed(&mut out, s);
-    out
 }
 
 /// The cases named wrong, with what each was flagged confusable with.
