@@ -329,33 +329,50 @@ impl Line {
 mod tests {
     use super::*;
 
+    const DT: f32 = 1e-5;
+
+    /// A sealed chamber of exponent `n` (at `p0_abs` to start) compressed
+    /// at 2.5 m/s from `x0`, then fed from sample `feed_at` on through a
+    /// port opening at a steady pace (the air let in grows as (t − t0)²,
+    /// and so does ln p at first, by `k`·(t − t0)²): positions and gauge
+    /// pressures.
+    fn compressed_then_fed<const N: usize>(
+        vol: &impl Fn(f32) -> f32,
+        x0: f32,
+        p0_abs: f32,
+        n: f32,
+        feed_at: usize,
+        k: f32,
+    ) -> (heapless::Vec<f32, N>, heapless::Vec<f32, N>) {
+        let x: heapless::Vec<f32, N> = (0..N).map(|i| x0 + 2.5 * DT * i as f32).collect();
+        let c = math::ln(p0_abs) + n * math::ln(vol(x[0]));
+        let p = (0..N)
+            .map(|i| {
+                let rise = k * (DT * (i as f32 - feed_at as f32).max(0.0)).powi(2);
+                math::exp(c - n * math::ln(vol(x[i])) + rise) - P_ATM_PA
+            })
+            .collect();
+        (x, p)
+    }
+
     /// A sealed adiabatic chamber compressed at a steady speed, then fed
     /// from a known sample on through a port opening at a steady pace (the
     /// air let in grows as (t − t0)², and so does ln p at first): the fitted
     /// exponent is 1.4 and the onset lies on the feed's start.
     #[test]
     fn a_sealed_chamber_gives_its_exponent_and_its_feed() {
-        let dt = 1e-5f32;
         let vol = |x: f32| 20e-6 + 7e-4 * (0.052 - x);
         let feed_at = 600usize;
-        let n = 1000;
-        let x: heapless::Vec<f32, 1000> = (0..n).map(|i| 0.025 + 2.5 * dt * i as f32).collect();
-        let c = math::ln(2e5) + 1.4 * math::ln(vol(x[0]));
-        let p: heapless::Vec<f32, 1000> = (0..n)
-            .map(|i| {
-                let rise = 2e4 * (dt * (i as f32 - feed_at as f32).max(0.0)).powi(2);
-                math::exp(c - 1.4 * math::ln(vol(x[i])) + rise) - P_ATM_PA
-            })
-            .collect();
-        let o = onset(&p, &x, &vol, dt).expect("a feed");
+        let (x, p) = compressed_then_fed::<1000>(&vol, 0.025, 2e5, 1.4, feed_at, 2e4);
+        let o = onset(&p, &x, &vol, DT).expect("a feed");
         assert!((o.exponent - 1.4).abs() < 1e-3, "n = {}", o.exponent);
-        let t_feed = feed_at as f32 * dt;
+        let t_feed = feed_at as f32 * DT;
         assert!(
-            (o.onset_s - t_feed).abs() < 0.5 * dt,
+            (o.onset_s - t_feed).abs() < 0.5 * DT,
             "onset {} s, fed at {t_feed} s",
             o.onset_s
         );
-        assert!(o.onset_uncertainty_s < 2.0 * dt, "U = {} s", o.onset_uncertainty_s);
+        assert!(o.onset_uncertainty_s < 2.0 * DT, "U = {} s", o.onset_uncertainty_s);
     }
 
     /// A chamber whose dead volume is 3 cm³ (15 %) larger than the one
@@ -364,24 +381,14 @@ mod tests {
     /// asks for none.
     #[test]
     fn the_closed_phase_gives_the_dead_volume_back() {
-        let dt = 1e-5f32;
         let assumed = |x: f32| 20e-6 + 7e-4 * (0.052 - x);
         let actual = |x: f32| assumed(x) + 3e-6;
-        let feed_at = 1100usize;
-        let n = 1300;
-        let x: heapless::Vec<f32, 1300> = (0..n).map(|i| 0.020 + 2.5 * dt * i as f32).collect();
-        let c = math::ln(1.05e5) + 1.35 * math::ln(actual(x[0]));
-        let p: heapless::Vec<f32, 1300> = (0..n)
-            .map(|i| {
-                let rise = 2e5 * (dt * (i as f32 - feed_at as f32).max(0.0)).powi(2);
-                math::exp(c - 1.35 * math::ln(actual(x[i])) + rise) - P_ATM_PA
-            })
-            .collect();
-        let o = onset(&p, &x, &actual, dt).expect("a feed");
-        let none = dead_volume_offset(&p, &x, &actual, dt, &o).expect("identifiable");
+        let (x, p) = compressed_then_fed::<1300>(&actual, 0.020, 1.05e5, 1.35, 1100, 2e5);
+        let o = onset(&p, &x, &actual, DT).expect("a feed");
+        let none = dead_volume_offset(&p, &x, &actual, DT, &o).expect("identifiable");
         assert!(none.abs() < 0.1e-6, "δ = {none} with the right volume");
-        let o = onset(&p, &x, &assumed, dt).expect("a feed");
-        let d = dead_volume_offset(&p, &x, &assumed, dt, &o).expect("identifiable");
+        let o = onset(&p, &x, &assumed, DT).expect("a feed");
+        let d = dead_volume_offset(&p, &x, &assumed, DT, &o).expect("identifiable");
         assert!((d - 3e-6).abs() < 0.09e-6, "δ = {d}, 3e-6 hidden");
     }
 
