@@ -66,7 +66,11 @@ def test_ctrl_c_interrupts_a_long_simulation():
     # A minute of simulated time takes several seconds; Ctrl-C returns at once.
     script = textwrap.dedent(
         """
-        import sys, time, hammer_monitor as hm
+        import signal, sys, time, hammer_monitor as hm
+        # A child started from a background job inherits SIGINT ignored, and
+        # Python then installs no handler: the test is of the library's
+        # polling, so the default handler is put back.
+        signal.signal(signal.SIGINT, signal.default_int_handler)
         print("started", flush=True)
         try:
             hm.simulate(5.0, 60.0)
