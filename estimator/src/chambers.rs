@@ -121,7 +121,8 @@ pub struct Feed {
     pub feed_area_m2: f32,
     pub feed_area_uncertainty_m2: f32,
     /// The correction to the chamber's dead volume its closed phase asks
-    /// for (`closed::dead_volume_offset`), m³; NaN where it cannot tell.
+    /// for (`closed::dead_volume_offset`), m³; NaN where it cannot tell or
+    /// was not asked (`Window::fit_dead_volume`).
     pub dead_volume_offset_m3: f32,
 }
 
@@ -183,6 +184,10 @@ pub struct Window<'a> {
     pub x_m: &'a [f32],
     pub open: usize,
     pub close: usize,
+    /// Also fit each chamber's dead volume (`Feed::dead_volume_offset_m3`,
+    /// NaN otherwise): a further pass over each closed phase, wanted only
+    /// where a hammer's own record is read, not in every model run.
+    pub fit_dead_volume: bool,
 }
 
 /// How long after the closing impact a front feed is still looked for.
@@ -266,7 +271,11 @@ fn feed(
         closed_exponent_uncertainty: o.exponent_uncertainty,
         feed_area_m2: area.area_m2,
         feed_area_uncertainty_m2: u_area,
-        dead_volume_offset_m3: closed::dead_volume_offset(p, x, &volume, w.dt_s, &o).unwrap_or(f32::NAN),
+        dead_volume_offset_m3: if w.fit_dead_volume {
+            closed::dead_volume_offset(p, x, &volume, w.dt_s, &o).unwrap_or(f32::NAN)
+        } else {
+            f32::NAN
+        },
     })
 }
 

@@ -11,16 +11,11 @@
 //!
 //! `cargo run --release -p hammer-host --example feed_shift -- SEED INDEX...`
 
-use hammer_host::diagnose::bench::{draw_effect, generator_config, hidden_for, structural_generator};
+use hammer_host::diagnose::bench::{draw_case, BenchOptions};
 use hammer_host::diagnose::engine::extractor_for;
 use hammer_host::diagnose::features::{CycleFeatures, Extractor, Signals, FRONT_FEED};
-use hammer_sim::effects::Effects;
-use hammer_sim::sensor::Rng;
 use hammer_sim::SimConfig;
 use hammer_trace::trace::Trace;
-use hammer_variants::generate;
-
-const POINTS: [f64; 3] = [4.0, 5.5, 7.0];
 
 fn median(mut v: Vec<f64>) -> f64 {
     v.retain(|x| x.is_finite());
@@ -73,41 +68,41 @@ fn main() {
     };
     let nominal = extractor_for(&SimConfig::default());
     println!("front feed shift against the record, ms: configured dead volumes | calibrated on the record | true port opening");
+    let bench = BenchOptions {
+        seed,
+        structural: true,
+        reference: true,
+        jitter: 0.1,
+        ..BenchOptions::default()
+    };
     for &index in indices {
         let index = index as usize;
-        // The case as `bench::run_case` draws it.
-        let mut rng = Rng::new(seed.wrapping_mul(0x9E37_79B9).wrapping_add(index as u64));
-        let hidden = hidden_for(index, &mut rng);
-        let mut gen = generator_config(&SimConfig::default(), 0.1, &mut rng);
-        for name in hidden.names() {
-            draw_effect(&mut gen.effects, &name, &mut rng);
-        }
-        let (structure, params) = structural_generator(0.1, &mut rng);
-        let mut traces = Vec::new();
-        for bar in POINTS {
-            let s = rng.next_u64();
-            let measured = generate(&params, structure, &gen.effects, bar, 1.0, s).trace;
-            let reference = generate(
-                &params,
-                structure,
-                &Effects::default(),
-                bar,
-                1.0,
-                s ^ 0x5EED_5EED_5EED_5EED,
-            )
-            .trace;
-            traces.push((bar, measured, reference));
-        }
-        let record: Vec<CycleFeatures> = traces
+        let case = match draw_case(&bench, index) {
+            Ok(c) => c,
+            Err(e) => {
+                println!("case {index}: {e:#}");
+                continue;
+            }
+        };
+        let Some((structure, params)) = &case.structural else {
+            continue;
+        };
+        // The record's cycles read with their dead volumes, then calibrated on.
+        let reading = Extractor {
+            read_dead_volume: true,
+            ..nominal
+        };
+        let record: Vec<CycleFeatures> = case
+            .references
             .iter()
-            .flat_map(|(bar, _, r)| cycles(&nominal, r, *bar))
+            .flat_map(|r| cycles(&reading, &r.trace, r.supply_bar))
             .collect();
         let calibrated = nominal.calibrated(&record);
         let (n, c) = (nominal.chambers.unwrap(), calibrated.chambers.unwrap());
         println!(
             "case {index} {:?} hidden {} — dead volumes front {:.2} → {:.2} cm³, rear {:.2} → {:.2} cm³ (true {:.2}, {:.2})",
             structure.variants(),
-            serde_json::to_string(&gen.effects).unwrap_or_default(),
+            serde_json::to_string(&case.gen.effects).unwrap_or_default(),
             1e6 * n.front_dead_m3,
             1e6 * c.front_dead_m3,
             1e6 * n.rear_dead_m3,
@@ -115,13 +110,15 @@ fn main() {
             1e6 * params.front_dead_m3,
             1e6 * params.rear_dead_m3,
         );
-        for (bar, m, r) in &traces {
+        for (m, r) in case.inputs.iter().zip(&case.references) {
+            let bar = m.supply_bar;
+            let (m, r) = (&m.trace, &r.trace);
             let shift = |ex: &Extractor| {
-                let feed = |t: &Trace| median(cycles(ex, t, *bar).iter().map(|c| c.values[FRONT_FEED]).collect());
+                let feed = |t: &Trace| median(cycles(ex, t, bar).iter().map(|c| c.values[FRONT_FEED]).collect());
                 1e3 * (feed(m) - feed(r))
             };
             let truth =
-                1e3 * (true_opening_s(m, &cycles(&nominal, m, *bar)) - true_opening_s(r, &cycles(&nominal, r, *bar)));
+                1e3 * (true_opening_s(m, &cycles(&nominal, m, bar)) - true_opening_s(r, &cycles(&nominal, r, bar)));
             println!(
                 "  {bar:>4} bar  {:+6.2} | {:+6.2} | {:+6.2}",
                 shift(&nominal),

@@ -142,8 +142,7 @@ fn a_valve_delay_is_named_against_the_commissioning_record_and_a_stale_one_is_re
 /// and both raise the alarm.
 #[test]
 fn a_fleet_reads_each_board_against_the_records_point_at_its_own_pressure() {
-    let emulated = hammer_host::emulator::qemu_available() && hammer_host::emulator::firmware_elf().exists();
-    if !emulated {
+    if !hammer_host::demo::emulated_board_available(false) {
         eprintln!("skipped: no emulated board (CI builds it and installs qemu-system-arm)");
         return;
     }

@@ -228,12 +228,23 @@ pub struct CaseResult {
     pub report: Option<super::engine::Report>,
 }
 
-/// Runs case `index` of the plan.
-pub fn run_case(opts: &BenchOptions, index: usize, diag: &Options) -> anyhow::Result<CaseResult> {
+/// A case as the plan draws it: what is hidden, the generator, and each
+/// point's measured trace (and, with references, the same hammer's record
+/// without the effect).
+pub struct DrawnCase {
+    pub hidden: Hidden,
+    pub gen: SimConfig,
+    /// The second family's structure and parameters (structural benchmark).
+    pub structural: Option<(Structure, VariantParams)>,
+    pub inputs: Vec<MeasuredInput>,
+    pub references: Vec<MeasuredInput>,
+}
+
+/// Draws case `index` of the plan and records its traces.
+pub fn draw_case(opts: &BenchOptions, index: usize) -> anyhow::Result<DrawnCase> {
     let mut rng = Rng::new(opts.seed.wrapping_mul(0x9E37_79B9).wrapping_add(index as u64));
     let hidden = hidden_for(index, &mut rng);
-    let base = SimConfig::default();
-    let mut gen = generator_config(&base, opts.jitter, &mut rng);
+    let mut gen = generator_config(&SimConfig::default(), opts.jitter, &mut rng);
     for name in hidden.names() {
         draw_effect(&mut gen.effects, &name, &mut rng);
     }
@@ -273,6 +284,25 @@ pub fn run_case(opts: &BenchOptions, index: usize, diag: &Options) -> anyhow::Re
             });
         }
     }
+    Ok(DrawnCase {
+        hidden,
+        gen,
+        structural,
+        inputs,
+        references,
+    })
+}
+
+/// Runs case `index` of the plan.
+pub fn run_case(opts: &BenchOptions, index: usize, diag: &Options) -> anyhow::Result<CaseResult> {
+    let DrawnCase {
+        hidden,
+        gen,
+        structural,
+        inputs,
+        references,
+    } = draw_case(opts, index)?;
+    let base = SimConfig::default();
     let t = std::time::Instant::now();
     let out = diagnose_against(&inputs, &references, &base, diag, &|_, _, _| {})?;
     let diagnose_s = t.elapsed().as_secs_f64();

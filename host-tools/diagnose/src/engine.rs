@@ -15,7 +15,7 @@
 
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use super::features::pressure_floor;
+use super::features::{pressure_floor, Extractor};
 pub use super::gap::PointWaves;
 use super::model::ModelRunner;
 use super::pipeline::{floor, group, held_out, nominal, rank, reference, where_};
@@ -74,7 +74,11 @@ pub fn diagnose_against(
     let hammer = if references.is_empty() {
         runner.extractor
     } else {
-        let read = group::group(references, &runner.extractor)?;
+        let reading = Extractor {
+            read_dead_volume: true,
+            ..runner.extractor
+        };
+        let read = group::group(references, &reading)?;
         let cycles: Vec<_> = read
             .points
             .iter()

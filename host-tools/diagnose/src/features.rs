@@ -147,6 +147,10 @@ pub struct Extractor {
     /// Where the chambers' volumes and outlets are, for their
     /// characteristics (`None`: not read).
     pub chambers: Option<ChamberGeometry>,
+    /// Read each chamber's dead volume too ([`CycleFeatures::dead_volume_offset_m3`]):
+    /// on for a hammer's record that [`Extractor::calibrated`] reads, off
+    /// elsewhere (a further pass over every closed phase).
+    pub read_dead_volume: bool,
 }
 
 /// Cycles that must read a chamber's dead volume for [`Extractor::calibrated`] to use it.
@@ -186,11 +190,13 @@ impl Extractor {
             min_speed_mps: 0.05,
             pressure_floor_pa: [f64::NEG_INFINITY; 2],
             chambers: None,
+            read_dead_volume: false,
         }
     }
 
     /// This extractor with the chambers' dead volumes a record of the hammer
-    /// asks for: each chamber's by the median of its cycles' corrections
+    /// asks for (its `cycles` read with [`Extractor::read_dead_volume`] on):
+    /// each chamber's by the median of its cycles' corrections
     /// (`hammer_estimator::chambers::closed::dead_volume_offset`), where at
     /// least [`MIN_CALIBRATION_CYCLES`] read one; else as it was. Why: the
     /// dead volumes are drawing estimates, and near the impact a tenth off
@@ -265,6 +271,7 @@ impl Extractor {
             blank_after_s: self.blank_after_s,
             zero_shift_tau_s: self.zero_shift_tau_s,
             supply_pa: s.supply_pa,
+            dead_volume: self.read_dead_volume,
         };
         let spans: Vec<Span> = imp
             .windows(2)

@@ -38,6 +38,9 @@ pub struct Reading {
     pub zero_shift_tau_s: f64,
     /// Gauge; NaN leaves the feed areas NaN.
     pub supply_pa: f64,
+    /// Also fit each chamber's dead volume (a hammer's own record; see
+    /// `hammer_estimator::chambers::Window::fit_dead_volume`).
+    pub dead_volume: bool,
 }
 
 impl Reading {
@@ -49,6 +52,7 @@ impl Reading {
             blank_after_s: c.blank_after_s as f64,
             zero_shift_tau_s: c.accel_zero_shift_tau_s as f64,
             supply_pa: c.supply_pressure_pa as f64,
+            dead_volume: false,
         }
     }
 }
@@ -130,6 +134,7 @@ pub fn characterise_spans(
                     x_m: &x[..=end - open],
                     open: 0,
                     close: close - open,
+                    fit_dead_volume: r.dead_volume,
                 };
                 characterise(&w, chambers, supply_abs)
             };

@@ -41,13 +41,16 @@ pub struct Watch {
 }
 
 impl Watch {
-    pub fn new(reference: Arc<Commissioned>, args: &DriftArgs) -> Self {
+    /// `link_bar`: the hammer's supply pressure where the link knows it
+    /// ([`super::Connector::supply_bar`]), the point read when `--point-bar`
+    /// does not say.
+    pub fn new(reference: Arc<Commissioned>, args: &DriftArgs, link_bar: Option<f64>) -> Self {
         Self {
             reference,
             allow_stale: args.allow_stale_reference,
             k: args.drift_cycles as usize,
             confirm: args.drift_confirm as usize,
-            point_bar: args.point_bar,
+            point_bar: args.point_bar.or(link_bar),
             config: None,
             window: None,
             refused: None,

@@ -60,11 +60,9 @@ pub fn run(devices: Vec<(String, Box<dyn Connector>)>, args: &MonitorArgs, headl
         let (tx, rx) = mpsc::sync_channel(EVENT_QUEUE);
         let title = connector.describe();
         // Each member at its own point: `--point-bar`, else what its link knows.
-        let drift = crate::drift::DriftArgs {
-            point_bar: args.drift.point_bar.or(connector.supply_bar()),
-            ..args.drift.clone()
-        };
-        let watch = reference.clone().map(|c| super::drift::Watch::new(c, &drift));
+        let watch = reference
+            .clone()
+            .map(|c| super::drift::Watch::new(c, &args.drift, connector.supply_bar()));
         readers.push(reader::spawn(connector, logger, export, watch, tx, stop.clone())?);
         members.push(Member {
             name,

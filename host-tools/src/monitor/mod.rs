@@ -229,11 +229,7 @@ pub fn run_with(connector: Box<dyn Connector>, args: &MonitorArgs) -> Result<()>
         .clone()
         .unwrap_or_else(|| device_name(&connector.describe()));
     let device_export = exports.clone().map(|x| export::DeviceExport::new(&device, x));
-    let drift_args = crate::drift::DriftArgs {
-        point_bar: args.drift.point_bar.or(connector.supply_bar()),
-        ..args.drift.clone()
-    };
-    let watch = commissioned(&args.drift)?.map(|c| drift::Watch::new(c, &drift_args));
+    let watch = commissioned(&args.drift)?.map(|c| drift::Watch::new(c, &args.drift, connector.supply_bar()));
     let (tx, rx) = mpsc::sync_channel(EVENT_QUEUE);
     let stop = Arc::new(AtomicBool::new(false));
     let reader = reader::spawn(connector, logger, device_export, watch, tx, stop.clone())?;
