@@ -198,7 +198,10 @@ const EDGE_GUARD_M: f32 = 2e-3;
 
 /// The characteristics of one cycle. `supply_abs_pa` is the supply pressure
 /// (absolute) that the fill is set against; NaN leaves the feed areas NaN.
-pub fn characterise(w: &Window, geo: &ChamberGeometry, supply_abs_pa: f32) -> Characteristics {
+/// `room` keeps the closed fits' logarithms ([`closed::Cached`]: two floats
+/// a sample of the window); where it is shorter they are computed as read,
+/// with the same figures, several times slower.
+pub fn characterise(w: &Window, geo: &ChamberGeometry, supply_abs_pa: f32, room: &mut [f32]) -> Characteristics {
     let n = w.p_rear_pa.len().min(w.p_front_pa.len()).min(w.x_m.len());
     if !(w.open < w.close && w.close < n && w.dt_s > 0.0 && geo.is_valid()) {
         return Characteristics::default();
@@ -214,7 +217,7 @@ pub fn characterise(w: &Window, geo: &ChamberGeometry, supply_abs_pa: f32) -> Ch
             let end = (w.close + look_after).min(n);
             let p = &w.p_front_pa[start..end];
             let x = &w.x_m[start..end];
-            feed(w, p, x, |x| geo.front_volume_m3(x), start, w.close, supply_abs_pa)
+            feed(w, p, x, |x| geo.front_volume_m3(x), start, w.close, supply_abs_pa, room)
         });
     // Rear: closed once the backhaul has covered its outlet, until the feed;
     // the search ends where the stroke uncovers it again.
@@ -224,7 +227,7 @@ pub fn characterise(w: &Window, geo: &ChamberGeometry, supply_abs_pa: f32) -> Ch
         let end = (turn..w.close).find(|&i| w.x_m[i] >= rear_edge).unwrap_or(w.close);
         let p = &w.p_rear_pa[start..end];
         let x = &w.x_m[start..end];
-        feed(w, p, x, |x| geo.rear_volume_m3(x), start, w.open, supply_abs_pa)
+        feed(w, p, x, |x| geo.rear_volume_m3(x), start, w.open, supply_abs_pa, room)
     });
     let found = Characteristics {
         front,
@@ -238,6 +241,7 @@ pub fn characterise(w: &Window, geo: &ChamberGeometry, supply_abs_pa: f32) -> Ch
 }
 
 /// One chamber: the closed fit, the onset, the state there and the fill.
+#[allow(clippy::too_many_arguments)]
 fn feed(
     w: &Window,
     p: &[f32],
@@ -246,8 +250,12 @@ fn feed(
     start: usize,
     reference: usize,
     supply_abs_pa: f32,
+    room: &mut [f32],
 ) -> Option<Feed> {
-    let o = closed::onset(p, x, &volume, w.dt_s)?;
+    let o = match closed::Cached::fill(p, x, &volume, room) {
+        Some(logs) => closed::onset_of(&logs, w.dt_s),
+        None => closed::onset(p, x, &volume, w.dt_s),
+    }?;
     // Onset time from the reference impact.
     let t_ref = (reference as f32 - start as f32) * w.dt_s;
     let at = |s: &[f32]| interpolate(s, start, o.onset_s / w.dt_s);

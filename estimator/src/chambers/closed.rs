@@ -42,17 +42,97 @@ pub struct Onset {
     pub rise_s: f32,
 }
 
+/// The logarithms a closed fit reads, sample by sample: ln p_abs and ln V.
+/// The fits read each a dozen times over (the line, its halves, the noise,
+/// the baseline, the rise, and all of it twice), so the host keeps them
+/// ([`Cached`]); [`Direct`] computes them as they are read. Both give the
+/// same figures.
+pub trait Logs {
+    /// Samples that have both.
+    fn len(&self) -> usize;
+    /// Whether every sample has a positive absolute pressure and volume.
+    fn valid(&self) -> bool;
+    fn ln_p(&self, i: usize) -> f32;
+    fn ln_v(&self, i: usize) -> f32;
+}
+
+/// The logarithms computed where read.
+pub struct Direct<'a, V: Fn(f32) -> f32> {
+    pub p: &'a [f32],
+    pub x: &'a [f32],
+    pub volume: &'a V,
+}
+
+impl<V: Fn(f32) -> f32> Logs for Direct<'_, V> {
+    fn len(&self) -> usize {
+        self.p.len().min(self.x.len())
+    }
+    fn valid(&self) -> bool {
+        (0..self.len()).all(|i| self.p[i] + P_ATM_PA > 0.0 && (self.volume)(self.x[i]) > 0.0)
+    }
+    fn ln_p(&self, i: usize) -> f32 {
+        math::ln(self.p[i] + P_ATM_PA)
+    }
+    fn ln_v(&self, i: usize) -> f32 {
+        math::ln((self.volume)(self.x[i]))
+    }
+}
+
+/// The logarithms computed once into the caller's room.
+pub struct Cached<'a> {
+    ln_p: &'a [f32],
+    ln_v: &'a [f32],
+    valid: bool,
+}
+
+impl<'a> Cached<'a> {
+    /// `room` holds two floats a sample; `None` where it is shorter.
+    pub fn fill(p: &[f32], x: &[f32], volume: &impl Fn(f32) -> f32, room: &'a mut [f32]) -> Option<Cached<'a>> {
+        let len = p.len().min(x.len());
+        let (ln_p, rest) = room.split_at_mut_checked(len)?;
+        let ln_v = rest.get_mut(..len)?;
+        let mut valid = true;
+        for i in 0..len {
+            let (pa, v) = (p[i] + P_ATM_PA, volume(x[i]));
+            valid &= pa > 0.0 && v > 0.0;
+            ln_p[i] = math::ln(pa);
+            ln_v[i] = math::ln(v);
+        }
+        Some(Cached { ln_p, ln_v, valid })
+    }
+}
+
+impl Logs for Cached<'_> {
+    fn len(&self) -> usize {
+        self.ln_p.len()
+    }
+    fn valid(&self) -> bool {
+        self.valid
+    }
+    fn ln_p(&self, i: usize) -> f32 {
+        self.ln_p[i]
+    }
+    fn ln_v(&self, i: usize) -> f32 {
+        self.ln_v[i]
+    }
+}
+
 /// `p` (gauge) and `x` start in the closed phase and run past the feed.
 pub fn onset(p: &[f32], x: &[f32], volume: &impl Fn(f32) -> f32, dt_s: f32) -> Option<Onset> {
-    let len = p.len().min(x.len());
+    onset_of(&Direct { p, x, volume }, dt_s)
+}
+
+/// [`onset`] from the samples' logarithms.
+pub fn onset_of(logs: &impl Logs, dt_s: f32) -> Option<Onset> {
+    let len = logs.len();
     let hold = ((HOLD_S / dt_s) as usize).max(3);
     let min_base = ((MIN_CLOSED_S / dt_s) as usize).max(8);
     if len < min_base + 2 * hold {
         return None;
     }
-    let ln_p = |i: usize| math::ln(p[i] + P_ATM_PA);
-    let ln_v = |i: usize| math::ln(volume(x[i]));
-    if (0..len).any(|i| !(p[i] + P_ATM_PA > 0.0) || !(volume(x[i]) > 0.0)) {
+    let ln_p = |i: usize| logs.ln_p(i);
+    let ln_v = |i: usize| logs.ln_v(i);
+    if !logs.valid() {
         return None;
     }
 
@@ -65,12 +145,12 @@ pub fn onset(p: &[f32], x: &[f32], volume: &impl Fn(f32) -> f32, dt_s: f32) -> O
         base_end -= 1;
     }
     let base_end = base_end.saturating_sub(hold);
-    let first = read(p, x, volume, dt_s, base_end)?;
+    let first = read(logs, dt_s, base_end)?;
     // A slow rise starts well before it shows: read again with the closed
     // phase ending where the first reading put the onset.
     let onset_at = (first.onset_s / dt_s) as usize;
     if onset_at < base_end + hold {
-        return read(p, x, volume, dt_s, onset_at.saturating_sub(hold)).or(Some(first));
+        return read(logs, dt_s, onset_at.saturating_sub(hold)).or(Some(first));
     }
     Some(first)
 }
@@ -157,15 +237,15 @@ pub fn dead_volume_offset(p: &[f32], x: &[f32], volume: &impl Fn(f32) -> f32, dt
 }
 
 /// Steps 2 and 3 of [`onset`], with the closed phase taken as `..base_end`.
-fn read(p: &[f32], x: &[f32], volume: &impl Fn(f32) -> f32, dt_s: f32, base_end: usize) -> Option<Onset> {
-    let len = p.len().min(x.len());
+fn read(logs: &impl Logs, dt_s: f32, base_end: usize) -> Option<Onset> {
+    let len = logs.len();
     let hold = ((HOLD_S / dt_s) as usize).max(3);
     let min_base = ((MIN_CLOSED_S / dt_s) as usize).max(8);
     if base_end < min_base {
         return None;
     }
-    let ln_p = |i: usize| math::ln(p[i] + P_ATM_PA);
-    let ln_v = |i: usize| math::ln(volume(x[i]));
+    let ln_p = |i: usize| logs.ln_p(i);
+    let ln_v = |i: usize| logs.ln_v(i);
 
     // 2. The closed phase's exponent: ln p = c − n·ln V.
     let line = Line::fit((0..base_end).map(|i| (ln_v(i), ln_p(i))))?;
@@ -390,6 +470,19 @@ mod tests {
         let o = onset(&p, &x, &assumed, DT).expect("a feed");
         let d = dead_volume_offset(&p, &x, &assumed, DT, &o).expect("identifiable");
         assert!((d - 3e-6).abs() < 0.09e-6, "δ = {d}, 3e-6 hidden");
+    }
+
+    /// The logarithms kept in a room read the same onset as computed ones,
+    /// bit for bit; a room too short for them is refused.
+    #[test]
+    fn kept_logarithms_give_the_same_onset() {
+        let vol = |x: f32| 20e-6 + 7e-4 * (0.052 - x);
+        let (x, p) = compressed_then_fed::<1000>(&vol, 0.025, 2e5, 1.35, 640, 3e4);
+        let mut room = [0.0f32; 2000];
+        let kept = Cached::fill(&p, &x, &vol, &mut room).expect("room for 1000 samples");
+        assert_eq!(onset_of(&kept, DT), onset(&p, &x, &vol, DT));
+        assert!(onset(&p, &x, &vol, DT).is_some());
+        assert!(Cached::fill(&p, &x, &vol, &mut room[..1999]).is_none());
     }
 
     /// No feed: no onset (the chamber stays closed).

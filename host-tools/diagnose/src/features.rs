@@ -246,10 +246,22 @@ impl Extractor {
 
     /// Features of every complete cycle (impact to impact) of `s`.
     pub fn cycles(&self, s: &Signals) -> Vec<CycleFeatures> {
+        self.cycles_from(s, f64::NEG_INFINITY)
+    }
+
+    /// Features of the complete cycles of `s` whose opening impact is at or
+    /// after `from_s`: the same figures [`Extractor::cycles`] gives them,
+    /// without reading the cycles before (a model run's start-up, which the
+    /// diagnosis does not average: more than half of each run).
+    pub fn cycles_from(&self, s: &Signals, from_s: f64) -> Vec<CycleFeatures> {
         let imp = self.impacts(s);
+        // A one-cycle capture reads its cycle past its end: decided on the
+        // whole trace's impacts.
+        let tail = imp.len() == 2;
+        let imp = &imp[imp.partition_point(|&t| t < from_s)..];
         let mut cycles: Vec<CycleFeatures> = imp.windows(2).filter_map(|w| self.cycle(s, w[0], w[1])).collect();
         if let Some(chambers) = &self.chambers {
-            self.characterise(s, &imp, &mut cycles, chambers);
+            self.characterise(s, imp, tail, &mut cycles, chambers);
         }
         cycles
     }
@@ -257,8 +269,17 @@ impl Extractor {
     /// The chamber characteristics of `cycles` (found between the impacts
     /// `imp`), each cycle's track from its own force balance's friction and
     /// zero shift; a cycle whose next is missing keeps NaN, unless it is a
-    /// device's one-cycle capture (two impacts), read past its end.
-    fn characterise(&self, s: &Signals, imp: &[f64], cycles: &mut [CycleFeatures], chambers: &ChamberGeometry) {
+    /// device's one-cycle capture (`tail`), read past its end. A cycle reads
+    /// its own span and the next one only, so any run of impacts gives its
+    /// cycles the same figures.
+    fn characterise(
+        &self,
+        s: &Signals,
+        imp: &[f64],
+        tail: bool,
+        cycles: &mut [CycleFeatures],
+        chambers: &ChamberGeometry,
+    ) {
         let g = &self.geometry;
         let reading = Reading {
             piston: Piston {
@@ -300,7 +321,7 @@ impl Extractor {
             &spans,
             &reading,
             chambers,
-            imp.len() == 2,
+            tail,
         );
         for (w, ch) in imp.windows(2).zip(read) {
             let (Some(ch), Some(c)) = (ch, cycles.iter_mut().find(|c| c.t_impact_s == w[0])) else {
@@ -348,7 +369,8 @@ impl Extractor {
         // transducer's floor is not one.
         let [floor1, floor2] = self.pressure_floor_pa;
         let balanced = |k: usize| flight(k) && p1[k] > floor1 && p2[k] > floor2;
-        let decay = |k: usize| (-since(k) / self.zero_shift_tau_s).exp();
+        // The zero shift's decay, once per cycle: the force balance reads it three times.
+        let decay: Vec<f64> = (0..n).map(|k| (-since(k) / self.zero_shift_tau_s).exp()).collect();
 
         // The force balance, first with the direction of motion from the
         // pressures, then twice more with the velocity integrated from the
@@ -359,7 +381,7 @@ impl Extractor {
         let mut vel: Vec<f64> = Vec::new();
         for pass in 0..3 {
             let z = fit.beta[5];
-            accel_c = (0..n).map(|k| acc[k] - z * decay(k)).collect();
+            accel_c = (0..n).map(|k| acc[k] - z * decay[k]).collect();
             vel = velocity_from_accel(&accel_c, dt);
             if pass < 2 {
                 fit = self.force_balance(p1, p2, acc, &vel, &balanced, &decay)?;
@@ -421,7 +443,7 @@ impl Extractor {
         acc: &[f64],
         v: &[f64],
         flight: &dyn Fn(usize) -> bool,
-        decay: &dyn Fn(usize) -> f64,
+        decay: &[f64],
     ) -> Option<ForceBalance> {
         const K: usize = 6;
         let g = &self.geometry;
@@ -443,7 +465,7 @@ impl Extractor {
                 vk,
                 f1,
                 -f2,
-                -m * decay(k),
+                -m * decay[k],
             ];
             for i in 0..K {
                 for j in 0..K {
@@ -630,6 +652,44 @@ mod tests {
         assert_eq!(pressure_floor(&[&clipped]), 0.0);
         assert_eq!(pressure_floor(&[]), f64::NEG_INFINITY);
         assert_eq!(pressure_floor(&[&[f64::NAN; 100]]), f64::NEG_INFINITY);
+    }
+
+    /// The cycles from a time on are the whole trace's cycles from there,
+    /// to the bit, chamber characteristics included (a model run's start-up
+    /// is not read).
+    #[test]
+    fn cycles_from_a_time_are_the_same_cycles() {
+        use hammer_sim::effects::Effects;
+        let base = hammer_sim::SimConfig::default();
+        let runner = crate::model::ModelRunner::new(base.clone(), crate::features::extractor_for(&base));
+        let truth = hammer_sim::simulate_truth(&runner.config(6.0, &Effects::default()))
+            .unwrap()
+            .truth;
+        let s = Signals {
+            dt_s: truth.dt_s,
+            p_rear_pa: &truth.p_rear_pa,
+            p_front_pa: &truth.p_front_pa,
+            accel_mps2: &truth.accel_mps2,
+            supply_pa: 6e5,
+        };
+        let all = runner.extractor.cycles(&s);
+        let from = runner.extractor.cycles_from(&s, runner.settle_s);
+        let later: Vec<_> = all.iter().filter(|c| c.t_impact_s >= runner.settle_s).collect();
+        assert!(
+            from.len() >= 3 && from.len() < all.len(),
+            "{} of {}",
+            from.len(),
+            all.len()
+        );
+        assert_eq!(from.len(), later.len());
+        // The last cycle has no next to read its front feed in.
+        assert!(from[..from.len() - 1].iter().all(|c| c.values[FRONT_FEED].is_finite()));
+        for (a, b) in from.iter().zip(later) {
+            assert_eq!(a.t_impact_s, b.t_impact_s);
+            for (x, y) in a.values.iter().zip(&b.values) {
+                assert!(x.to_bits() == y.to_bits() || (x.is_nan() && y.is_nan()), "{x} != {y}");
+            }
+        }
     }
 
     /// A frictionless hammer read through transducers whose range ends at

@@ -116,12 +116,7 @@ impl ModelRunner {
             accel_mps2: &truth.accel_mps2,
             supply_pa: supply_bar * 1e5,
         };
-        let cycles: Vec<_> = self
-            .extractor
-            .cycles(&s)
-            .into_iter()
-            .filter(|c| c.t_impact_s >= self.settle_s)
-            .collect();
+        let cycles = self.extractor.cycles_from(&s, self.settle_s);
         if cycles.is_empty() {
             return None;
         }

@@ -108,6 +108,8 @@ pub fn characterise_spans(
         let t = span_tracks(s, r, chambers, (&p1, &p2, &accel), spans);
         (accel, t)
     });
+    // The closed fits' logarithms, two floats a sample of the longest window.
+    let room = std::cell::RefCell::new(vec![0.0f32; 2 * n]);
     (0..spans.len())
         .map(|k| {
             let cur = spans[k];
@@ -136,7 +138,7 @@ pub fn characterise_spans(
                     close: close - open,
                     fit_dead_volume: r.dead_volume,
                 };
-                characterise(&w, chambers, supply_abs)
+                characterise(&w, chambers, supply_abs, &mut room.borrow_mut())
             };
             match (s.x_m, &tracked) {
                 (Some(x), _) if x.len() > following => {
