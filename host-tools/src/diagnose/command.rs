@@ -2,12 +2,13 @@
 
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicUsize, Ordering};
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
-use super::bench::{render, run_case, summarize, BenchOptions};
+use super::bench::{render, run_case, summarize, BenchOptions, CaseResult};
 use super::engine::{diagnose_against, Options};
 use super::input::{read_request, DiagnoseError, Request};
 use super::output::{summary, write_all};
@@ -214,15 +215,49 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         args.cases as u64,
         "diagnose-bench [{bar:30}] {pos}/{len} {msg} ({elapsed}, eta {eta})",
     );
+    // Cases side by side, one thread each: a case's diagnosis is the same
+    // on any number of threads, and one thread a case keeps every core
+    // busy where a case's own stages would leave one idle between them.
+    let workers = diag.threads.clamp(1, args.cases.max(1));
+    let one = Options {
+        threads: 1,
+        ..diag.clone()
+    };
+    let next = AtomicUsize::new(0);
+    let right = AtomicUsize::new(0);
+    let results: Vec<(usize, Result<CaseResult>)> = std::thread::scope(|scope| {
+        let workers: Vec<_> = (0..workers)
+            .map(|_| {
+                scope.spawn(|| {
+                    let mut done = Vec::new();
+                    loop {
+                        let i = next.fetch_add(1, Ordering::Relaxed);
+                        if i >= args.cases {
+                            break done;
+                        }
+                        let r = run_case(&opts, i, &one);
+                        if let Ok(c) = &r {
+                            right.fetch_add(usize::from(c.correct), Ordering::Relaxed);
+                        }
+                        pb.set_message(format!("{} named right", right.load(Ordering::Relaxed)));
+                        pb.inc(1);
+                        done.push((i, r));
+                    }
+                })
+            })
+            .collect();
+        let mut all: Vec<_> = workers
+            .into_iter()
+            .flat_map(|w| w.join().unwrap_or_else(|p| std::panic::resume_unwind(p)))
+            .collect();
+        all.sort_by_key(|(i, _)| *i);
+        all
+    });
     let mut cases = Vec::new();
     let mut not_run = Vec::new();
-    let mut right = 0;
-    for i in 0..args.cases {
-        match run_case(&opts, i, &diag) {
-            Ok(c) => {
-                right += usize::from(c.correct);
-                cases.push(c);
-            }
+    for (i, r) in results {
+        match r {
+            Ok(c) => cases.push(c),
             // A generated hammer that does not run: the case is not a test
             // of the diagnosis. Said, and left out of the counts.
             Err(e)
@@ -234,8 +269,6 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
             }
             Err(e) => return Err(e.context(format!("case {i}"))),
         }
-        pb.set_message(format!("{right} named right"));
-        pb.inc(1);
     }
     pb.finish_and_clear();
     if not_run.len() * 10 > args.cases {
