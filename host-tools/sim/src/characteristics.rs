@@ -187,6 +187,7 @@ fn span_tracks(
     let mut x_acc = vec![f32::NAN; n];
     let mut x_force = vec![f32::NAN; n];
     let mut rebounds = vec![[None; 2]; spans.len()];
+    let (mut before, mut after) = (vec![0.0f32; n], vec![0.0f32; n]);
     for (j, span) in spans.iter().enumerate() {
         let (a, b) = (index(span.open_s), index(span.close_s));
         if !(a < b && b < n) {
@@ -200,7 +201,16 @@ fn span_tracks(
         let balance = || track::force_balance(p1, p2, &r.piston, span.friction);
         let tau = r.zero_shift_tau_s as f32;
         let source = track::accelerometer(accel, span.zero_shift_mps2, tau, dt, a, a + blank, balance());
-        track::closed(dt, impact, a_end, b, &mut x_acc, source);
+        // The source once a sample (its zero shift's decay is a power of
+        // the sample's distance from the impact), read by the track's three
+        // passes: before the turn and after it. It depends on the turn only
+        // in the blank, where the force balance's friction changes sign.
+        for i in a_end..=b {
+            before[i] = source(i, usize::MAX);
+            after[i] = if i < a + blank { source(i, 0) } else { before[i] };
+        }
+        let kept = |i: usize, turn: usize| if i < turn { before[i] } else { after[i] };
+        track::closed(dt, impact, a_end, b, &mut x_acc, kept);
         track::closed(dt, impact, a_end, b, &mut x_force, balance());
         if a_end + 1 < b {
             rebounds[j] = [&x_acc, &x_force].map(|x| Some((x[a_end + 1] - x[a_end]) / dt).filter(|v| v.is_finite()));
