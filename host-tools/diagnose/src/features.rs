@@ -450,7 +450,7 @@ impl Extractor {
         let (a1, a2, m) = (g.rear_area_m2(), g.front_area_m2(), g.piston_mass_kg);
         let mut ata = [[0.0; K]; K];
         let mut atb = [0.0; K];
-        let mut rows: Vec<([f64; K], f64)> = Vec::new();
+        let mut rows: Vec<([f64; K], f64)> = Vec::with_capacity(p1.len());
         for k in 0..p1.len() {
             let vk = v[k];
             if !flight(k) || !vk.is_finite() || vk.abs() < self.min_speed_mps || acc[k].abs() >= self.accel_clip_mps2 {
@@ -467,13 +467,19 @@ impl Extractor {
                 -f2,
                 -m * decay[k],
             ];
+            // The upper triangle: the lower is its mirror, the same sums.
             for i in 0..K {
-                for j in 0..K {
+                for j in i..K {
                     ata[i][j] += x[i] * x[j];
                 }
                 atb[i] += x[i] * r;
             }
             rows.push((x, r));
+        }
+        for i in 0..K {
+            for j in 0..i {
+                ata[i][j] = ata[j][i];
+            }
         }
         if rows.len() < 4 * K {
             return None;

@@ -225,16 +225,23 @@ impl FitSet<'_> {
             }
             r
         };
-        let whitened = |d: &[f64]| -> Option<Vec<f64>> {
+        // The points side by side on `threads` (1 inside the Jacobian's
+        // columns, which are side by side themselves).
+        let whitened_on = |d: &[f64], threads: usize| -> Option<Vec<f64>> {
             let r = runner_at(d);
-            let mut out = Vec::with_capacity(self.points.len() * N_FEATURES);
-            for (bar, s, sigma) in &self.points {
+            let jobs: Vec<usize> = (0..self.points.len()).collect();
+            let models = parallel(threads, jobs, &|k| {
                 self.sims.fetch_add(1, Ordering::Relaxed);
-                let m = r.features(*bar, cand, None)?;
+                r.features(self.points[k].0, cand, None)
+            });
+            let mut out = Vec::with_capacity(self.points.len() * N_FEATURES);
+            for ((_, s, sigma), m) in self.points.iter().zip(models) {
+                let m = m?;
                 out.extend((0..N_FEATURES).map(|j| residual(j, m[j], s.mean[j], sigma[j])));
             }
             Some(out)
         };
+        let whitened = |d: &[f64]| whitened_on(d, threads);
         let cost = |r: &[f64], d: &[f64]| r.iter().chain(d).map(|x| x * x).sum::<f64>();
         // Finite-difference step, in prior standard deviations.
         const STEP: f64 = 0.25;
@@ -254,7 +261,7 @@ impl FitSet<'_> {
             let cols = parallel(threads, jobs, &|i| {
                 let mut d = delta.clone();
                 d[i] += STEP;
-                whitened(&d).map(|ri| ri.iter().zip(&r).map(|(a, b)| (a - b) / STEP).collect::<Vec<f64>>())
+                whitened_on(&d, 1).map(|ri| ri.iter().zip(&r).map(|(a, b)| (a - b) / STEP).collect::<Vec<f64>>())
             });
             let cols: Vec<Vec<f64>> = cols
                 .into_iter()

@@ -13,6 +13,7 @@ use crate::gap::PointWaves;
 use crate::gap::{breakdown, measured_cycles, normalized, template, CycleSignals, GapCell};
 use crate::input::MeasuredInput;
 use crate::options::Options;
+use crate::parallel::parallel;
 use crate::report::{Remainder, WhereCell};
 use hammer_sim::params::HammerParams;
 use hammer_sim::SimConfig;
@@ -39,52 +40,78 @@ pub(crate) fn locate(
     base: &SimConfig,
     opts: &Options,
 ) -> Located {
+    // Each point on its own (the cycles' alignment is most of the stage),
+    // gathered in point order.
+    let jobs: Vec<usize> = (0..grouped.points.len()).collect();
+    let per_point = parallel(opts.threads, jobs, &|i| {
+        locate_point(i, inputs, grouped, nominal, models, base, opts)
+    });
     let mut out = Located {
         where_: Vec::new(),
         remainder: Vec::new(),
         waves: Vec::new(),
     };
-    for (i, p) in grouped.points.iter().enumerate() {
-        let Some((mut tpl, stages)) = template(&nominal.runs[i], &base.hammer) else {
-            continue;
-        };
-        models.read(&mut tpl, None);
-        let mut meas = Vec::new();
-        for &k in &p.inputs {
-            meas.extend(measured_cycles(&inputs[k].trace, &grouped.steady_impacts[k]));
-        }
-        let nominal_cells = breakdown(&tpl, &stages, &meas);
-        if let Some((mut after, after_stages)) = models.verdict_run(i).and_then(|r| template(r, &base.hammer)) {
-            models.read(&mut after, models.fitted_cand.as_ref());
-            let after_cells = breakdown(&after, &after_stages, &meas);
-            out.remainder
-                .extend(remainder(p.supply_bar, after_cells, &nominal_cells));
-        }
-        out.where_.extend(nominal_cells.into_iter().map(|c| WhereCell {
-            supply_bar: p.supply_bar,
-            signal: c.signal,
-            stage: c.stage,
-            bias: c.bias,
-            rms: c.rms,
-            relative_rms: c.relative_rms,
-            timing_shift_s: c.timing_shift_s,
-        }));
-        if opts.figures && !meas.is_empty() {
-            let fitted = fitted_cycle(models, i, &base.hammer);
-            out.waves.push(PointWaves {
-                supply_bar: p.supply_bar,
-                t_s: (0..tpl.len()).map(|k| k as f64 * tpl.dt_s).collect(),
-                stages: stages.clone(),
-                measured: mean_cycle(&meas, tpl.len()),
-                nominal: tpl,
-                fitted,
-            });
-        }
+    for p in per_point.into_iter().flatten() {
+        out.where_.extend(p.where_);
+        out.remainder.extend(p.remainder);
+        out.waves.extend(p.waves);
     }
     out.where_.sort_by(|a, b| b.relative_rms.total_cmp(&a.relative_rms));
     out.remainder.sort_by(|a, b| b.relative_rms.total_cmp(&a.relative_rms));
     out.remainder.truncate(REMAINDER_CELLS);
     out
+}
+
+/// [`locate`] at point `i`; None where its nominal cycle cannot be cut out.
+fn locate_point(
+    i: usize,
+    inputs: &[MeasuredInput],
+    grouped: &Grouped,
+    nominal: &Nominal,
+    models: &Models,
+    base: &SimConfig,
+    opts: &Options,
+) -> Option<Located> {
+    let p = &grouped.points[i];
+    let mut out = Located {
+        where_: Vec::new(),
+        remainder: Vec::new(),
+        waves: Vec::new(),
+    };
+    let (mut tpl, stages) = template(&nominal.runs[i], &base.hammer)?;
+    models.read(&mut tpl, None);
+    let mut meas = Vec::new();
+    for &k in &p.inputs {
+        meas.extend(measured_cycles(&inputs[k].trace, &grouped.steady_impacts[k]));
+    }
+    let nominal_cells = breakdown(&tpl, &stages, &meas);
+    if let Some((mut after, after_stages)) = models.verdict_run(i).and_then(|r| template(r, &base.hammer)) {
+        models.read(&mut after, models.fitted_cand.as_ref());
+        let after_cells = breakdown(&after, &after_stages, &meas);
+        out.remainder
+            .extend(remainder(p.supply_bar, after_cells, &nominal_cells));
+    }
+    out.where_.extend(nominal_cells.into_iter().map(|c| WhereCell {
+        supply_bar: p.supply_bar,
+        signal: c.signal,
+        stage: c.stage,
+        bias: c.bias,
+        rms: c.rms,
+        relative_rms: c.relative_rms,
+        timing_shift_s: c.timing_shift_s,
+    }));
+    if opts.figures && !meas.is_empty() {
+        let fitted = fitted_cycle(models, i, &base.hammer);
+        out.waves.push(PointWaves {
+            supply_bar: p.supply_bar,
+            t_s: (0..tpl.len()).map(|k| k as f64 * tpl.dt_s).collect(),
+            stages: stages.clone(),
+            measured: mean_cycle(&meas, tpl.len()),
+            nominal: tpl,
+            fitted,
+        });
+    }
+    Some(out)
 }
 
 /// The cells the verdict's model leaves above [`REMAINDER_MIN`], each with
