@@ -368,7 +368,8 @@ impl Extractor {
         // The force balance needs both chamber forces: a reading at a
         // transducer's floor is not one.
         let [floor1, floor2] = self.pressure_floor_pa;
-        let balanced = |k: usize| flight(k) && p1[k] > floor1 && p2[k] > floor2;
+        // Once per cycle: the three force balances read it.
+        let balanced: Vec<bool> = (0..n).map(|k| flight(k) && p1[k] > floor1 && p2[k] > floor2).collect();
         // The zero shift's decay, once per cycle: the force balance reads it three times.
         let decay: Vec<f64> = (0..n).map(|k| (-since(k) / self.zero_shift_tau_s).exp()).collect();
 
@@ -442,7 +443,7 @@ impl Extractor {
         p2: &[f64],
         acc: &[f64],
         v: &[f64],
-        flight: &dyn Fn(usize) -> bool,
+        flight: &[bool],
         decay: &[f64],
     ) -> Option<ForceBalance> {
         const K: usize = 6;
@@ -453,7 +454,7 @@ impl Extractor {
         let mut rows: Vec<([f64; K], f64)> = Vec::with_capacity(p1.len());
         for k in 0..p1.len() {
             let vk = v[k];
-            if !flight(k) || !vk.is_finite() || vk.abs() < self.min_speed_mps || acc[k].abs() >= self.accel_clip_mps2 {
+            if !flight[k] || !vk.is_finite() || vk.abs() < self.min_speed_mps || acc[k].abs() >= self.accel_clip_mps2 {
                 continue;
             }
             let f1 = p1[k] * a1;
