@@ -225,21 +225,22 @@ impl FitSet<'_> {
             }
             r
         };
-        // The points side by side on `threads` (1 inside the Jacobian's
-        // columns, which are side by side themselves).
+        // One point's whitened residuals at `d`.
+        let block = |d: &[f64], k: usize| -> Option<Vec<f64>> {
+            self.sims.fetch_add(1, Ordering::Relaxed);
+            let (bar, s, sigma) = &self.points[k];
+            let m = runner_at(d).features(*bar, cand, None)?;
+            Some(
+                (0..N_FEATURES)
+                    .map(|j| residual(j, m[j], s.mean[j], sigma[j]))
+                    .collect(),
+            )
+        };
+        // The points side by side.
         let whitened_on = |d: &[f64], threads: usize| -> Option<Vec<f64>> {
-            let r = runner_at(d);
             let jobs: Vec<usize> = (0..self.points.len()).collect();
-            let models = parallel(threads, jobs, &|k| {
-                self.sims.fetch_add(1, Ordering::Relaxed);
-                r.features(self.points[k].0, cand, None)
-            });
-            let mut out = Vec::with_capacity(self.points.len() * N_FEATURES);
-            for ((_, s, sigma), m) in self.points.iter().zip(models) {
-                let m = m?;
-                out.extend((0..N_FEATURES).map(|j| residual(j, m[j], s.mean[j], sigma[j])));
-            }
-            Some(out)
+            let blocks = parallel(threads, jobs, &|k| block(d, k));
+            blocks.into_iter().collect::<Option<Vec<_>>>().map(|b| b.concat())
         };
         let whitened = |d: &[f64]| whitened_on(d, threads);
         let cost = |r: &[f64], d: &[f64]| r.iter().chain(d).map(|x| x * x).sum::<f64>();
@@ -257,15 +258,27 @@ impl FitSet<'_> {
         }
         let mut sd = vec![1.0; k];
         for _ in 0..steps {
-            let jobs: Vec<usize> = (0..k).collect();
-            let cols = parallel(threads, jobs, &|i| {
+            // Every (parameter, point) on its own: more, smaller jobs
+            // keep both cores busy to the step's end.
+            let n_points = self.points.len();
+            let jobs: Vec<(usize, usize)> = (0..k).flat_map(|i| (0..n_points).map(move |p| (i, p))).collect();
+            let mut blocks = parallel(threads, jobs, &|(i, p)| {
                 let mut d = delta.clone();
                 d[i] += STEP;
-                whitened_on(&d, 1).map(|ri| ri.iter().zip(&r).map(|(a, b)| (a - b) / STEP).collect::<Vec<f64>>())
-            });
-            let cols: Vec<Vec<f64>> = cols
-                .into_iter()
-                .map(|c| c.unwrap_or_else(|| vec![0.0; r.len()]))
+                block(&d, p)
+            })
+            .into_iter();
+            // A column a point could not give is no change.
+            let cols: Vec<Vec<f64>> = (0..k)
+                .map(|_| {
+                    // Taken whole first: collecting into an Option stops at a None.
+                    let col: Vec<Option<Vec<f64>>> = blocks.by_ref().take(n_points).collect();
+                    let col: Option<Vec<Vec<f64>>> = col.into_iter().collect();
+                    col.map_or_else(
+                        || vec![0.0; r.len()],
+                        |c| c.concat().iter().zip(&r).map(|(a, b)| (a - b) / STEP).collect(),
+                    )
+                })
                 .collect();
             let (a, b) = prior_normal_equations(&cols, &r, &delta);
             sd = (0..k)
