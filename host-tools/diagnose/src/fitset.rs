@@ -258,28 +258,7 @@ impl FitSet<'_> {
         }
         let mut sd = vec![1.0; k];
         for _ in 0..steps {
-            // Every (parameter, point) on its own: more, smaller jobs
-            // keep both cores busy to the step's end.
-            let n_points = self.points.len();
-            let jobs: Vec<(usize, usize)> = (0..k).flat_map(|i| (0..n_points).map(move |p| (i, p))).collect();
-            let mut blocks = parallel(threads, jobs, &|(i, p)| {
-                let mut d = delta.clone();
-                d[i] += STEP;
-                block(&d, p)
-            })
-            .into_iter();
-            // A column a point could not give is no change.
-            let cols: Vec<Vec<f64>> = (0..k)
-                .map(|_| {
-                    // Taken whole first: collecting into an Option stops at a None.
-                    let col: Vec<Option<Vec<f64>>> = blocks.by_ref().take(n_points).collect();
-                    let col: Option<Vec<Vec<f64>>> = col.into_iter().collect();
-                    col.map_or_else(
-                        || vec![0.0; r.len()],
-                        |c| c.concat().iter().zip(&r).map(|(a, b)| (a - b) / STEP).collect(),
-                    )
-                })
-                .collect();
+            let cols = self.jacobian(&block, &delta, &r, STEP, threads);
             let (a, b) = prior_normal_equations(&cols, &r, &delta);
             sd = (0..k)
                 .map(|i| {
@@ -340,6 +319,43 @@ impl FitSet<'_> {
             delta,
             sd,
         })
+    }
+
+    /// The recalibration's Jacobian at `delta` by forward differences of
+    /// `step` (prior standard deviations), `block(d, p)` being point `p`'s
+    /// whitened residuals at `d` and `r` all of them at `delta`. Every
+    /// (parameter, point) is a job of its own: nine columns of two points
+    /// as nine jobs left one core idle at each step's end. A column a
+    /// point could not give is no change.
+    fn jacobian(
+        &self,
+        block: &(dyn Fn(&[f64], usize) -> Option<Vec<f64>> + Sync),
+        delta: &[f64],
+        r: &[f64],
+        step: f64,
+        threads: usize,
+    ) -> Vec<Vec<f64>> {
+        let n_points = self.points.len();
+        let jobs: Vec<(usize, usize)> = (0..delta.len())
+            .flat_map(|i| (0..n_points).map(move |p| (i, p)))
+            .collect();
+        let mut blocks = parallel(threads, jobs, &|(i, p)| {
+            let mut d = delta.to_vec();
+            d[i] += step;
+            block(&d, p)
+        })
+        .into_iter();
+        (0..delta.len())
+            .map(|_| {
+                // Taken whole first: collecting into an Option stops at a None.
+                let col: Vec<Option<Vec<f64>>> = blocks.by_ref().take(n_points).collect();
+                let col: Option<Vec<Vec<f64>>> = col.into_iter().collect();
+                col.map_or_else(
+                    || vec![0.0; r.len()],
+                    |c| c.concat().iter().zip(r).map(|(a, b)| (a - b) / step).collect(),
+                )
+            })
+            .collect()
     }
 
     /// What of `cand`'s effect no nominal parameter can absorb, in χ²
