@@ -21,7 +21,8 @@
 //! - this file: [`ChamberGeometry`], [`Feed`] and [`Characteristics`], and
 //!   [`characterise`], which finds each chamber's closed phase in a cycle;
 //! - `track`: the piston's position from the force balance, closed over the cycle;
-//! - `closed`: the closed phase's polytropic fit and the feed onset after it;
+//! - `closed`: the closed phase's polytropic fit and the feed onset after it,
+//!   reading ln p and ln V from the caller's room where it gives one (`Cached`);
 //! - `fill`: the effective feed area from the energy equation;
 //! - `charge`: the air each chamber draws per cycle (an estimate).
 
