@@ -661,17 +661,21 @@ mod tests {
         assert_eq!(pressure_floor(&[&[f64::NAN; 100]]), f64::NEG_INFINITY);
     }
 
+    /// The default model's runner and its noiseless run at `supply_bar`.
+    fn nominal_run(supply_bar: f64) -> (crate::model::ModelRunner, hammer_sim::TruthTrace) {
+        let base = hammer_sim::SimConfig::default();
+        let runner = crate::model::ModelRunner::new(base.clone(), extractor_for(&base));
+        let config = runner.config(supply_bar, &hammer_sim::effects::Effects::default());
+        let truth = hammer_sim::simulate_truth(&config).unwrap().truth;
+        (runner, truth)
+    }
+
     /// The cycles from a time on are the whole trace's cycles from there,
     /// to the bit, chamber characteristics included (a model run's start-up
     /// is not read).
     #[test]
     fn cycles_from_a_time_are_the_same_cycles() {
-        use hammer_sim::effects::Effects;
-        let base = hammer_sim::SimConfig::default();
-        let runner = crate::model::ModelRunner::new(base.clone(), crate::features::extractor_for(&base));
-        let truth = hammer_sim::simulate_truth(&runner.config(6.0, &Effects::default()))
-            .unwrap()
-            .truth;
+        let (runner, truth) = nominal_run(6.0);
         let s = Signals {
             dt_s: truth.dt_s,
             p_rear_pa: &truth.p_rear_pa,
@@ -705,12 +709,7 @@ mod tests {
     /// truth (no friction, unit gains) within its floors.
     #[test]
     fn clipped_readings_are_left_out_of_the_force_balance() {
-        use hammer_sim::effects::Effects;
-        let base = hammer_sim::SimConfig::default();
-        let runner = crate::model::ModelRunner::new(base.clone(), crate::features::extractor_for(&base));
-        let truth = hammer_sim::simulate_truth(&runner.config(5.0, &Effects::default()))
-            .unwrap()
-            .truth;
+        let (runner, truth) = nominal_run(5.0);
         let floor = 0.3e5;
         let p1: Vec<f64> = truth.p_rear_pa.iter().map(|p| p.max(floor)).collect();
         let p2: Vec<f64> = truth.p_front_pa.iter().map(|p| p.max(floor)).collect();

@@ -236,13 +236,12 @@ impl FitSet<'_> {
                     .collect(),
             )
         };
-        // The points side by side.
-        let whitened_on = |d: &[f64], threads: usize| -> Option<Vec<f64>> {
+        // All points' residuals at `d`, the points side by side.
+        let whitened = |d: &[f64]| -> Option<Vec<f64>> {
             let jobs: Vec<usize> = (0..self.points.len()).collect();
             let blocks = parallel(threads, jobs, &|k| block(d, k));
             blocks.into_iter().collect::<Option<Vec<_>>>().map(|b| b.concat())
         };
-        let whitened = |d: &[f64]| whitened_on(d, threads);
         let cost = |r: &[f64], d: &[f64]| r.iter().chain(d).map(|x| x * x).sum::<f64>();
         // Finite-difference step, in prior standard deviations.
         const STEP: f64 = 0.25;

@@ -23,6 +23,7 @@ const REMAINDER_MIN: f64 = 0.1;
 /// Remainder cells kept in the report.
 const REMAINDER_CELLS: usize = 8;
 
+#[derive(Default)]
 pub(crate) struct Located {
     /// Largest relative RMS first.
     pub(crate) where_: Vec<WhereCell>,
@@ -46,11 +47,7 @@ pub(crate) fn locate(
     let per_point = parallel(opts.threads, jobs, &|i| {
         locate_point(i, inputs, grouped, nominal, models, base, opts)
     });
-    let mut out = Located {
-        where_: Vec::new(),
-        remainder: Vec::new(),
-        waves: Vec::new(),
-    };
+    let mut out = Located::default();
     for p in per_point.into_iter().flatten() {
         out.where_.extend(p.where_);
         out.remainder.extend(p.remainder);
@@ -73,11 +70,7 @@ fn locate_point(
     opts: &Options,
 ) -> Option<Located> {
     let p = &grouped.points[i];
-    let mut out = Located {
-        where_: Vec::new(),
-        remainder: Vec::new(),
-        waves: Vec::new(),
-    };
+    let mut out = Located::default();
     let (mut tpl, stages) = template(&nominal.runs[i], &base.hammer)?;
     models.read(&mut tpl, None);
     let mut meas = Vec::new();
