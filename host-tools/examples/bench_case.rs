@@ -66,7 +66,7 @@ fn main() {
                 println!("      {ev}");
             }
         }
-        for m in &r.model_free {
+        for m in r.model_free.iter().chain(&r.chambers) {
             println!(
                 "  model-free {:<32} {:>10.4} vs {:>10.4} ± {:.4}  z {:>6.1}",
                 m.feature, m.measured, m.nominal, m.se, m.z

@@ -1,8 +1,25 @@
 use super::{between, rel, Diagnosed};
+use crate::features::FRONT_EXPONENT;
 use crate::fit::ParamSpec;
+use crate::fitset::FitSet;
 use hammer_sim::effects::HeatTransfer;
 use hammer_sim::sensor::Rng;
 
+/// A rise of the front exponent at one operating point, in standard
+/// errors, that no heat exchange can give (the ranking's own threshold for
+/// a model-free signature).
+const MIN_RISE_Z: f64 = 3.0;
+
+/// Against the hammer's own reference record, heat exchange with the walls
+/// shows in the chamber characteristics: the front chamber's closed
+/// compression bends towards the isotherm, its exponent falls. That holds
+/// on any hammer: compressed air is hotter than the wall and gives heat to
+/// it, whatever the wall's law. Of the catalogue's other effects only a
+/// leak can lower that exponent (the second family's leaks mostly do not:
+/// 2 of 20 benchmark leaks did, `examples/bench_case.rs`), so a drop is a
+/// heat exchange's evidence and its absence rules one out. Against the
+/// model alone the exponent carries the form (±20 % of dead volume moves it
+/// by about ±0.13), so there heat exchange stays model-based.
 impl Diagnosed for HeatTransfer {
     fn free_params(_distinct_pressures: usize) -> Vec<ParamSpec> {
         vec![ParamSpec {
@@ -16,6 +33,35 @@ impl Diagnosed for HeatTransfer {
 
     fn from_fit(theta: &[f64], _pressures: (f64, f64)) -> Self {
         HeatTransfer { h_w_per_m2_k: theta[0] }
+    }
+
+    fn model_free_z(fs: &FitSet) -> Option<f64> {
+        // Only against a reference, and where every fit point read the phase.
+        let read = fs.points.iter().all(|p| p.1.mean[FRONT_EXPONENT].is_finite());
+        if !(fs.against_reference && read) {
+            return None;
+        }
+        // It lowers the exponent at every operating point: a point where it
+        // rose beyond the threshold rules it out, whatever the mean.
+        let rise = fs
+            .points
+            .iter()
+            .zip(&fs.nominal_features)
+            .map(|(p, nom)| (p.1.mean[FRONT_EXPONENT] - nom[FRONT_EXPONENT]) / p.2[FRONT_EXPONENT])
+            .filter(|z| z.is_finite())
+            .fold(f64::NEG_INFINITY, f64::max);
+        if rise >= MIN_RISE_Z {
+            return Some(-rise);
+        }
+        fs.off_nominal_z(FRONT_EXPONENT).map(|z| -z)
+    }
+
+    fn evidence(fs: &FitSet) -> Option<String> {
+        Self::model_free_z(fs)?;
+        let (d, sd) = fs.off_nominal(FRONT_EXPONENT);
+        Some(format!(
+            "chamber characteristics: the front chamber's closed compression exponent moved {d:+.4} ± {sd:.4} since the reference (heat exchange lowers it)"
+        ))
     }
 
     fn draw(rng: &mut Rng) -> Self {

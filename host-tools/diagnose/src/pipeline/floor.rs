@@ -38,7 +38,10 @@ pub(crate) fn floors(fs: &FitSet, ranking: &Ranking, opts: &Options) -> Vec<Dete
     let needed = chi2_needed(fs, ranking, opts);
     let names: Vec<&str> = EFFECT_NAMES.iter().copied().filter(|n| seen(n).is_some()).collect();
     parallel(opts.threads, names, &|name| match seen(name) {
-        Some(true) => model_free_floor(fs, name, opts.min_model_free_z),
+        // A chamber characteristic's change has no magnitude law: the
+        // model's floor stands for it.
+        Some(true) => model_free_floor(fs, name, opts.min_model_free_z)
+            .or_else(|| needed.and_then(|needed| floor_of(fs, name, needed))),
         _ => needed.and_then(|needed| floor_of(fs, name, needed)),
     })
     .into_iter()

@@ -70,7 +70,7 @@ pub(crate) fn rank(fs: &FitSet, opts: &Options, step: &(dyn Fn(&str) + Sync)) ->
     let mut verdict = None;
     // The best-scoring effect with evidence of its own: a higher score
     // without it is the form error's shape, not an effect.
-    let reason = match effects.iter().position(|e| significant(e, opts)) {
+    let reason = match effects.iter().position(|e| significant(e, opts)).map(|i| prefer_seen(&effects, i, opts)) {
         Some(i) => {
             let best = &effects[i];
             verdict = Some(best.clone());
@@ -118,6 +118,23 @@ pub(crate) fn rank(fs: &FitSet, opts: &Options, step: &(dyn Fn(&str) + Sync)) ->
         chi2_nominal,
         features_compared: n_compared,
     }
+}
+
+/// The effect to name instead of the best significant `effects[best]`
+/// when that one has no model-free signature: the best-scoring significant
+/// effect with one, if it scores within [`Options::seen_margin`] of it.
+fn prefer_seen(effects: &[EffectResult], best: usize, opts: &Options) -> usize {
+    let b = &effects[best];
+    if b.model_free_z.is_some() {
+        return best;
+    }
+    let close = (1.0 - opts.seen_margin) * b.score;
+    effects
+        .iter()
+        .enumerate()
+        .skip(best + 1)
+        .find(|(_, e)| e.model_free_z.is_some() && significant(e, opts) && e.score >= close)
+        .map_or(best, |(i, _)| i)
 }
 
 /// Shows evidence of its own: the force balance's signature if it has
@@ -251,18 +268,30 @@ fn single_reason(effects: &[EffectResult], best: usize, opts: &Options) -> Strin
     let e = &effects[best];
     let next = effects.iter().find(|x| x.name != e.name);
     let evidence = evidence_phrase(e, opts);
-    let passed = if best > 0 {
-        format!(
-            "; {} scored higher without evidence of its own",
-            effects[..best]
-                .iter()
-                .map(|x| x.name.as_str())
-                .collect::<Vec<_>>()
-                .join(", ")
-        )
-    } else {
-        String::new()
+    let names = |significant_too: bool| {
+        effects[..best]
+            .iter()
+            .filter(|x| significant(x, opts) == significant_too)
+            .map(|x| x.name.as_str())
+            .collect::<Vec<_>>()
+            .join(", ")
     };
+    let mut passed = String::new();
+    for (which, why) in [
+        (false, "without evidence of its own".to_string()),
+        (
+            true,
+            format!(
+                "by less than {:.0} % and without a model-free signature",
+                100.0 * opts.seen_margin
+            ),
+        ),
+    ] {
+        let n = names(which);
+        if !n.is_empty() {
+            passed += &format!("; {n} scored higher {why}");
+        }
+    }
     format!(
         "{} scores {:.0}, {evidence} (next {} at {:.0}){passed}",
         e.name,
@@ -376,6 +405,31 @@ mod tests {
             result("pressure_gain_error+coulomb_friction", 4, 82.0, 1000.0, ln_n),
         ];
         assert_eq!(confusable_with(&pairs[0], &pairs, &all, &opts), ["leakage"]);
+    }
+
+    /// A significant effect with a model-free signature close behind an
+    /// unseen best is named instead (heat exchange whose chamber exponent
+    /// fell, behind a leak the waveforms score a little higher); one far
+    /// behind, or one whose signature is too weak, is not.
+    #[test]
+    fn a_close_seen_effect_is_named_before_an_unseen_best() {
+        let opts = Options::default();
+        let ln_n = 20f64.ln();
+        let leak = result("leakage", 1, 480.0, 1000.0, ln_n);
+        let heat = |chi2: f64, z: f64| EffectResult {
+            model_free_z: Some(z),
+            ..result("heat_transfer", 1, chi2, 1000.0, ln_n)
+        };
+        let close = [leak.clone(), heat(500.0, 8.0)];
+        assert_eq!(prefer_seen(&close, 0, &opts), 1);
+        assert!(single_reason(&close, 1, &opts).contains("leakage scored higher by less than 20 % and without a model-free signature"));
+        assert_eq!(prefer_seen(&[leak.clone(), heat(500.0, 2.0)], 0, &opts), 0, "its signature is too weak");
+        assert_eq!(prefer_seen(&[leak.clone(), heat(650.0, 8.0)], 0, &opts), 0, "it scores far lower");
+        let seen_best = EffectResult {
+            model_free_z: Some(5.0),
+            ..leak
+        };
+        assert_eq!(prefer_seen(&[seen_best, heat(500.0, 8.0)], 0, &opts), 0);
     }
 
     /// A single that leaves only noise spends no simulations on pairs; one
