@@ -208,7 +208,10 @@ fn pair_gain(
 
 /// The named single (`effects[best]`) with each runner-up; the next effects
 /// by their own score: a second effect shows there first, and each pair
-/// costs a fit.
+/// costs a fit. An effect whose model-free signature stands is tried as
+/// well, however its waveforms score: a zero shift or a delayed valve
+/// beside a larger effect moves the waveforms little, and its signature
+/// is measured.
 fn fit_pairs(
     fs: &FitSet,
     effects: &[EffectResult],
@@ -223,8 +226,9 @@ fn fit_pairs(
     let jobs: Vec<(String, Vec<FittedParam>)> = effects
         .iter()
         .filter(|e| e.name != first)
-        .take(opts.pair_candidates)
-        .map(|o| (o.name.clone(), o.fitted.clone()))
+        .enumerate()
+        .filter(|(k, e)| *k < opts.pair_candidates || e.model_free_z.is_some_and(|z| z >= opts.min_model_free_z))
+        .map(|(_, o)| (o.name.clone(), o.fitted.clone()))
         .collect();
     let mut pairs: Vec<EffectResult> = parallel(opts.threads, jobs, &|(other, other_start)| {
         let mut init = start.clone();
