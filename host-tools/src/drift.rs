@@ -59,7 +59,8 @@ pub struct DriftArgs {
     #[arg(long, value_name = "N", default_value_t = 10, requires = "reference",
           value_parser = clap::value_parser!(u32).range(2..=200))]
     pub drift_cycles: u32,
-    /// Windows in a row beyond the uncertainty that raise the alarm.
+    /// Windows in a row beyond the uncertainty that raise the alarm (their
+    /// cycles together must also stand 5 standard uncertainties off).
     #[arg(long, value_name = "N", default_value_t = 3, requires = "reference",
           value_parser = clap::value_parser!(u32).range(1..=100))]
     pub drift_confirm: u32,
@@ -103,6 +104,20 @@ pub struct Baseline {
     pub cycles: [usize; N_CHARACTERISTICS],
 }
 
+impl Baseline {
+    /// The baseline of a record's cycles (`readings`) at `supply_bar`.
+    pub fn of(supply_bar: f64, readings: &[Reading]) -> Self {
+        let values: [Vec<f64>; N_CHARACTERISTICS] =
+            std::array::from_fn(|i| readings.iter().map(|r| r[i]).filter(|x| x.is_finite()).collect());
+        Baseline {
+            supply_bar,
+            median: values.each_ref().map(|v| median(v)),
+            spread: values.each_ref().map(|v| robust_sd(v)),
+            cycles: values.each_ref().map(Vec::len),
+        }
+    }
+}
+
 /// A commissioning record read for drift: its baselines and the extractor
 /// that read them (and reads the captures).
 #[derive(Debug, Clone)]
@@ -135,14 +150,8 @@ impl Commissioned {
                     .with_context(|| format!("reading {}", path.display()))?;
                 cycles.extend(cycles_of(&extractor, &trace, point.supply_bar));
             }
-            let values = CHAMBER_FEATURES
-                .map(|j| -> Vec<f64> { cycles.iter().map(|c| c.values[j]).filter(|x| x.is_finite()).collect() });
-            let b = Baseline {
-                supply_bar: point.supply_bar,
-                median: values.each_ref().map(|v| median(v)),
-                spread: values.each_ref().map(|v| robust_sd(v)),
-                cycles: values.each_ref().map(Vec::len),
-            };
+            let readings: Vec<Reading> = cycles.iter().map(reading).collect();
+            let b = Baseline::of(point.supply_bar, &readings);
             if b.cycles.iter().all(|&n| n < 2) {
                 bail!(
                     "{}: the record's cycles at {} bar give no chamber characteristic twice: nothing to read a drift against",
@@ -220,10 +229,7 @@ impl Commissioned {
     /// The characteristics of each whole cycle in `trace` (a capture) at
     /// `supply_bar`.
     pub fn readings(&self, trace: &Trace, supply_bar: f64) -> Vec<Reading> {
-        cycles_of(&self.extractor, trace, supply_bar)
-            .iter()
-            .map(reading)
-            .collect()
+        readings_of(&self.extractor, trace, supply_bar)
     }
 }
 
@@ -254,6 +260,12 @@ pub fn robust_sd(xs: &[f64]) -> f64 {
 
 /// A median's standard error over a mean's, for normal scatter: √(π/2).
 const MEDIAN_EFFICIENCY: f64 = 1.2533;
+
+/// The characteristics of each steady cycle of `trace` at `supply_bar`,
+/// read by `extractor` as a record's are.
+pub fn readings_of(extractor: &Extractor, trace: &Trace, supply_bar: f64) -> Vec<Reading> {
+    cycles_of(extractor, trace, supply_bar).iter().map(reading).collect()
+}
 
 /// The steady cycles of a trace, as the diagnosis reads a record's.
 fn cycles_of(extractor: &Extractor, trace: &Trace, supply_bar: f64) -> Vec<CycleFeatures> {
@@ -286,7 +298,9 @@ pub struct Characteristic {
     pub cycles: usize,
     /// |drift| > uncertainty in this window.
     pub beyond: bool,
-    /// Beyond in this window and the ones before it, as many as confirm.
+    /// Beyond in this window and the ones before it, as many as confirm,
+    /// and those windows' cycles together beyond [`ALARM_Z`] standard
+    /// uncertainties.
     pub alarm: bool,
 }
 
@@ -403,10 +417,23 @@ pub struct Window {
     k: usize,
     confirm: usize,
     readings: Vec<Reading>,
+    /// The last `confirm` windows' cycles, oldest first.
+    recent: std::collections::VecDeque<Vec<Reading>>,
     windows: u64,
     /// Windows in a row each characteristic has been beyond.
     beyond_run: [usize; N_CHARACTERISTICS],
 }
+
+/// The alarm's threshold: the last `confirm` windows' cycles together must
+/// stand this many standard uncertainties from the record. Each window
+/// beyond its U alone is not enough: the record's own median error is
+/// common to every window read against it, so a record a little off makes
+/// every window a little off, and three in a row came 2–13 times as often
+/// as (1/20)³ (`examples/drift_false_alarms.rs`: 40 records of 30 cycles,
+/// 5000 windows each, 39 records raised an alarm on the sound hammer).
+/// Five standard uncertainties is about one chance in 1.7·10⁶ per
+/// characteristic and window for normal scatter.
+pub const ALARM_Z: f64 = 5.0;
 
 impl Window {
     /// Windows of `k` cycles; `confirm` windows in a row beyond raise the alarm.
@@ -416,6 +443,7 @@ impl Window {
             k: k.max(1),
             confirm: confirm.max(1),
             readings: Vec::new(),
+            recent: std::collections::VecDeque::new(),
             windows: 0,
             beyond_run: [0; N_CHARACTERISTICS],
         }
@@ -433,21 +461,33 @@ impl Window {
         }
         let readings = std::mem::take(&mut self.readings);
         self.windows += 1;
+        self.recent.push_back(readings.clone());
+        if self.recent.len() > self.confirm {
+            self.recent.pop_front();
+        }
         let b = &self.baseline;
+        let u_of = |i: usize, m: usize| {
+            let n = b.cycles[i];
+            if m > 0 && n > 1 {
+                MEDIAN_EFFICIENCY * b.spread[i] * (1.0 / m as f64 + 1.0 / n as f64).sqrt()
+            } else {
+                f64::NAN
+            }
+        };
         let characteristics = (0..N_CHARACTERISTICS)
             .map(|i| {
-                let xs: Vec<f64> = readings.iter().map(|r| r[i]).filter(|x| x.is_finite()).collect();
-                let (m, n) = (xs.len(), b.cycles[i]);
+                let read = |rs: &[Reading]| -> Vec<f64> { rs.iter().map(|r| r[i]).filter(|x| x.is_finite()).collect() };
+                let xs = read(&readings);
+                let m = xs.len();
                 let measured = median(&xs);
                 let drift = measured - b.median[i];
-                let uncertainty = if m > 0 && n > 1 {
-                    2.0 * MEDIAN_EFFICIENCY * b.spread[i] * (1.0 / m as f64 + 1.0 / n as f64).sqrt()
-                } else {
-                    f64::NAN
-                };
+                let uncertainty = 2.0 * u_of(i, m);
                 let beyond = drift.is_finite() && uncertainty.is_finite() && drift.abs() > uncertainty;
                 self.beyond_run[i] = if beyond { self.beyond_run[i] + 1 } else { 0 };
-                let alarm = self.beyond_run[i] >= self.confirm;
+                let alarm = self.beyond_run[i] >= self.confirm && {
+                    let pooled: Vec<f64> = self.recent.iter().flat_map(|w| read(w)).collect();
+                    (median(&pooled) - b.median[i]).abs() > ALARM_Z * u_of(i, pooled.len())
+                };
                 Characteristic {
                     name: feature_name(CHAMBER_FEATURES[i]),
                     measured,

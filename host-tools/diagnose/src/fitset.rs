@@ -39,7 +39,7 @@ pub(crate) struct FitSet<'a> {
     pub(crate) against_reference: bool,
 }
 
-impl FitSet<'_> {
+impl<'a> FitSet<'a> {
     /// The supply pressures of the fit points, bar.
     pub(crate) fn bars(&self) -> Vec<f64> {
         self.points.iter().map(|p| p.0).collect()
@@ -101,6 +101,26 @@ impl FitSet<'_> {
     pub(crate) fn off_nominal_z(&self, j: usize) -> Option<f64> {
         let (d, se) = self.off_nominal(j);
         (se > 0.0).then(|| d / se)
+    }
+
+    /// The fit set read against `model_features` (at each fit point)
+    /// instead of the nominal model's: a pair's second effect is judged by
+    /// its model-free signature against the first effect's model, so that
+    /// what the first explains of a characteristic (heat exchange delays
+    /// the valve's switching, a gain error bends the read exponents) is
+    /// not taken for the second's.
+    pub(crate) fn against(&self, model_features: Vec<Vec<f64>>) -> FitSet<'a> {
+        FitSet {
+            runner: self.runner,
+            points: self.points.clone(),
+            nominal_truth: Vec::new(),
+            nominal_features: model_features,
+            pressures: self.pressures,
+            distinct: self.distinct,
+            sims: AtomicUsize::new(0),
+            nuisance: Vec::new(),
+            against_reference: self.against_reference,
+        }
     }
 
     /// The force balance's quantities against the nominal model's.

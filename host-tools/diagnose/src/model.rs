@@ -4,7 +4,7 @@
 use super::features::{summarize, Extractor, Signals, N_FEATURES};
 pub use super::report::Candidate;
 use hammer_sim::effects::Effects;
-use hammer_sim::run::TruthTrace;
+use hammer_sim::run::{output_len, run_model, TruthSample, TruthSink, TruthTrace};
 use hammer_sim::{simulate_truth, SimConfig};
 
 /// E[u²] of the zero-shift magnitude factor u ~ U(0.5, 1.5) (`sim::sensor`).
@@ -68,17 +68,31 @@ impl ModelRunner {
     }
 
     /// Mean steady features of the candidate at `supply_bar`; `nominal_truth`
-    /// is reused when the candidate has no physical effect.
+    /// is reused when the candidate has no physical effect. A run of its
+    /// own keeps only the three signals the extractor reads.
     pub fn features(&self, supply_bar: f64, cand: &Candidate, nominal_truth: Option<&TruthTrace>) -> Option<Vec<f64>> {
-        let owned;
-        let truth = match nominal_truth {
-            Some(t) if !cand.has_physics() => t,
-            _ => {
-                owned = self.truth(supply_bar, cand)?;
-                &owned
-            }
-        };
-        self.features_of_truth(truth, &cand.effects, supply_bar)
+        if let Some(t) = nominal_truth.filter(|_| !cand.has_physics()) {
+            return self.features_of_truth(t, &cand.effects, supply_bar);
+        }
+        let cfg = self.config(supply_bar, &cand.physics());
+        let mut read = Measured::with_capacity(output_len(&cfg));
+        run_model(&cfg, &mut read).ok()?;
+        let Measured {
+            mut p_rear_pa,
+            mut p_front_pa,
+            accel_mps2,
+        } = read;
+        if !self.reads_as_is(&cand.effects) {
+            self.read_pressures(&cand.effects, &mut p_rear_pa, &mut p_front_pa);
+        }
+        self.features_of(
+            cfg.solver.output_step_s,
+            &p_rear_pa,
+            &p_front_pa,
+            &accel_mps2,
+            &cand.effects,
+            supply_bar,
+        )
     }
 
     /// Whether the measurement's transducers read the model's pressures as
@@ -109,11 +123,24 @@ impl ModelRunner {
             self.read_pressures(effects, &mut read.0, &mut read.1);
             (&read.0, &read.1)
         };
+        self.features_of(truth.dt_s, p1, p2, &truth.accel_mps2, effects, supply_bar)
+    }
+
+    /// Mean steady features of pressures already read by the transducers.
+    fn features_of(
+        &self,
+        dt_s: f64,
+        p1: &[f64],
+        p2: &[f64],
+        accel_mps2: &[f64],
+        effects: &Effects,
+        supply_bar: f64,
+    ) -> Option<Vec<f64>> {
         let s = Signals {
-            dt_s: truth.dt_s,
+            dt_s,
             p_rear_pa: p1,
             p_front_pa: p2,
-            accel_mps2: &truth.accel_mps2,
+            accel_mps2,
             supply_pa: supply_bar * 1e5,
         };
         let cycles = self.extractor.cycles_from(&s, self.settle_s);
@@ -124,5 +151,58 @@ impl ModelRunner {
         self.reads.shift_expected_features(effects, &mut mean);
         debug_assert_eq!(mean.len(), N_FEATURES);
         Some(mean)
+    }
+}
+
+/// A model run's signals as the extractor reads them, and nothing else: a
+/// candidate's run is read once, for its features (a third of the stores
+/// a whole truth trace makes).
+struct Measured {
+    p_rear_pa: Vec<f64>,
+    p_front_pa: Vec<f64>,
+    accel_mps2: Vec<f64>,
+}
+
+impl Measured {
+    fn with_capacity(n: usize) -> Self {
+        Self {
+            p_rear_pa: Vec::with_capacity(n),
+            p_front_pa: Vec::with_capacity(n),
+            accel_mps2: Vec::with_capacity(n),
+        }
+    }
+}
+
+impl TruthSink for Measured {
+    type Error = std::convert::Infallible;
+    fn sample(&mut self, s: &TruthSample) -> Result<(), Self::Error> {
+        self.p_rear_pa.push(s.p_rear_pa);
+        self.p_front_pa.push(s.p_front_pa);
+        self.accel_mps2.push(s.accel_mps2);
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::pipeline::tests::nominal_runner;
+
+    /// A candidate's own run, which keeps only the three signals read, gives
+    /// the features of its whole truth trace to the bit, through a sensor
+    /// gain too.
+    #[test]
+    fn a_candidates_own_run_reads_as_its_truth_does() {
+        let runner = nominal_runner();
+        for spec in ["leakage", "valve_delay", "pressure_gain_error:rear=0.03"] {
+            let mut cand = Candidate::default();
+            cand.effects.apply_spec("heat_transfer").unwrap();
+            cand.effects.apply_spec(spec).unwrap();
+            let lean = runner.features(5.0, &cand, None).expect("the model runs");
+            let truth = runner.truth(5.0, &cand).expect("the model runs");
+            let whole = runner.features_of_truth(&truth, &cand.effects, 5.0).expect("read");
+            let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&lean), bits(&whole), "{spec}");
+        }
     }
 }

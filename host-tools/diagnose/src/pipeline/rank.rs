@@ -8,6 +8,7 @@
 //! simulation.
 
 use super::effect_fit::fit_effects;
+use crate::effects::diagnosis;
 use crate::features::N_FEATURES;
 use crate::fitset::FitSet;
 use crate::model::Candidate;
@@ -70,16 +71,21 @@ pub(crate) fn rank(fs: &FitSet, opts: &Options, step: &(dyn Fn(&str) + Sync)) ->
     let mut verdict = None;
     // The best-scoring effect with evidence of its own: a higher score
     // without it is the form error's shape, not an effect.
-    let reason = match effects.iter().position(|e| significant(e, opts)).map(|i| prefer_seen(&effects, i, opts)) {
+    let reason = match effects
+        .iter()
+        .position(|e| significant(e, opts))
+        .map(|i| prefer_seen(&effects, i, opts))
+    {
         Some(i) => {
             let best = &effects[i];
             verdict = Some(best.clone());
             let mut reason = single_reason(&effects, i, opts);
             if needs_pair(best, n_compared, ln_n, opts) {
                 pairs = fit_pairs(fs, &effects, i, chi2_nominal, ln_n, opts);
+                let given = first_model(fs, best, opts).map(|f| fs.against(f));
                 let second_z = |p: &EffectResult| {
                     let second = p.name.split('+').nth(1).unwrap_or_default();
-                    effects.iter().find(|e| e.name == second).and_then(|e| e.model_free_z)
+                    given.as_ref().and_then(|g| diagnosis(second)?.model_free_z(g))
                 };
                 if let Some((p, extra)) = pairs
                     .iter()
@@ -118,6 +124,18 @@ pub(crate) fn rank(fs: &FitSet, opts: &Options, step: &(dyn Fn(&str) + Sync)) ->
         chi2_nominal,
         features_compared: n_compared,
     }
+}
+
+/// The first effect's model features at each fit point (`None` if a run
+/// fails): what a pair's second effect's signature is read against.
+fn first_model(fs: &FitSet, first: &EffectResult, opts: &Options) -> Option<Vec<Vec<f64>>> {
+    let jobs: Vec<usize> = (0..fs.points.len()).collect();
+    let features = parallel(opts.threads, jobs, &|k| {
+        fs.runner
+            .features(fs.points[k].0, &first.candidate, fs.nominal_truth.get(k))
+    });
+    fs.sims.fetch_add(features.len(), std::sync::atomic::Ordering::Relaxed);
+    features.into_iter().collect()
 }
 
 /// The effect to name instead of the best significant `effects[best]`
@@ -426,9 +444,18 @@ mod tests {
         };
         let close = [leak.clone(), heat(500.0, 8.0)];
         assert_eq!(prefer_seen(&close, 0, &opts), 1);
-        assert!(single_reason(&close, 1, &opts).contains("leakage scored higher by less than 20 % and without a model-free signature"));
-        assert_eq!(prefer_seen(&[leak.clone(), heat(500.0, 2.0)], 0, &opts), 0, "its signature is too weak");
-        assert_eq!(prefer_seen(&[leak.clone(), heat(650.0, 8.0)], 0, &opts), 0, "it scores far lower");
+        assert!(single_reason(&close, 1, &opts)
+            .contains("leakage scored higher by less than 20 % and without a model-free signature"));
+        assert_eq!(
+            prefer_seen(&[leak.clone(), heat(500.0, 2.0)], 0, &opts),
+            0,
+            "its signature is too weak"
+        );
+        assert_eq!(
+            prefer_seen(&[leak.clone(), heat(650.0, 8.0)], 0, &opts),
+            0,
+            "it scores far lower"
+        );
         let seen_best = EffectResult {
             model_free_z: Some(5.0),
             ..leak
