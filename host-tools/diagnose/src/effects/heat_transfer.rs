@@ -35,6 +35,10 @@ impl Diagnosed for HeatTransfer {
         HeatTransfer { h_w_per_m2_k: theta[0] }
     }
 
+    fn seen_in_chambers() -> bool {
+        true
+    }
+
     fn model_free_z(fs: &FitSet) -> Option<f64> {
         // Only against a reference, and where every fit point read the phase.
         let read = fs.points.iter().all(|p| p.1.mean[FRONT_EXPONENT].is_finite());

@@ -137,6 +137,16 @@ pub(super) trait Diagnosed: Effect {
         None
     }
 
+    /// Whether its model-free signature is in the chamber characteristics
+    /// (against a reference) rather than the force balance. Such a
+    /// signature moves with other effects too (heat exchange delays the
+    /// valve's switching; friction moves the piston and with it the feed's
+    /// onset, by the hammer's form, not the model's), so it is not enough
+    /// to try the effect as a pair's second where its waveforms do not.
+    fn seen_in_chambers() -> bool {
+        false
+    }
+
     /// The magnitude (a catalogue key and its value) at which its
     /// force-balance signature stands `z_min` standard errors off nominal:
     /// below it, the verdict cannot exclude the effect. `None` if the force
@@ -171,6 +181,7 @@ pub(super) trait DiagnosisEntry: Sync {
     fn evidence(&self, fs: &FitSet) -> Option<String>;
     fn model_free_z(&self, fs: &FitSet) -> Option<f64>;
     fn model_free_floor(&self, fs: &FitSet, z_min: f64) -> Option<(&'static str, f64)>;
+    fn seen_in_chambers(&self) -> bool;
     fn pressure_reading_factors(&self, effects: &Effects) -> (f64, f64);
     fn shift_expected_features(&self, effects: &Effects, mean: &mut [f64]);
     fn draw(&self, effects: &mut Effects, rng: &mut Rng);
@@ -201,6 +212,9 @@ impl<T: Diagnosed> DiagnosisEntry for Entry<T> {
     }
     fn model_free_floor(&self, fs: &FitSet, z_min: f64) -> Option<(&'static str, f64)> {
         T::model_free_floor(fs, z_min)
+    }
+    fn seen_in_chambers(&self) -> bool {
+        T::seen_in_chambers()
     }
     fn pressure_reading_factors(&self, effects: &Effects) -> (f64, f64) {
         T::get(effects).map_or((1.0, 1.0), |e| e.pressure_reading_factors())

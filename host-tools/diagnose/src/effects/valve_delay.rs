@@ -38,6 +38,10 @@ impl Diagnosed for ValveDelay {
         }
     }
 
+    fn seen_in_chambers() -> bool {
+        true
+    }
+
     fn model_free_z(fs: &FitSet) -> Option<f64> {
         // Only against a reference, and where every fit point read the feed.
         let read = fs.points.iter().all(|p| p.1.mean[FRONT_FEED].is_finite());
