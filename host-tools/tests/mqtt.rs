@@ -1007,9 +1007,9 @@ fn a_valve_delay_drifts_the_feed_timing_on_the_broker_and_in_line_protocol() {
     let dir = scratch("drift");
     let reference = dir.join("ref");
     let out = Command::new(env!("CARGO_BIN_EXE_hammer"))
-        // More cycles than the default 30: the record's median is the one
-        // every window is read against, so its own error is common to them
-        // all (docs/fleet.md).
+        // 100 cycles (the default, said here for the reader): the record's
+        // median is the one every window is read against, so its own error
+        // is common to them all (docs/fleet.md).
         .args([
             "commission",
             "--demo",
