@@ -71,10 +71,19 @@ pub(crate) fn rank(fs: &FitSet, opts: &Options, step: &(dyn Fn(&str) + Sync)) ->
     let mut verdict = None;
     // The best-scoring effect with evidence of its own: a higher score
     // without it is the form error's shape, not an effect.
+    // A seen effect preferred to the unseen best must keep its signature
+    // against the best's model: the best does not explain it.
+    let stands_against = |best: &EffectResult, e: &EffectResult| {
+        let given = first_model(fs, best, opts).map(|f| fs.against(f));
+        given
+            .as_ref()
+            .and_then(|g| diagnosis(&e.name)?.model_free_z(g))
+            .is_some_and(|z| z >= opts.min_model_free_z)
+    };
     let reason = match effects
         .iter()
         .position(|e| significant(e, opts))
-        .map(|i| prefer_seen(&effects, i, opts))
+        .map(|i| prefer_seen(&effects, i, opts, &|e| stands_against(&effects[i], e)))
     {
         Some(i) => {
             let best = &effects[i];
@@ -146,8 +155,11 @@ fn first_model(fs: &FitSet, first: &EffectResult, opts: &Options) -> Option<Vec<
 
 /// The effect to name instead of the best significant `effects[best]`
 /// when that one has no model-free signature: the best-scoring significant
-/// effect with one, if it scores within [`Options::seen_margin`] of it.
-fn prefer_seen(effects: &[EffectResult], best: usize, opts: &Options) -> usize {
+/// effect with one, if it scores within [`Options::seen_margin`] of it and
+/// its signature `stands` against the best's model too (a leak lowers the
+/// closed exponent in the model as heat exchange does: the model's own
+/// leaks were named heat exchange without this).
+fn prefer_seen(effects: &[EffectResult], best: usize, opts: &Options, stands: &dyn Fn(&EffectResult) -> bool) -> usize {
     let b = &effects[best];
     if b.model_free_z.is_some() {
         return best;
@@ -158,6 +170,7 @@ fn prefer_seen(effects: &[EffectResult], best: usize, opts: &Options) -> usize {
         .enumerate()
         .skip(best + 1)
         .find(|(_, e)| e.model_free_z.is_some() && significant(e, opts) && e.score >= close)
+        .filter(|(_, e)| stands(e))
         .map_or(best, |(i, _)| i)
 }
 
@@ -457,16 +470,18 @@ mod tests {
             ..result("heat_transfer", 1, chi2, 1000.0, ln_n)
         };
         let close = [leak.clone(), heat(500.0, 8.0)];
-        assert_eq!(prefer_seen(&close, 0, &opts), 1);
+        let stands = |_: &EffectResult| true;
+        assert_eq!(prefer_seen(&close, 0, &opts, &stands), 1);
+        assert_eq!(prefer_seen(&close, 0, &opts, &|_| false), 0, "the best's model explains its signature");
         assert!(single_reason(&close, 1, &opts)
             .contains("leakage scored higher by less than 20 % and without a model-free signature"));
         assert_eq!(
-            prefer_seen(&[leak.clone(), heat(500.0, 2.0)], 0, &opts),
+            prefer_seen(&[leak.clone(), heat(500.0, 2.0)], 0, &opts, &stands),
             0,
             "its signature is too weak"
         );
         assert_eq!(
-            prefer_seen(&[leak.clone(), heat(650.0, 8.0)], 0, &opts),
+            prefer_seen(&[leak.clone(), heat(650.0, 8.0)], 0, &opts, &stands),
             0,
             "it scores far lower"
         );
@@ -474,7 +489,7 @@ mod tests {
             model_free_z: Some(5.0),
             ..leak
         };
-        assert_eq!(prefer_seen(&[seen_best, heat(500.0, 8.0)], 0, &opts), 0);
+        assert_eq!(prefer_seen(&[seen_best, heat(500.0, 8.0)], 0, &opts, &stands), 0);
     }
 
     /// A single that leaves only noise spends no simulations on pairs; one
