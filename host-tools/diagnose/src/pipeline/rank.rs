@@ -472,7 +472,11 @@ mod tests {
         let close = [leak.clone(), heat(500.0, 8.0)];
         let stands = |_: &EffectResult| true;
         assert_eq!(prefer_seen(&close, 0, &opts, &stands), 1);
-        assert_eq!(prefer_seen(&close, 0, &opts, &|_| false), 0, "the best's model explains its signature");
+        assert_eq!(
+            prefer_seen(&close, 0, &opts, &|_| false),
+            0,
+            "the best's model explains its signature"
+        );
         assert!(single_reason(&close, 1, &opts)
             .contains("leakage scored higher by less than 20 % and without a model-free signature"));
         assert_eq!(
