@@ -287,7 +287,12 @@ fn the_second_familys_valve_is_earlier_than_the_models_even_when_delayed() {
 /// wrong member of the cluster (a leak named `heat_transfer`, case 13), the
 /// hidden effect is named, its magnitude within 15 %; a control (case 8)
 /// stays `none`; a valve delay (case 3) the configured dead volumes hid is
-/// named, each hammer's front dead volume read from its record.
+/// named, each hammer's front dead volume read from its record. Heat
+/// exchange's own evidence, the front closed exponent's drop: a heat
+/// exchange the waveforms scored a little below a leak (case 15) is named,
+/// a leak whose exponent rose at 7 bar (case 13) is not taken for one, and
+/// neither is a supply restriction whose exponent stayed (case 112, named
+/// `heat_transfer` before the evidence).
 #[test]
 fn against_its_own_record_a_hammer_of_another_form_shows_what_changed() {
     use hammer_host::diagnose::bench::{run_case, BenchOptions};
@@ -307,6 +312,8 @@ fn against_its_own_record_a_hammer_of_another_form_shows_what_changed() {
         (13, "leakage"),
         (8, "none"),
         (3, "valve_delay"),
+        (15, "heat_transfer"),
+        (112, "supply_restriction"),
     ] {
         let c = run_case(&bench, index, &opts).unwrap();
         println!(
@@ -324,6 +331,13 @@ fn against_its_own_record_a_hammer_of_another_form_shows_what_changed() {
         );
         if hidden == "none" {
             assert!(c.named.is_empty(), "case {index}: a control named {:?}", c.named);
+            continue;
+        }
+        if hidden == "heat_transfer" {
+            // Named on the exponent's drop; h is a law's parameter, and
+            // the second family's chambers are polytropic here
+            // (docs/diagnosis.md): its size is not asserted.
+            assert_eq!(c.named, [hidden], "case {index}");
             continue;
         }
         if hidden == "valve_delay" {
