@@ -103,6 +103,14 @@ impl<'a> FitSet<'a> {
         (se > 0.0).then(|| d / se)
     }
 
+    /// Whether chamber characteristic `j`'s change since a reference record
+    /// can be read: the fit set was read against one and every fit point
+    /// read `j`. Against the model alone a characteristic carries the
+    /// model's form, so it is no effect's evidence there.
+    pub(crate) fn reads_change(&self, j: usize) -> bool {
+        self.against_reference && self.points.iter().all(|p| p.1.mean[j].is_finite())
+    }
+
     /// The fit set read against `model_features` (at each fit point)
     /// instead of the nominal model's: a pair's second effect is judged by
     /// its model-free signature against the first effect's model, so that

@@ -40,9 +40,7 @@ impl Diagnosed for HeatTransfer {
     }
 
     fn model_free_z(fs: &FitSet) -> Option<f64> {
-        // Only against a reference, and where every fit point read the phase.
-        let read = fs.points.iter().all(|p| p.1.mean[FRONT_EXPONENT].is_finite());
-        if !(fs.against_reference && read) {
+        if !fs.reads_change(FRONT_EXPONENT) {
             return None;
         }
         // It lowers the exponent at every operating point: a point where it

@@ -43,9 +43,7 @@ impl Diagnosed for ValveDelay {
     }
 
     fn model_free_z(fs: &FitSet) -> Option<f64> {
-        // Only against a reference, and where every fit point read the feed.
-        let read = fs.points.iter().all(|p| p.1.mean[FRONT_FEED].is_finite());
-        if !(fs.against_reference && read) {
+        if !fs.reads_change(FRONT_FEED) {
             return None;
         }
         fs.off_nominal_z(FRONT_FEED)

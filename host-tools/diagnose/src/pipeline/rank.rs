@@ -7,6 +7,8 @@
 //! functions of the scores alone, so they can be read and tested without a
 //! simulation.
 
+use std::sync::OnceLock;
+
 use super::effect_fit::fit_effects;
 use crate::effects::diagnosis;
 use crate::features::N_FEATURES;
@@ -69,29 +71,28 @@ pub(crate) fn rank(fs: &FitSet, opts: &Options, step: &(dyn Fn(&str) + Sync)) ->
     let n_compared = fs.points.len() * N_FEATURES;
     let mut pairs = Vec::new();
     let mut verdict = None;
-    // The best-scoring effect with evidence of its own: a higher score
-    // without it is the form error's shape, not an effect.
-    // A seen effect preferred to the unseen best must keep its signature
-    // against the best's model: the best does not explain it.
-    let stands_against = |best: &EffectResult, e: &EffectResult| {
-        let given = first_model(fs, best, opts).map(|f| fs.against(f));
-        given
-            .as_ref()
-            .and_then(|g| diagnosis(&e.name)?.model_free_z(g))
-            .is_some_and(|z| z >= opts.min_model_free_z)
+    // The fit set read against each effect's own model, run once and only
+    // where a rule asks for it (two simulations each).
+    let against: Vec<OnceLock<Option<FitSet>>> = effects.iter().map(|_| OnceLock::new()).collect();
+    let z_against = |i: usize, name: &str| {
+        let given = against[i].get_or_init(|| first_model(fs, &effects[i], opts).map(|f| fs.against(f)));
+        diagnosis(name)?.model_free_z(given.as_ref()?)
     };
-    let reason = match effects
-        .iter()
-        .position(|e| significant(e, opts))
-        .map(|i| prefer_seen(&effects, i, opts, &|e| stands_against(&effects[i], e)))
-    {
+    // The best-scoring effect with evidence of its own: a higher score
+    // without it is the form error's shape, not an effect. A seen effect
+    // preferred to an unseen best must keep its signature against the
+    // best's model: the best does not explain it.
+    let reason = match effects.iter().position(|e| significant(e, opts)).map(|i| {
+        prefer_seen(&effects, i, opts, &|e| {
+            z_against(i, &e.name).is_some_and(|z| z >= opts.min_model_free_z)
+        })
+    }) {
         Some(i) => {
             let best = &effects[i];
             verdict = Some(best.clone());
             let mut reason = single_reason(&effects, i, opts);
             if needs_pair(best, n_compared, ln_n, opts) {
                 pairs = fit_pairs(fs, &effects, i, chi2_nominal, ln_n, opts);
-                let given = first_model(fs, best, opts).map(|f| fs.against(f));
                 // The second's signature must stand both as measured (it
                 // is there) and against the first's model (the first does
                 // not explain it): the model's form can move a chamber
@@ -99,8 +100,7 @@ pub(crate) fn rank(fs: &FitSet, opts: &Options, step: &(dyn Fn(&str) + Sync)) ->
                 let second_z = |p: &EffectResult| {
                     let second = p.name.split('+').nth(1).unwrap_or_default();
                     let alone = effects.iter().find(|e| e.name == second)?.model_free_z?;
-                    let given = given.as_ref().and_then(|g| diagnosis(second)?.model_free_z(g))?;
-                    Some(alone.min(given))
+                    Some(alone.min(z_against(i, second)?))
                 };
                 if let Some((p, extra)) = pairs
                     .iter()
