@@ -1,7 +1,8 @@
 //! Arbitrary input never panics the estimator, every buffer stays bounded,
 //! and whatever it reports is either flagged or finite.
 
-use hammer_estimator::{Config, Estimator, RawSample};
+use hammer_estimator::cycle::MAX_CHECKPOINTS;
+use hammer_estimator::{Config, ConfigError, Estimator, RawSample};
 use proptest::prelude::*;
 
 /// A stretch of signal: base codes, a noise amplitude, a length; an impact
@@ -101,8 +102,18 @@ proptest! {
         let mut c = Config::default();
         c.sample_rate_hz = fs;
         c.accel_zero_shift_tau_s = tau;
-        let ok = (1_000.0..=1_000_000.0).contains(&fs) && (0.0..=10.0).contains(&tau);
-        prop_assert_eq!(Estimator::new(c).is_ok(), ok);
+        let in_range = (1_000.0..=1_000_000.0).contains(&fs) && (0.0..=10.0).contains(&tau);
+        // One checkpoint per millisecond (at least one per sample) and at most
+        // MAX_CHECKPOINTS of them: below ~1.07 kHz the default 0.12 s period
+        // does not fit and must be refused too.
+        let per_checkpoint = (fs * 1e-3).round().max(1.0);
+        let fits = c.max_period_s <= MAX_CHECKPOINTS as f32 * per_checkpoint / fs;
+        let result = Estimator::new(c);
+        prop_assert_eq!(result.is_ok(), in_range && fits, "{:?}", result.err());
+        if in_range && !fits {
+            let memory = matches!(result, Err(ConfigError::PeriodTooLongForMemory { .. }));
+            prop_assert!(memory, "refused for the period's memory");
+        }
     }
 }
 
@@ -149,4 +160,16 @@ proptest! {
         }
         prop_assert_eq!(one.counters(), blocks.counters());
     }
+}
+
+#[test]
+fn a_period_that_does_not_fit_the_checkpoints_is_refused() {
+    // The case proptest found: 1323 Hz gives one checkpoint per sample, so
+    // 128 checkpoints hold 0.097 s, less than the default 0.12 s period.
+    let mut c = Config::default();
+    c.sample_rate_hz = 1323.1045;
+    c.accel_zero_shift_tau_s = 0.0;
+    assert!(matches!(Estimator::new(c.clone()), Err(ConfigError::PeriodTooLongForMemory { .. })));
+    c.max_period_s = 0.09;
+    assert!(Estimator::new(c).is_ok());
 }
