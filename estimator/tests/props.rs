@@ -169,7 +169,10 @@ fn a_period_that_does_not_fit_the_checkpoints_is_refused() {
     let mut c = Config::default();
     c.sample_rate_hz = 1323.1045;
     c.accel_zero_shift_tau_s = 0.0;
-    assert!(matches!(Estimator::new(c.clone()), Err(ConfigError::PeriodTooLongForMemory { .. })));
+    assert!(matches!(
+        Estimator::new(c.clone()),
+        Err(ConfigError::PeriodTooLongForMemory { .. })
+    ));
     c.max_period_s = 0.09;
     assert!(Estimator::new(c).is_ok());
 }
