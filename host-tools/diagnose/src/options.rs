@@ -105,6 +105,16 @@ pub struct Options {
     /// structural benchmark's calibration seed (docs/diagnosis.md).
     #[serde(default = "default_seen_margin")]
     pub seen_margin: f64,
+    /// When no effect is significant, an effect whose model-free signature
+    /// measures its own size (a valve delay: the front feed's shift since
+    /// the reference) is named on that signature alone if it stands this
+    /// many standard errors off and no other effect's signature stands at
+    /// [`Options::min_model_free_z`]: the model's law for it may differ
+    /// from the hammer's (a dead time against a lagging spool), so its fit
+    /// to the waveforms may disagree however clear the change is. 5 is the
+    /// drift alarm's pooled threshold (docs/fleet.md).
+    #[serde(default = "default_chamber_alone_z")]
+    pub chamber_alone_z: f64,
     /// Pairs are tried when the best single effect leaves a reduced χ² above this.
     pub pair_residual: f64,
     /// How many runners-up are tried as the second effect of a pair.
@@ -130,6 +140,7 @@ impl Default for Options {
             min_explained_pair: default_min_explained_pair(),
             confusable_margin: default_confusable_margin(),
             seen_margin: default_seen_margin(),
+            chamber_alone_z: default_chamber_alone_z(),
             pair_residual: 2.0,
             pair_candidates: 5,
             threads: std::thread::available_parallelism().map_or(2, |n| n.get()),
@@ -149,6 +160,10 @@ fn default_confusable_margin() -> f64 {
 
 fn default_seen_margin() -> f64 {
     0.2
+}
+
+fn default_chamber_alone_z() -> f64 {
+    5.0
 }
 
 fn default_min_explained_pair() -> f64 {

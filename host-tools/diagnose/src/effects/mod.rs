@@ -147,6 +147,14 @@ pub(super) trait Diagnosed: Effect {
         false
     }
 
+    /// Its free parameters (values, standard deviations) read from its
+    /// model-free signature alone, where that signature measures the
+    /// parameter itself rather than through the model's law; `None` if it
+    /// does not, or does not stand.
+    fn measured_size(_fs: &FitSet) -> Option<(Vec<f64>, Vec<f64>)> {
+        None
+    }
+
     /// The magnitude (a catalogue key and its value) at which its
     /// force-balance signature stands `z_min` standard errors off nominal:
     /// below it, the verdict cannot exclude the effect. `None` if the force
@@ -182,6 +190,7 @@ pub(super) trait DiagnosisEntry: Sync {
     fn model_free_z(&self, fs: &FitSet) -> Option<f64>;
     fn model_free_floor(&self, fs: &FitSet, z_min: f64) -> Option<(&'static str, f64)>;
     fn seen_in_chambers(&self) -> bool;
+    fn measured_size(&self, fs: &FitSet) -> Option<(Vec<f64>, Vec<f64>)>;
     fn pressure_reading_factors(&self, effects: &Effects) -> (f64, f64);
     fn shift_expected_features(&self, effects: &Effects, mean: &mut [f64]);
     fn draw(&self, effects: &mut Effects, rng: &mut Rng);
@@ -215,6 +224,9 @@ impl<T: Diagnosed> DiagnosisEntry for Entry<T> {
     }
     fn seen_in_chambers(&self) -> bool {
         T::seen_in_chambers()
+    }
+    fn measured_size(&self, fs: &FitSet) -> Option<(Vec<f64>, Vec<f64>)> {
+        T::measured_size(fs)
     }
     fn pressure_reading_factors(&self, effects: &Effects) -> (f64, f64) {
         T::get(effects).map_or((1.0, 1.0), |e| e.pressure_reading_factors())

@@ -49,6 +49,17 @@ impl Diagnosed for ValveDelay {
         fs.off_nominal_z(FRONT_FEED)
     }
 
+    /// The feed's shift is the delay of the port's opening itself: within
+    /// 0.25 ms of the true shift on the model up to 1.5 ms, 0.3–0.5 ms
+    /// short at 2.4 ms on the second family, whose spool lags
+    /// (docs/estimator.md). A shift the wrong way is no delay's size.
+    fn measured_size(fs: &FitSet) -> Option<(Vec<f64>, Vec<f64>)> {
+        Self::model_free_z(fs)?;
+        let (shift, se) = fs.off_nominal(FRONT_FEED);
+        let spec = Self::free_params(fs.distinct)[0];
+        (shift > spec.lo).then(|| (vec![shift.min(spec.hi)], vec![se]))
+    }
+
     fn model_free_floor(fs: &FitSet, z_min: f64) -> Option<(&'static str, f64)> {
         let se = fs.mean_se(FRONT_FEED).1;
         Self::model_free_z(fs).and(se.is_finite().then_some(se)).map(|se| ("tau_s", z_min * se))

@@ -62,17 +62,6 @@ pub(crate) fn fit_effects(
     let sims_before = fs.sims.load(Ordering::Relaxed);
     let fit: FitResult = levenberg_marquardt(&specs, &theta0, opts.max_iterations, &mut |t| fs.residuals(&build(t)))?;
     let cand = build(&fit.theta);
-    let k = specs.len() as f64;
-    let score = chi2_nominal - fit.chi2 - k * ln_n;
-    let explained = if chi2_nominal > 0.0 {
-        ((chi2_nominal - fit.chi2) / chi2_nominal).max(0.0)
-    } else {
-        0.0
-    };
-    let mut params = serde_json::Map::new();
-    for name in names {
-        params.insert(name.to_string(), catalogue_params(&cand.effects, name));
-    }
     let fitted = specs
         .iter()
         .zip(&owner)
@@ -83,13 +72,86 @@ pub(crate) fn fit_effects(
             sd,
         })
         .collect();
+    let scored = Scored {
+        chi2: fit.chi2,
+        chi2_nominal,
+        penalty: specs.len() as f64 * ln_n,
+    };
+    Some(result(fs, names, cand, fitted, scored, sims_before))
+}
+
+/// Effect `name` at the size its model-free signature measures
+/// ([`crate::effects`]' `measured_size`), beside a fitted `first` effect if
+/// given, nothing more fitted: scored on the waveforms as a fit is (its
+/// parameter counted in the penalty), so the report says how well the
+/// model's law for it agrees.
+pub(crate) fn at_measured_size(
+    fs: &FitSet,
+    first: Option<&EffectResult>,
+    name: &str,
+    chi2_nominal: f64,
+    ln_n: f64,
+) -> Option<EffectResult> {
+    let (theta, sd) = diagnosis(name)?.measured_size(fs)?;
+    let specs = free_params(name, fs.distinct);
+    let mut cand = first.map_or_else(Candidate::default, |f| f.candidate.clone());
+    apply(&mut cand.effects, name, &theta, fs.pressures);
+    let sims_before = fs.sims.load(Ordering::Relaxed);
+    let chi2 = fs.chi2(&cand)?;
+    let mut fitted = first.map_or_else(Vec::new, |f| f.fitted.clone());
+    fitted.extend(
+        specs
+            .iter()
+            .zip(theta.iter().zip(&sd))
+            .map(|(s, (&value, &sd))| FittedParam {
+                key: format!("{name}.{}", s.key),
+                value,
+                sd,
+            }),
+    );
+    let scored = Scored {
+        chi2,
+        chi2_nominal,
+        penalty: fitted.len() as f64 * ln_n,
+    };
+    let mut names: Vec<&str> = first.map_or_else(Vec::new, |f| f.name.split('+').collect());
+    names.push(name);
+    Some(result(fs, &names, cand, fitted, scored, sims_before))
+}
+
+/// A candidate's χ² beside the nominal model's, and its BIC penalty.
+struct Scored {
+    chi2: f64,
+    chi2_nominal: f64,
+    penalty: f64,
+}
+
+/// The result of `names` as `cand`, with its parameters, score and evidence.
+fn result(
+    fs: &FitSet,
+    names: &[&str],
+    cand: Candidate,
+    fitted: Vec<FittedParam>,
+    s: Scored,
+    sims_before: usize,
+) -> EffectResult {
+    let score = s.chi2_nominal - s.chi2 - s.penalty;
+    let explained = if s.chi2_nominal > 0.0 {
+        ((s.chi2_nominal - s.chi2) / s.chi2_nominal).max(0.0)
+    } else {
+        0.0
+    };
+    let mut params = serde_json::Map::new();
+    for name in names {
+        params.insert(name.to_string(), catalogue_params(&cand.effects, name));
+    }
     let evidence = evidence(fs, names, &cand);
     // A pair is seen by the force balance as well as its clearer member.
     let model_free_z = names
         .iter()
         .filter_map(|n| diagnosis(n).and_then(|d| d.model_free_z(fs)))
         .reduce(f64::max);
-    Some(EffectResult {
+    EffectResult {
         name: names.join("+"),
         params: if names.len() == 1 {
             params.remove(names[0]).unwrap_or_default()
@@ -97,14 +159,14 @@ pub(crate) fn fit_effects(
             serde_json::Value::Object(params)
         },
         fitted,
-        chi2: fit.chi2,
+        chi2: s.chi2,
         score,
         explained_fraction: explained,
         evidence,
         model_free_z,
         simulations: fs.sims.load(Ordering::Relaxed) - sims_before,
         candidate: cand,
-    })
+    }
 }
 
 /// What in the measurement the effect matched: its signature in the force

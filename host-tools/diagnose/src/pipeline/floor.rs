@@ -60,7 +60,7 @@ fn model_free_floor(fs: &FitSet, name: &str, z_min: f64) -> Option<DetectionFloo
         chi2_needed: z_min * z_min,
         model_free: true,
         statement: format!(
-            "{name} with {key} ≥ {value:.3} would have been named (its force-balance signature at {z_min:.0} standard errors); below that it is within the force balance's uncertainty"
+            "{name} with {key} ≥ {value:.3e} would have been named (its model-free signature, the force balance's or against a reference the chamber characteristics', at {z_min:.0} standard errors); below that it is within that signature's uncertainty"
         ),
     })
 }
