@@ -13,13 +13,7 @@ fn main() {
     let reference = args.iter().any(|a| a == "--reference");
     args.retain(|a| a != "--structural" && a != "--reference");
     let seed: u64 = args.first().and_then(|s| s.parse().ok()).unwrap_or(7);
-    let bench = BenchOptions {
-        seed,
-        structural,
-        reference,
-        jitter: if structural { 0.1 } else { 0.03 },
-        ..BenchOptions::default()
-    };
+    let bench = BenchOptions::of(seed, structural, reference);
     let diag = Options {
         figures: false,
         ..Options::default()

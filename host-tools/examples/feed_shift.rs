@@ -68,13 +68,7 @@ fn main() {
     };
     let nominal = extractor_for(&SimConfig::default());
     println!("front feed shift against the record, ms: configured dead volumes | calibrated on the record | true port opening");
-    let bench = BenchOptions {
-        seed,
-        structural: true,
-        reference: true,
-        jitter: 0.1,
-        ..BenchOptions::default()
-    };
+    let bench = BenchOptions::of(seed, true, true);
     for &index in indices {
         let index = index as usize;
         let case = match draw_case(&bench, index) {

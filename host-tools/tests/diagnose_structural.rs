@@ -201,12 +201,7 @@ fn own_hammer() -> Vec<MeasuredInput> {
 #[test]
 fn a_name_within_the_unseen_cluster_is_right_or_flagged() {
     use hammer_host::diagnose::bench::{run_case, BenchOptions};
-    let bench = BenchOptions {
-        seed: 7,
-        structural: true,
-        jitter: 0.1,
-        ..BenchOptions::default()
-    };
+    let bench = BenchOptions::of(7, true, false);
     let opts = Options {
         figures: false,
         ..Options::default()
@@ -296,13 +291,7 @@ fn the_second_familys_valve_is_earlier_than_the_models_even_when_delayed() {
 #[test]
 fn against_its_own_record_a_hammer_of_another_form_shows_what_changed() {
     use hammer_host::diagnose::bench::{run_case, BenchOptions};
-    let bench = BenchOptions {
-        seed: 7,
-        structural: true,
-        reference: true,
-        jitter: 0.1,
-        ..BenchOptions::default()
-    };
+    let bench = BenchOptions::of(7, true, true);
     let opts = Options {
         figures: false,
         ..Options::default()
@@ -352,5 +341,46 @@ fn against_its_own_record_a_hammer_of_another_form_shows_what_changed() {
         assert_eq!(c.named, [hidden], "case {index}");
         let e = c.param_errors[hidden];
         assert!(e < 0.15, "case {index}: {hidden} off by {:.1} %", 100.0 * e);
+    }
+}
+
+/// A valve delay whose front feed moved far beyond its uncertainty is named
+/// and sized on that change alone where the model's delay law disagrees
+/// with the waveforms (a dead time against the second family's lagging
+/// spool): alone (seed 8, case 3: τ 2.43 ms on a polytropic hammer with
+/// resonant, clipping sensors; the model's fitted delay scored below
+/// nominal) and beside viscous friction (seed 7, case 34: τ 1.28 ms; the
+/// pair's fit drove τ to zero). The size is the feed's shift, the delay of
+/// the port's opening: alone within 15 % of τ, the benchmark's criterion;
+/// beside friction on a moving tool the onset moves with the friction and
+/// the tool too (31 % short here, docs/diagnosis.md), so there only the
+/// names are asserted.
+#[test]
+fn a_clear_measured_change_is_named_where_the_models_law_disagrees() {
+    use hammer_host::diagnose::bench::{run_case, BenchOptions};
+    let opts = Options {
+        figures: false,
+        ..Options::default()
+    };
+    for (seed, index, hidden, sized) in [
+        (8, 3, vec!["valve_delay"], true),
+        (7, 34, vec!["viscous_friction", "valve_delay"], false),
+    ] {
+        let c = run_case(&BenchOptions::of(seed, true, true), index, &opts).unwrap();
+        println!(
+            "seed {seed} case {index} ({:?}): named {:?}, parameter errors {:?}",
+            c.variants, c.named, c.param_errors
+        );
+        let mut named = c.named.clone();
+        named.sort();
+        let mut want: Vec<String> = hidden.iter().map(|s| s.to_string()).collect();
+        want.sort();
+        assert_eq!(named, want, "seed {seed} case {index}");
+        let e = c.param_errors["valve_delay"];
+        assert!(
+            !sized || e < 0.15,
+            "seed {seed} case {index}: the delay off by {:.1} %",
+            100.0 * e
+        );
     }
 }

@@ -120,14 +120,19 @@ pub fn diagnose_against(
     let points = &grouped.points;
     // Against a reference the model's form error has cancelled: what the
     // nominal model misses is the change, and a form factor measured on it
-    // would weigh the effects down by their own size.
-    let fit_opts = Options {
-        model_form: opts.model_form && references.is_empty(),
-        ..opts.clone()
+    // would weigh the effects down by their own size; an unseen effect
+    // needs the reference's share of the change (Options::min_explained_reference).
+    let fit_opts = match references.is_empty() {
+        true => opts.clone(),
+        false => Options {
+            model_form: false,
+            min_explained: opts.min_explained_reference,
+            ..opts.clone()
+        },
     };
     let (fs, model_form) = nominal::fit_set(points, &nominal, &runner, &fit_opts);
-    let ranking = rank::rank(&fs, opts, &step);
-    let detection_floors = floor::floors(&fs, &ranking, opts);
+    let ranking = rank::rank(&fs, &fit_opts, &step);
+    let detection_floors = floor::floors(&fs, &ranking, &fit_opts);
     step("detection floors");
 
     let models = held_out::models(&fs, &nominal.bars, ranking.verdict.as_ref(), opts);

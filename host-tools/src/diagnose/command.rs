@@ -195,7 +195,7 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
     if args.isolability {
         return isolability(args);
     }
-    let jitter = args.jitter.unwrap_or(if args.structural { 0.1 } else { 0.03 });
+    let jitter = args.jitter.unwrap_or(BenchOptions::default_jitter(args.structural));
     hammer_trace::config::check_range("--jitter", jitter, 0.0, 0.5)?;
     hammer_trace::config::check_range("--duration", args.duration, 0.3, 60.0)?;
     let opts = BenchOptions {

@@ -81,12 +81,17 @@ pub fn compact(x: f64) -> String {
     }
 }
 
-/// A count out of a total with its share: `7/8 (88 %)`; `-` of none.
+/// A count out of a total with its share to a tenth of a percent, so that
+/// a share just short of a target is not printed as the target:
+/// `71/79 (89.9 %)`, `7/8 (87.5 %)`, `3/4 (75 %)`; `-` of none.
 pub fn fraction((n, of): (usize, usize)) -> String {
     if of == 0 {
-        "-".into()
-    } else {
-        format!("{}/{} ({:.0} %)", n, of, 100.0 * n as f64 / of as f64)
+        return "-".into();
+    }
+    let tenths = (1000 * n + of / 2) / of;
+    match tenths % 10 {
+        0 => format!("{n}/{of} ({} %)", tenths / 10),
+        t => format!("{n}/{of} ({}.{t} %)", tenths / 10),
     }
 }
 
@@ -180,7 +185,10 @@ mod tests {
         assert_eq!(compact(2.14159), "2.1416");
         assert_eq!(compact(1e-5), "1.000e-5");
         assert_eq!(compact(0.0), "0");
-        assert_eq!(fraction((7, 8)), "7/8 (88 %)");
+        assert_eq!(fraction((7, 8)), "7/8 (87.5 %)");
+        assert_eq!(fraction((71, 79)), "71/79 (89.9 %)");
+        assert_eq!(fraction((3, 4)), "3/4 (75 %)");
+        assert_eq!(fraction((2, 3)), "2/3 (66.7 %)");
         assert_eq!(fraction((0, 0)), "-");
     }
 }
