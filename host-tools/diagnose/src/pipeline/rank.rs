@@ -74,6 +74,8 @@ pub(crate) fn rank(fs: &FitSet, opts: &Options, step: &(dyn Fn(&str) + Sync)) ->
     // The fit set read against each effect's own model, run once and only
     // where a rule asks for it (two simulations each).
     let against: Vec<OnceLock<Option<FitSet>>> = effects.iter().map(|_| OnceLock::new()).collect();
+    // Whether an effect's model-free signature reads its size.
+    let sized = |e: &EffectResult| diagnosis(&e.name).is_some_and(|d| d.measured_size(fs).is_some());
     let z_against = |i: usize, name: &str| {
         let given = against[i].get_or_init(|| first_model(fs, &effects[i], opts).map(|f| fs.against(f)));
         diagnosis(name)?.model_free_z(given.as_ref()?)
@@ -112,7 +114,6 @@ pub(crate) fn rank(fs: &FitSet, opts: &Options, step: &(dyn Fn(&str) + Sync)) ->
             }
             // A clear measured change beside a force-balance effect, that
             // the fits of pairs could not take up.
-            let sized = |e: &EffectResult| diagnosis(&e.name).is_some_and(|d| d.measured_size(fs).is_some());
             let single = verdict.as_ref().is_some_and(|v| v.name == best.name);
             let beside = single && diagnosis(&best.name).is_some_and(|d| !d.seen_in_chambers());
             if let Some((k, pair)) = beside
@@ -129,7 +130,6 @@ pub(crate) fn rank(fs: &FitSet, opts: &Options, step: &(dyn Fn(&str) + Sync)) ->
             reason
         }
         None => {
-            let sized = |e: &EffectResult| diagnosis(&e.name).is_some_and(|d| d.measured_size(fs).is_some());
             let alone = chamber_alone(&effects, opts, &sized)
                 .and_then(|i| at_measured_size(fs, None, &effects[i].name, chi2_nominal, ln_n).map(|m| (i, m)));
             match (alone, effects.first()) {
@@ -204,7 +204,8 @@ fn prefer_seen(effects: &[EffectResult], best: usize, opts: &Options, stands: &d
 /// The effect named on its model-free signature alone when none is
 /// significant: one whose signature measures its own size (`sized`),
 /// stands [`Options::chamber_alone_z`] standard errors off, and is the only
-/// one whose signature stands at [`Options::min_model_free_z`]. Another
+/// one whose signature stands at [`Options::min_model_free_z`] either way
+/// ([`only_other_standing`]). Another
 /// effect seen there too (heat exchange also delays the valve's switching)
 /// leaves the change unexplained rather than named.
 fn chamber_alone(effects: &[EffectResult], opts: &Options, sized: &dyn Fn(&EffectResult) -> bool) -> Option<usize> {
@@ -625,6 +626,43 @@ mod tests {
             reason.contains("valve_delay's model-free signature stands 42.8"),
             "{reason}"
         );
+    }
+
+    /// Beside friction named on its force balance, a clearly delayed feed
+    /// is added as the second effect at its measured size (seed 7 case 34:
+    /// 23.6 standard errors as measured, 29.4 against the friction's
+    /// model), unless the friction's model explains it, or another
+    /// signature stands beside the two (seed 8 case 59: an exponent risen
+    /// by 80 standard errors, a big leak).
+    #[test]
+    fn a_clear_measured_change_is_added_beside_a_force_balance_effect() {
+        let opts = Options::default();
+        let ln_n = 20f64.ln();
+        let seen = |name: &str, chi2: f64, z: f64| EffectResult {
+            model_free_z: Some(z),
+            ..result(name, 1, chi2, 9634.0, ln_n)
+        };
+        let sized = |e: &EffectResult| e.name == "valve_delay";
+        let case = |heat_z: f64| {
+            [
+                seen("viscous_friction", 2077.0, 33.5),
+                seen("heat_transfer", 9500.0, heat_z),
+                seen("valve_delay", 9700.0, 23.6),
+            ]
+        };
+        let against = |z: f64| move |e: &EffectResult| (e.name == "valve_delay").then_some(z);
+        assert_eq!(second_alone(&case(0.1), 0, &opts, &sized, &against(29.4)), Some(2));
+        assert_eq!(
+            second_alone(&case(0.1), 0, &opts, &sized, &against(2.0)),
+            None,
+            "the friction's model explains the shift"
+        );
+        assert_eq!(
+            second_alone(&case(-80.0), 0, &opts, &sized, &against(29.4)),
+            None,
+            "an exponent risen by 80 standard errors beside it"
+        );
+        assert_eq!(second_alone(&case(0.1), 0, &opts, &|_| false, &against(29.4)), None);
     }
 
     /// A single that leaves only noise spends no simulations on pairs; one
