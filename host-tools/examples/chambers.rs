@@ -55,17 +55,22 @@ fn main() {
                     .expect("catalogue effect");
                 let d = run(family, bar, &e, seconds, 5);
                 let shift = |c: &hammer_host::chambers::Compared| mean_onset_s(&c.measured, true);
+                let label = format!("{:8} {bar} bar valve delay {:.1} ms", family.name(), tau * 1e3);
                 let (Some(m1), Some(m0)) = (shift(&d), shift(&none)) else {
+                    println!(
+                        "{label}: no front feed onset read (delayed {:?}, sound {:?})",
+                        shift(&d),
+                        shift(&none)
+                    );
                     continue;
                 };
                 let (Some(p1), Some(p0)) = (mean_front_port_opening_s(&d), mean_front_port_opening_s(&none)) else {
+                    println!("{label}: no true port opening recorded");
                     continue;
                 };
                 let (m, p) = ((m1 - m0) * 1e3, (p1 - p0) * 1e3);
                 println!(
-                    "{:8} {bar} bar valve delay {:.1} ms: front feed moved {m:+.3} ms, the port {p:+.3} ms (difference {:+.3} ms)",
-                    family.name(),
-                    tau * 1e3,
+                    "{label}: front feed moved {m:+.3} ms, the port {p:+.3} ms (difference {:+.3} ms)",
                     m - p
                 );
             }

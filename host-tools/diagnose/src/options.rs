@@ -89,7 +89,7 @@ pub struct Options {
     /// the structural and same-structure benchmarks against the record),
     /// but a change is read through the model's law for it, and on a
     /// hammer of another form that law explains only part of it: the
-    /// second family's leaks 9–21 % of theirs. Set on the structural
+    /// second family's missed leaks 4–24 % of theirs. Set on the structural
     /// benchmark's calibration seed (docs/diagnosis.md).
     #[serde(default = "default_min_explained_reference")]
     pub min_explained_reference: f64,
