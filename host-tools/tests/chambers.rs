@@ -84,8 +84,8 @@ fn a_hidden_valve_delay_moves_the_measured_switching_with_the_spool() {
 /// calibration terms) against the truth, over both families at 4 and 7 bar
 /// with no effect and each effect but the pressure gain error (a
 /// calibration error, which the stated uncertainty leaves out by design).
-/// Measured over 1 s runs (docs/estimator.md): onsets 90 % (front) and 86 %
-/// (rear), exponents 98 % / 98 %, areas 98 % / 99 %. Here 0.5 s runs:
+/// Measured over 1 s runs (docs/estimator.md): onsets 88 % (front) and 85 %
+/// (rear), exponents 98 % / 98 %, areas 97 % / 99 %. Here 0.5 s runs:
 /// each at least 80 %, every onset's mean difference within 0.1 ms (the
 /// slow rises of a restricted or heat-exchanging chamber lean early).
 #[test]
