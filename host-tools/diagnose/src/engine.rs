@@ -122,13 +122,14 @@ pub fn diagnose_against(
     // nominal model misses is the change, and a form factor measured on it
     // would weigh the effects down by their own size; an unseen effect
     // needs the reference's share of the change (Options::min_explained_reference).
-    let fit_opts = match references.is_empty() {
-        true => opts.clone(),
-        false => Options {
+    let fit_opts = if references.is_empty() {
+        opts.clone()
+    } else {
+        Options {
             model_form: false,
             min_explained: opts.min_explained_reference,
             ..opts.clone()
-        },
+        }
     };
     let (fs, model_form) = nominal::fit_set(points, &nominal, &runner, &fit_opts);
     let ranking = rank::rank(&fs, &fit_opts, &step);

@@ -481,6 +481,14 @@ mod tests {
         }
     }
 
+    /// [`result`] with a model-free signature `z` standard errors off.
+    fn seen(name: &str, chi2: f64, chi2_nominal: f64, z: f64) -> EffectResult {
+        EffectResult {
+            model_free_z: Some(z),
+            ..result(name, 1, chi2, chi2_nominal, 20f64.ln())
+        }
+    }
+
     /// An effect the force balance cannot see needs a share of the gap: a
     /// large gap closed by a fifth is the form error's shape, not an effect.
     #[test]
@@ -561,10 +569,7 @@ mod tests {
         let opts = Options::default();
         let ln_n = 20f64.ln();
         let leak = result("leakage", 1, 480.0, 1000.0, ln_n);
-        let heat = |chi2: f64, z: f64| EffectResult {
-            model_free_z: Some(z),
-            ..result("heat_transfer", 1, chi2, 1000.0, ln_n)
-        };
+        let heat = |chi2: f64, z: f64| seen("heat_transfer", chi2, 1000.0, z);
         let close = [leak.clone(), heat(500.0, 8.0)];
         let stands = |_: &EffectResult| true;
         assert_eq!(prefer_seen(&close, 0, &opts, &stands), 1);
@@ -600,14 +605,9 @@ mod tests {
     #[test]
     fn a_clear_measured_change_is_named_alone() {
         let opts = Options::default();
-        let ln_n = 20f64.ln();
-        let seen = |name: &str, chi2: f64, z: f64| EffectResult {
-            model_free_z: Some(z),
-            ..result(name, 1, chi2, 11450.0, ln_n)
-        };
-        let friction = seen("coulomb_friction", 10627.0, 0.2);
-        let heat = |z| seen("heat_transfer", 11541.0, z);
-        let delay = |z| seen("valve_delay", 11607.0, z);
+        let friction = seen("coulomb_friction", 10627.0, 11450.0, 0.2);
+        let heat = |z| seen("heat_transfer", 11541.0, 11450.0, z);
+        let delay = |z| seen("valve_delay", 11607.0, 11450.0, z);
         let sized = |e: &EffectResult| e.name == "valve_delay";
         let case = [friction.clone(), heat(1.8), delay(42.8)];
         assert!(case.iter().all(|e| !significant(e, &opts)));
@@ -637,17 +637,12 @@ mod tests {
     #[test]
     fn a_clear_measured_change_is_added_beside_a_force_balance_effect() {
         let opts = Options::default();
-        let ln_n = 20f64.ln();
-        let seen = |name: &str, chi2: f64, z: f64| EffectResult {
-            model_free_z: Some(z),
-            ..result(name, 1, chi2, 9634.0, ln_n)
-        };
         let sized = |e: &EffectResult| e.name == "valve_delay";
         let case = |heat_z: f64| {
             [
-                seen("viscous_friction", 2077.0, 33.5),
-                seen("heat_transfer", 9500.0, heat_z),
-                seen("valve_delay", 9700.0, 23.6),
+                seen("viscous_friction", 2077.0, 9634.0, 33.5),
+                seen("heat_transfer", 9500.0, 9634.0, heat_z),
+                seen("valve_delay", 9700.0, 9634.0, 23.6),
             ]
         };
         let against = |z: f64| move |e: &EffectResult| (e.name == "valve_delay").then_some(z);
