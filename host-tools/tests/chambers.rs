@@ -56,10 +56,10 @@ fn the_second_familys_front_feed_starts_before_the_impact_and_the_models_after()
     }
 }
 
-/// A hidden valve delay moves the measured front feed by the spool's true
-/// shift within 0.25 ms on the model family (measured: 0.02–0.12 ms at
-/// τ = 0.6 and 1.5 ms). On the second family the onset moves further than
-/// the port (docs/estimator.md): asserted only as the right direction.
+/// A hidden valve delay of 1.5 ms moves the measured front feed by the
+/// spool's true shift within 0.25 ms on both families (measured over 1 s
+/// runs: model +0.095 / +0.002 ms at 4 / 7 bar, second family −0.054 /
+/// +0.169 ms; docs/estimator.md).
 #[test]
 fn a_hidden_valve_delay_moves_the_measured_switching_with_the_spool() {
     for bar in [4.0, 7.0] {
@@ -73,9 +73,7 @@ fn a_hidden_valve_delay_moves_the_measured_switching_with_the_spool() {
                 family.name()
             );
             assert!(port > 0.5e-3 && measured > 0.5e-3, "{what}");
-            if family == Family::Model {
-                assert!((measured - port).abs() < 0.25e-3, "{what}");
-            }
+            assert!((measured - port).abs() < 0.25e-3, "{what}");
         }
     }
 }
