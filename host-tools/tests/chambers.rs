@@ -82,10 +82,11 @@ fn a_hidden_valve_delay_moves_the_measured_switching_with_the_spool() {
 /// calibration terms) against the truth, over both families at 4 and 7 bar
 /// with no effect and each effect but the pressure gain error (a
 /// calibration error, which the stated uncertainty leaves out by design).
-/// Measured over 1 s runs (docs/estimator.md): onsets 88 % (front) and 85 %
-/// (rear), exponents 98 % / 98 %, areas 97 % / 99 %. Here 0.5 s runs:
-/// each at least 80 %, every onset's mean difference within 0.1 ms (the
-/// slow rises of a restricted or heat-exchanging chamber lean early).
+/// Measured over 1 s runs (docs/estimator.md): onsets 89 % (front) and 95 %
+/// (rear), exponents 97 % / 98 %, areas 97 % / 100 %, the onsets' mean
+/// differences −0.008 and −0.004 ms. Here 0.5 s runs: each at least 85 %,
+/// every onset's mean difference within 0.03 ms (it was −0.056 ms on the
+/// rear feed while the band was chosen by the noisy samples).
 #[test]
 fn the_stated_uncertainties_cover_the_truth_in_most_cycles() {
     let mut total = Tally::default();
@@ -98,10 +99,10 @@ fn the_stated_uncertainties_cover_the_truth_in_most_cycles() {
     }
     let line = total.line();
     for a in total.all() {
-        assert!(a.cycles >= 200 && a.coverage() >= 0.8, "{line}");
+        assert!(a.cycles >= 200 && a.coverage() >= 0.85, "{line}");
     }
     assert!(
-        total.front_onset.mean().abs() < 0.1e-3 && total.rear_onset.mean().abs() < 0.1e-3,
+        total.front_onset.mean().abs() < 0.03e-3 && total.rear_onset.mean().abs() < 0.03e-3,
         "{line}"
     );
 }

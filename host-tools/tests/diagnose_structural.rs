@@ -345,16 +345,18 @@ fn against_its_own_record_a_hammer_of_another_form_shows_what_changed() {
 }
 
 /// A valve delay whose front feed moved far beyond its uncertainty is named
-/// and sized on that change alone where the model's delay law disagrees
-/// with the waveforms (a dead time against the second family's lagging
-/// spool): alone (seed 8, case 3: τ 2.43 ms on a polytropic hammer with
-/// resonant, clipping sensors; the model's fitted delay scored below
-/// nominal) and beside viscous friction (seed 7, case 34: τ 1.28 ms; the
-/// pair's fit drove τ to zero). The size is the feed's shift, the delay of
-/// the port's opening: alone within 15 % of τ, the benchmark's criterion;
-/// beside friction on a moving tool the onset moves with the friction and
-/// the tool too (31 % short here, docs/diagnosis.md), so there only the
-/// names are asserted.
+/// and sized on that change where the model's delay law disagrees with the
+/// waveforms (a dead time against the second family's lagging spool):
+/// alone (seed 8, case 3: τ 2.43 ms on a polytropic hammer with resonant,
+/// clipping sensors; the model's fitted delay scored below nominal), named
+/// on its signature but fitted far short (seed 8, case 14: τ 1.46 ms, the
+/// fit gave 0.26 ms, the feed's shift 1.16 ms) and beside viscous friction
+/// (seed 7, case 34: τ 1.28 ms; the pair's fit drove τ to zero). The size
+/// is the feed's shift, the delay of the port's opening, which on the
+/// second family falls short of the spool command's lag (by 0.1–0.6 ms,
+/// docs/estimator.md): within 15 % of τ at 2.43 ms (the benchmark's
+/// criterion; measured 3.4 %), within 25 % at 1.46 ms and beside friction
+/// (measured 20.7 % and 14.9 %).
 #[test]
 fn a_clear_measured_change_is_named_where_the_models_law_disagrees() {
     use hammer_host::diagnose::bench::{run_case, BenchOptions};
@@ -362,9 +364,10 @@ fn a_clear_measured_change_is_named_where_the_models_law_disagrees() {
         figures: false,
         ..Options::default()
     };
-    for (seed, index, hidden, sized) in [
-        (8, 3, vec!["valve_delay"], true),
-        (7, 34, vec!["viscous_friction", "valve_delay"], false),
+    for (seed, index, hidden, within) in [
+        (8, 3, vec!["valve_delay"], 0.15),
+        (8, 14, vec!["valve_delay"], 0.25),
+        (7, 34, vec!["viscous_friction", "valve_delay"], 0.25),
     ] {
         let c = run_case(&BenchOptions::of(seed, true, true), index, &opts).unwrap();
         println!(
@@ -378,7 +381,7 @@ fn a_clear_measured_change_is_named_where_the_models_law_disagrees() {
         assert_eq!(named, want, "seed {seed} case {index}");
         let e = c.param_errors["valve_delay"];
         assert!(
-            !sized || e < 0.15,
+            e < within,
             "seed {seed} case {index}: the delay off by {:.1} %",
             100.0 * e
         );

@@ -50,9 +50,10 @@ impl Diagnosed for ValveDelay {
     }
 
     /// The feed's shift is the delay of the port's opening itself: within
-    /// 0.25 ms of the true shift on the model up to 1.5 ms, 0.3–0.5 ms
-    /// short at 2.4 ms on the second family, whose spool lags
-    /// (docs/estimator.md). A shift the wrong way is no delay's size.
+    /// 0.25 ms of the port's true shift on both families up to 1.5 ms; at
+    /// 2.4 ms the second family's, whose spool lags, moves 0.2–0.3 ms
+    /// further than its port (docs/estimator.md). A shift the wrong way is
+    /// no delay's size.
     fn measured_size(fs: &FitSet) -> Option<(Vec<f64>, Vec<f64>)> {
         Self::model_free_z(fs)?;
         let (shift, se) = fs.off_nominal(FRONT_FEED);

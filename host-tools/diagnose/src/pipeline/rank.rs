@@ -9,7 +9,7 @@
 
 use std::sync::OnceLock;
 
-use super::effect_fit::{at_measured_size, fit_effects};
+use super::effect_fit::{at_measured_instead, at_measured_size, fit_effects};
 use crate::effects::diagnosis;
 use crate::features::N_FEATURES;
 use crate::fitset::FitSet;
@@ -84,7 +84,7 @@ pub(crate) fn rank(fs: &FitSet, opts: &Options, step: &(dyn Fn(&str) + Sync)) ->
     // without it is the form error's shape, not an effect. A seen effect
     // preferred to an unseen best must keep its signature against the
     // best's model: the best does not explain it.
-    let reason = match effects.iter().position(|e| significant(e, opts)).map(|i| {
+    let mut reason = match effects.iter().position(|e| significant(e, opts)).map(|i| {
         prefer_seen(&effects, i, opts, &|e| {
             z_against(i, &e.name).is_some_and(|z| z >= opts.min_model_free_z)
         })
@@ -143,6 +143,14 @@ pub(crate) fn rank(fs: &FitSet, opts: &Options, step: &(dyn Fn(&str) + Sync)) ->
             }
         }
     };
+    // A size the signature measures, where the fit's law put it elsewhere.
+    if let Some((v, why)) = verdict
+        .as_ref()
+        .and_then(|v| at_measured_instead(fs, v, &effects, chi2_nominal, ln_n))
+    {
+        reason = format!("{reason}; {why}");
+        verdict = Some(v);
+    }
     step("pairs");
     let confusable = match &verdict {
         Some(v) if v.name.contains('+') => confusable_with(v, &pairs, &effects, opts),
