@@ -192,7 +192,7 @@ pub struct Window<'a> {
 }
 
 /// How long after the closing impact a front feed is still looked for.
-pub const LOOK_AFTER_S: f32 = 12e-3;
+pub const LOOK_AFTER_S: f32 = 8e-3;
 /// Distance from an outlet edge at which the chamber counts as closed (a
 /// port opens over its diameter's ramp; the paper's are 5 mm).
 const EDGE_GUARD_M: f32 = 2e-3;

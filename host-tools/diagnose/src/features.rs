@@ -293,6 +293,7 @@ impl Extractor {
             zero_shift_tau_s: self.zero_shift_tau_s,
             supply_pa: s.supply_pa,
             dead_volume: self.read_dead_volume,
+            track_term: false,
         };
         let spans: Vec<Span> = imp
             .windows(2)

@@ -41,6 +41,11 @@ pub struct Reading {
     /// Also fit each chamber's dead volume (a hammer's own record; see
     /// `hammer_estimator::chambers::Window::fit_dead_volume`).
     pub dead_volume: bool,
+    /// Also read each cycle through the force balance's own track and widen
+    /// the uncertainties by the difference (the track term). It doubles the
+    /// reading's cost; the diagnosis reads the values only (its spreads
+    /// come from the cycles' scatter), so it leaves this off.
+    pub track_term: bool,
 }
 
 impl Reading {
@@ -53,6 +58,7 @@ impl Reading {
             zero_shift_tau_s: c.accel_zero_shift_tau_s as f64,
             supply_pa: c.supply_pressure_pa as f64,
             dead_volume: false,
+            track_term: true,
         }
     }
 }
@@ -148,17 +154,20 @@ pub fn characterise_spans(
                 (Some(_), _) | (None, None) => None,
                 (None, Some((accel, (all_acc, all_force, rebounds)))) => {
                     let mut x_acc = all_acc[open..=following].to_vec();
-                    let mut x_force = all_force[open..=following].to_vec();
+                    let mut x_force = r.track_term.then(|| all_force[open..=following].to_vec());
                     if next.is_none() {
                         let a_end = shock_end(s.accel_mps2, close, r.impact_threshold_mps2, s.dt_s) - open;
                         let (accel, p2) = (&accel[open..=following], &p2[open..=following]);
                         let (dt, c) = (s.dt_s as f32, close - open);
                         tail_track(accel, p2, dt, chambers, c, a_end, rebounds[k][0], &mut x_acc);
-                        tail_track(accel, p2, dt, chambers, c, a_end, rebounds[k][1], &mut x_force);
+                        if let Some(x_force) = x_force.as_mut() {
+                            tail_track(accel, p2, dt, chambers, c, a_end, rebounds[k][1], x_force);
+                        }
                     }
                     // The accelerometer's track is read; the spread to the
                     // force balance's widens the uncertainties.
-                    Some(window(&x_acc).widened(&window(&x_force)))
+                    let read = window(&x_acc);
+                    Some(x_force.map_or(read, |x_force| read.widened(&window(&x_force))))
                 }
             }
         })
@@ -211,7 +220,9 @@ fn span_tracks(
         }
         let kept = |i: usize, turn: usize| if i < turn { before[i] } else { after[i] };
         track::closed(dt, impact, a_end, b, &mut x_acc, kept);
-        track::closed(dt, impact, a_end, b, &mut x_force, balance());
+        if r.track_term {
+            track::closed(dt, impact, a_end, b, &mut x_force, balance());
+        }
         if a_end + 1 < b {
             rebounds[j] = [&x_acc, &x_force].map(|x| Some((x[a_end + 1] - x[a_end]) / dt).filter(|v| v.is_finite()));
         }
@@ -340,4 +351,79 @@ pub fn characterise_cycles(
     }
     flush(&mut run);
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::SimConfig;
+
+    /// Without the track term (the diagnosis' reading) every value is the
+    /// one read with it, bit for bit, and only the uncertainties are
+    /// narrower or equal: the force balance's track widens them, it moves
+    /// no value.
+    #[test]
+    fn the_track_term_moves_no_value() {
+        let mut cfg = SimConfig::nominal(5.0);
+        cfg.solver.duration_s = 0.3;
+        let config = cfg.estimator_config(Some(5.0)).expect("nominal config");
+        let trace = crate::simulate(&cfg).expect("simulation").trace();
+        let reports = crate::estimation::run(&crate::estimation::to_codes(&trace, &config), config).expect("estimator");
+        let spans: Vec<Span> = reports
+            .windows(2)
+            .filter(|w| w[0].is_valid() && w[1].is_valid())
+            .map(|w| Span {
+                open_s: w[0].t_impact_s(),
+                close_s: w[1].t_impact_s(),
+                friction: PhaseFriction {
+                    backhaul_n: w[1].friction_backhaul_n,
+                    stroke_n: w[1].friction_stroke_n,
+                },
+                zero_shift_mps2: w[1].accel_zero_shift_mps2,
+            })
+            .collect();
+        let s = Signals {
+            dt_s: trace.dt_s,
+            p_rear_pa: &trace.p_rear_pa,
+            p_front_pa: &trace.p_front_pa,
+            accel_mps2: &trace.accel_mps2,
+            x_m: None,
+        };
+        let with = Reading::of(&config);
+        let without = Reading {
+            track_term: false,
+            ..with
+        };
+        let chambers = cfg.hammer.chambers();
+        let (a, b) = (
+            characterise_spans(&s, &spans, &with, &chambers, true),
+            characterise_spans(&s, &spans, &without, &chambers, true),
+        );
+        assert!(
+            a.iter()
+                .flatten()
+                .filter(|c| c.front.is_some() && c.rear.is_some())
+                .count()
+                >= 3
+        );
+        for (a, b) in a.iter().zip(&b) {
+            let (Some(a), Some(b)) = (a, b) else {
+                assert_eq!(a.is_some(), b.is_some());
+                continue;
+            };
+            for (fa, fb) in [(a.front, b.front), (a.rear, b.rear)] {
+                let (Some(fa), Some(fb)) = (fa, fb) else {
+                    assert_eq!(fa.is_some(), fb.is_some());
+                    continue;
+                };
+                assert_eq!(
+                    (fa.onset_s, fa.closed_exponent, fa.feed_area_m2),
+                    (fb.onset_s, fb.closed_exponent, fb.feed_area_m2)
+                );
+                assert!(fb.onset_uncertainty_s <= fa.onset_uncertainty_s);
+                assert!(fb.closed_exponent_uncertainty <= fa.closed_exponent_uncertainty);
+                assert!(fb.feed_area_uncertainty_m2 <= fa.feed_area_uncertainty_m2);
+            }
+        }
+    }
 }

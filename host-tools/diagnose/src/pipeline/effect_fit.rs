@@ -123,11 +123,18 @@ pub(crate) fn at_measured_size(
 /// which a named effect's fitted size must differ from the size its
 /// model-free signature measures for the verdict to take the measured one.
 const MEASURED_DISAGREE_Z: f64 = 3.0;
+/// And the factor by which it must differ: where the model's law is the
+/// hammer's, the two sizes differ by degree (the model's feed moves up to
+/// a fifth further than its dead time at 7 bar, docs/estimator.md), and
+/// its fit is the better size; a law of another kind misses by a factor
+/// (the second family's delays were fitted at 2–35 % of their shift).
+const MEASURED_DISAGREE_FACTOR: f64 = 2.0;
 
 /// The named `verdict` with its effect whose model-free signature measures
 /// its size put at that size, where its fit put it more than
-/// [`MEASURED_DISAGREE_Z`] standard deviations away; the other named effect
-/// (a pair's) keeps its own single fit from `singles`. `None` where the
+/// [`MEASURED_DISAGREE_Z`] standard deviations and a factor of
+/// [`MEASURED_DISAGREE_FACTOR`] away; the other named effect (a pair's)
+/// keeps its own single fit from `singles`. `None` where the
 /// two sizes agree or no named effect's signature measures a size.
 ///
 /// Why: such an effect is named on its signature, and the size that
@@ -155,10 +162,11 @@ pub(crate) fn at_measured_instead(
         .filter_map(|s| verdict.fitted.iter().find(|f| f.key == format!("{name}.{}", s.key)))
         .collect();
     let disagree = fitted.len() == theta.len()
-        && fitted
-            .iter()
-            .zip(theta.iter().zip(&sd))
-            .any(|(f, (&m, &sm))| (f.value - m).abs() > MEASURED_DISAGREE_Z * (f.sd * f.sd + sm * sm).sqrt());
+        && fitted.iter().zip(theta.iter().zip(&sd)).any(|(f, (&m, &sm))| {
+            let factor = (f.value / m).max(m / f.value);
+            (f.value - m).abs() > MEASURED_DISAGREE_Z * (f.sd * f.sd + sm * sm).sqrt()
+                && !(factor <= MEASURED_DISAGREE_FACTOR)
+        });
     if !disagree {
         return None;
     }
