@@ -353,7 +353,7 @@ fn against_its_own_record_a_hammer_of_another_form_shows_what_changed() {
 /// fit gave 0.26 ms, the feed's shift 1.16 ms) and beside viscous friction
 /// (seed 7, case 34: τ 1.28 ms; the pair's fit drove τ to zero). The size
 /// is the feed's shift, the delay of the port's opening, which on the
-/// second family falls short of the spool command's lag (by 0.1–0.6 ms,
+/// second family falls short of the spool command's lag (by 0.1–0.9 ms,
 /// docs/estimator.md): within 15 % of τ at 2.43 ms (the benchmark's
 /// criterion; measured 3.4 %), within 25 % at 1.46 ms and beside friction
 /// (measured 20.7 % and 14.9 %).

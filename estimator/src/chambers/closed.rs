@@ -343,12 +343,12 @@ fn band_of(line: &Line, low: f32, high: f32, from: usize, len: usize) -> Option<
     let k0 = line.root();
     let start = k0 + math::sqrt(low) / line.slope;
     let end = k0 + math::sqrt(high) / line.slope;
-    if !(start.is_finite() && end.is_finite()) || start < from as f32 || end < start {
+    if !(start.is_finite() && end.is_finite()) || start < from as f32 || end < start || start >= len as f32 {
         return None;
     }
-    // Non-negative here: `as` is the floor.
+    // Non-negative and below `len` here: `as` is the floor.
     let lo = start as usize + usize::from((start as usize as f32) < start);
-    let hi = (end as usize + 1).min(len);
+    let hi = (end.min(len as f32) as usize + 1).min(len);
     if hi < lo + 3 {
         let mid = (lo + hi) / 2;
         let lo = mid.saturating_sub(1).max(from);
@@ -487,11 +487,13 @@ mod tests {
     }
 
     /// The transducer's noise (500 Pa, the simulator's default) must not
-    /// pull the onset: over 200 noisy copies of one feed the mean onset
-    /// stays within a tenth of a sample of the noise-free one. Chosen by
+    /// pull the onset: over 2000 noisy copies of one feed the mean onset
+    /// stays within a tenth of a sample of the noise-free one (one copy
+    /// scatters by about 0.9 samples: the mean's standard error is 0.02). Chosen by
     /// the noisy values, the band let in samples lifted by their noise at
     /// its foot and kept out those lifted at its top, which read the onset
-    /// early by about a third of a sample (measured: −0.35 samples).
+    /// early by about a third of a sample (measured over 200 copies: −0.35
+    /// samples).
     #[test]
     fn noise_does_not_pull_the_onset() {
         const N: usize = 1000;
@@ -506,7 +508,7 @@ mod tests {
             (state >> 40) as f32 / (1u64 << 24) as f32
         };
         let (mut sum, mut runs) = (0.0f32, 0usize);
-        for _ in 0..200 {
+        for _ in 0..2000 {
             let noisy: heapless::Vec<f32, N> = p
                 .iter()
                 .map(|&v| v + 500.0 * ((0..12).map(|_| uniform()).sum::<f32>() - 6.0))
@@ -516,7 +518,7 @@ mod tests {
                 runs += 1;
             }
         }
-        assert!(runs >= 190, "{runs} of 200 read");
+        assert!(runs >= 1900, "{runs} of 2000 read");
         let mean = sum / runs as f32;
         assert!(mean.abs() < 0.1, "mean onset {mean:+.3} samples off the noise-free one");
     }

@@ -133,8 +133,9 @@ const MEASURED_DISAGREE_FACTOR: f64 = 2.0;
 /// The named `verdict` with its effect whose model-free signature measures
 /// its size put at that size, where its fit put it more than
 /// [`MEASURED_DISAGREE_Z`] standard deviations and a factor of
-/// [`MEASURED_DISAGREE_FACTOR`] away; the other named effect (a pair's)
-/// keeps its own single fit from `singles`. `None` where the
+/// [`MEASURED_DISAGREE_FACTOR`] away, if its signature stands
+/// ([`Options::min_model_free_z`]); the other named effect (a pair's)
+/// keeps its own single fit from `singles` (none fitted: no change). `None` where the
 /// two sizes agree or no named effect's signature measures a size.
 ///
 /// Why: such an effect is named on its signature, and the size that
@@ -148,13 +149,23 @@ pub(crate) fn at_measured_instead(
     fs: &FitSet,
     verdict: &EffectResult,
     singles: &[EffectResult],
+    opts: &Options,
     chi2_nominal: f64,
     ln_n: f64,
 ) -> Option<(EffectResult, String)> {
     let names: Vec<&str> = verdict.name.split('+').collect();
+    // Named on its signature: it stands as the ranking asks of one.
+    let stands = |n: &str| {
+        singles
+            .iter()
+            .find(|e| e.name == n)
+            .and_then(|e| e.model_free_z)
+            .is_some_and(|z| z >= opts.min_model_free_z)
+    };
     let (k, name, (theta, sd)) = names
         .iter()
         .enumerate()
+        .filter(|(_, n)| stands(n))
         .find_map(|(k, n)| Some((k, *n, diagnosis(n)?.measured_size(fs)?)))?;
     let specs = free_params(name, fs.distinct);
     let fitted: Vec<&FittedParam> = specs
@@ -174,7 +185,11 @@ pub(crate) fn at_measured_instead(
         Some((_, other)) => Some(singles.iter().find(|e| e.name == *other)?),
         None => None,
     };
-    let measured = at_measured_size(fs, first, name, chi2_nominal, ln_n)?;
+    // Named in the verdict's order (a pair's last is what `confusable_with` reads).
+    let measured = EffectResult {
+        name: verdict.name.clone(),
+        ..at_measured_size(fs, first, name, chi2_nominal, ln_n)?
+    };
     let sizes = |v: &dyn Fn(usize) -> f64| {
         specs
             .iter()

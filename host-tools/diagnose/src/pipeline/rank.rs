@@ -146,7 +146,7 @@ pub(crate) fn rank(fs: &FitSet, opts: &Options, step: &(dyn Fn(&str) + Sync)) ->
     // A size the signature measures, where the fit's law put it elsewhere.
     if let Some((v, why)) = verdict
         .as_ref()
-        .and_then(|v| at_measured_instead(fs, v, &effects, chi2_nominal, ln_n))
+        .and_then(|v| at_measured_instead(fs, v, &effects, opts, chi2_nominal, ln_n))
     {
         reason = format!("{reason}; {why}");
         verdict = Some(v);
