@@ -74,6 +74,22 @@ pub struct Span {
     pub zero_shift_mps2: f32,
 }
 
+impl Span {
+    /// The cycle `cur` closes, opened by the report before it, with the
+    /// friction and zero shift the estimator fitted to it.
+    pub fn between(prev: &CycleReport, cur: &CycleReport) -> Span {
+        Span {
+            open_s: prev.t_impact_s(),
+            close_s: cur.t_impact_s(),
+            friction: PhaseFriction {
+                backhaul_n: cur.friction_backhaul_n,
+                stroke_n: cur.friction_stroke_n,
+            },
+            zero_shift_mps2: cur.accel_zero_shift_mps2,
+        }
+    }
+}
+
 /// The longest a shock is looked for after its impact (a contact lasts
 /// tens of microseconds; the accelerometer's ringing a little longer).
 const MAX_SHOCK_S: f64 = 0.5e-3;
@@ -336,18 +352,7 @@ pub fn characterise_cycles(
             flush(&mut run);
             continue;
         }
-        run.push((
-            cur,
-            Span {
-                open_s: prev.t_impact_s(),
-                close_s: cur.t_impact_s(),
-                friction: PhaseFriction {
-                    backhaul_n: cur.friction_backhaul_n,
-                    stroke_n: cur.friction_stroke_n,
-                },
-                zero_shift_mps2: cur.accel_zero_shift_mps2,
-            },
-        ));
+        run.push((cur, Span::between(prev, cur)));
     }
     flush(&mut run);
     out
@@ -372,15 +377,7 @@ mod tests {
         let spans: Vec<Span> = reports
             .windows(2)
             .filter(|w| w[0].is_valid() && w[1].is_valid())
-            .map(|w| Span {
-                open_s: w[0].t_impact_s(),
-                close_s: w[1].t_impact_s(),
-                friction: PhaseFriction {
-                    backhaul_n: w[1].friction_backhaul_n,
-                    stroke_n: w[1].friction_stroke_n,
-                },
-                zero_shift_mps2: w[1].accel_zero_shift_mps2,
-            })
+            .map(|w| Span::between(&w[0], &w[1]))
             .collect();
         let s = Signals {
             dt_s: trace.dt_s,

@@ -135,8 +135,9 @@ const MEASURED_DISAGREE_FACTOR: f64 = 2.0;
 /// [`MEASURED_DISAGREE_Z`] standard deviations and a factor of
 /// [`MEASURED_DISAGREE_FACTOR`] away, if its signature stands
 /// ([`Options::min_model_free_z`]); the other named effect (a pair's)
-/// keeps its own single fit from `singles` (none fitted: no change). `None` where the
-/// two sizes agree or no named effect's signature measures a size.
+/// keeps its own single fit from `singles`. `None` where the two sizes
+/// agree, no named effect's signature measures a size, or the other
+/// effect has no single fit.
 ///
 /// Why: such an effect is named on its signature, and the size that
 /// signature measures is the change itself (a valve delay's: the front
