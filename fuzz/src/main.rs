@@ -75,8 +75,7 @@ fn main() -> ExitCode {
                 ),
             };
             let execs = execs.unwrap_or(if minutes.is_some() { u64::MAX } else { 1_000_000 });
-            let deadline = minutes.map(|m| Duration::from_secs(m * 60 / targets.len() as u64));
-            smoke_run(&targets, execs, deadline, seed)
+            smoke_run(&targets, execs, minutes, seed)
         }
         _ => usage(),
     }
@@ -96,15 +95,14 @@ fn seeds(targets: &[&Target]) -> ExitCode {
     ExitCode::SUCCESS
 }
 
-fn smoke_run(targets: &[&Target], execs: u64, deadline: Option<Duration>, seed: u64) -> ExitCode {
-    let (mut total, mut failed) = (0u64, 0usize);
-    println!(
-        "{:<10} {:>12} {:>9} {:>11} {:>9} {:>5}  findings",
-        "target", "executions", "seconds", "exec/s", "outcomes", "pool"
-    );
+/// The targets side by side, one a core (each run is seeded per target, so
+/// the order they run in changes nothing); the table in the list's order.
+/// `minutes` is the whole run's budget, shared out between the targets.
+fn smoke_run(targets: &[&Target], execs: u64, minutes: Option<u64>, seed: u64) -> ExitCode {
+    let mut corpora = Vec::with_capacity(targets.len());
     for t in targets {
-        let corpus = match smoke::load_corpus(&fuzz_dir().join("corpus"), t) {
-            Ok(c) if !c.is_empty() => c,
+        match smoke::load_corpus(&fuzz_dir().join("corpus"), t) {
+            Ok(c) if !c.is_empty() => corpora.push(std::sync::Mutex::new(Some(c))),
             Ok(_) | Err(_) => {
                 eprintln!(
                     "{}: no seed corpus in fuzz/corpus/{} (run `hammer-fuzz seeds`)",
@@ -112,8 +110,45 @@ fn smoke_run(targets: &[&Target], execs: u64, deadline: Option<Duration>, seed: 
                 );
                 return ExitCode::from(2);
             }
+        }
+    }
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let results: Vec<std::sync::Mutex<Option<smoke::RunStats>>> =
+        targets.iter().map(|_| std::sync::Mutex::new(None)).collect();
+    let workers = std::thread::available_parallelism()
+        .map_or(1, |n| n.get())
+        .min(targets.len());
+    let rounds = targets.len().div_ceil(workers.max(1)).max(1) as u64;
+    let deadline = minutes.map(|m| Duration::from_secs(m * 60 / rounds));
+    let artifacts = fuzz_dir().join("artifacts");
+    std::thread::scope(|scope| {
+        for _ in 0..workers {
+            scope.spawn(|| loop {
+                let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                let Some(t) = targets.get(i) else { break };
+                let corpus = corpora[i]
+                    .lock()
+                    .map(|mut c| c.take())
+                    .ok()
+                    .flatten()
+                    .unwrap_or_default();
+                let s = smoke::run(t, corpus, execs, deadline, seed, &artifacts);
+                if let Ok(mut slot) = results[i].lock() {
+                    *slot = Some(s);
+                }
+            });
+        }
+    });
+    let (mut total, mut failed) = (0u64, 0usize);
+    println!(
+        "{:<10} {:>12} {:>9} {:>11} {:>9} {:>5}  findings",
+        "target", "executions", "seconds", "exec/s", "outcomes", "pool"
+    );
+    for (t, slot) in targets.iter().zip(results) {
+        let Some(s) = slot.into_inner().ok().flatten() else {
+            eprintln!("{}: its run did not finish", t.name);
+            return ExitCode::from(2);
         };
-        let s = smoke::run(t, corpus, execs, deadline, seed, &fuzz_dir().join("artifacts"));
         let secs = s.elapsed.as_secs_f64();
         println!(
             "{:<10} {:>12} {:>9.1} {:>11.0} {:>9} {:>5}  {}",

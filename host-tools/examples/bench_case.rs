@@ -56,6 +56,9 @@ fn main() {
             if let Some(z) = e.model_free_z {
                 println!("      model-free z {z:.1}");
             }
+            if let Some(why) = &e.contradicted_by {
+                println!("      ruled out: {why}");
+            }
             for ev in &e.evidence {
                 println!("      {ev}");
             }

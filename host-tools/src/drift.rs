@@ -4,7 +4,8 @@
 //! difference and an alarm when it stays beyond it.
 //!
 //! The characteristics are the diagnosis' model-free ones (feed onsets,
-//! closed-phase exponents, feed areas: `hammer_estimator::chambers`), read
+//! closed-phase exponents, feed areas: `hammer_estimator::chambers`; the
+//! front chamber's floor, which a leak past the piston raises), read
 //! by the same extractor from the record's traces and from the live
 //! captures, so whatever the extractor reads slightly wrong it reads wrong
 //! on both sides, and the model's form error never enters. The board cannot
@@ -393,7 +394,7 @@ impl Drift {
 
 /// A name's stem and its unit suffix (`front_feed_s` → `front_feed`, `_s`).
 fn split_unit(name: &str) -> (&str, &str) {
-    ["_s", "_m2"]
+    ["_s", "_m2", "_pa"]
         .iter()
         .find_map(|u| name.strip_suffix(u).map(|stem| (stem, *u)))
         .unwrap_or((name, ""))
@@ -405,6 +406,8 @@ pub fn unit_of(name: &str) -> (f64, &'static str) {
         (1e3, " ms")
     } else if name.ends_with("_m2") {
         (1e6, " mm²")
+    } else if name.ends_with("_pa") {
+        (1e-2, " mbar")
     } else {
         (1.0, "")
     }
@@ -536,8 +539,8 @@ mod tests {
     fn baseline() -> Baseline {
         Baseline {
             supply_bar: 4.0,
-            median: [1e-3, 2e-3, 1.3, 1.35, 5e-6, 6e-6],
-            spread: [1e-4, 1e-4, 0.02, 0.02, 2e-7, 2e-7],
+            median: [1e-3, 2e-3, 1.3, 1.35, 5e-6, 6e-6, 8e3],
+            spread: [1e-4, 1e-4, 0.02, 0.02, 2e-7, 2e-7, 150.0],
             cycles: [30; N_CHARACTERISTICS],
         }
     }

@@ -44,15 +44,19 @@ pub fn run(root: &Path, totals: &mut (u64, u64)) -> Result<(), String> {
     let venv_arg = venv.to_string_lossy().into_owned();
     crate::run(root, "python3", &["-m", "venv", "--system-site-packages", &venv_arg])?;
     let python = venv.join("bin/python").to_string_lossy().into_owned();
-    // The extension's Rust build in a directory of its own: python/ has its
-    // own Cargo.lock and features, so its artifacts are not the workspace's.
+    // The extension's final artifacts in a directory of its own (python/
+    // has its own Cargo.lock), its intermediate ones in the workspace's
+    // build directory: the dependencies both resolve alike, with the same
+    // release profile, are built once.
     std::env::set_var("CARGO_TARGET_DIR", root.join("target/python"));
+    std::env::set_var("CARGO_BUILD_BUILD_DIR", &target);
     let built = crate::run(
         root,
         &python,
         &["-m", "pip", "install", "--no-build-isolation", "--quiet", "./python"],
     );
     std::env::set_var("CARGO_TARGET_DIR", &target);
+    std::env::remove_var("CARGO_BUILD_BUILD_DIR");
     built?;
     crate::run(root, &python, &["-c", "import hammer_monitor"])?;
     eprintln!("xtask: ({}) {python} -m pytest python/tests", root.display());

@@ -53,16 +53,20 @@ pub const FRONT_EXPONENT: usize = 10;
 pub const REAR_EXPONENT: usize = 11;
 pub const FRONT_AREA: usize = 12;
 pub const REAR_AREA: usize = 13;
+/// The front chamber's floor: its lowest pressure in the cycle, Pa gauge
+/// ([`front_floor_pa`]).
+pub const FRONT_FLOOR: usize = 14;
 /// The chamber characteristics' features, in order.
-pub const CHAMBER_FEATURES: [usize; 6] = [
+pub const CHAMBER_FEATURES: [usize; 7] = [
     FRONT_FEED,
     REAR_FEED,
     FRONT_EXPONENT,
     REAR_EXPONENT,
     FRONT_AREA,
     REAR_AREA,
+    FRONT_FLOOR,
 ];
-pub const SCALARS: usize = 14;
+pub const SCALARS: usize = 15;
 pub const N_FEATURES: usize = SCALARS + WAVE_SIGNALS.len() * BINS;
 
 const SCALAR_NAMES: [&str; SCALARS] = [
@@ -80,6 +84,7 @@ const SCALAR_NAMES: [&str; SCALARS] = [
     "rear_closed_exponent",
     "front_feed_area_m2",
     "rear_feed_area_m2",
+    "front_floor_pa",
 ];
 
 pub fn wave_index(signal: usize, bin: usize) -> usize {
@@ -151,6 +156,37 @@ pub struct Extractor {
     /// on for a hammer's record that [`Extractor::calibrated`] reads, off
     /// elsewhere (a further pass over every closed phase).
     pub read_dead_volume: bool,
+}
+
+/// How long a stretch of the front pressure [`front_floor_pa`] averages:
+/// long enough that the sensor's noise does not pull the lowest mean down
+/// (eleven samples at 100 kS/s), short beside the exhaust's floor.
+pub const FLOOR_WINDOW_S: f64 = 1e-4;
+
+/// The front chamber's floor in one cycle: the lowest mean of its pressure
+/// over [`FLOOR_WINDOW_S`], Pa gauge. Its change since a reference record is
+/// model-free evidence: air leaking past the piston into the exhausting
+/// front chamber raises it, so a floor that fell rules a leak out
+/// (docs/diagnosis.md). NaN where that stretch touches the transducer's
+/// floor (`transducer_floor_pa`): a clipped reading says only "at or
+/// below", and a floor read there would not move with the chamber.
+pub fn front_floor_pa(p: &[f64], transducer_floor_pa: f64, dt_s: f64) -> f64 {
+    let w = ((FLOOR_WINDOW_S / dt_s).round() as usize).max(1);
+    if p.len() < w {
+        return f64::NAN;
+    }
+    let mut sum: f64 = p[..w].iter().sum();
+    let (mut lowest, mut at) = (sum, 0);
+    for k in w..p.len() {
+        sum += p[k] - p[k - w];
+        if sum < lowest {
+            (lowest, at) = (sum, k + 1 - w);
+        }
+    }
+    if p[at..at + w].iter().any(|&x| !(x > transducer_floor_pa)) {
+        return f64::NAN;
+    }
+    lowest / w as f64
 }
 
 /// Cycles that must read a chamber's dead volume for [`Extractor::calibrated`] to use it.
@@ -429,6 +465,7 @@ impl Extractor {
                 }
             }
         }
+        f[FRONT_FLOOR] = front_floor_pa(p2, floor2, dt);
         Some(CycleFeatures {
             t_impact_s: t0,
             values: f,
@@ -649,6 +686,32 @@ mod tests {
         assert_eq!(feature_name(wave_index(2, 3)), "accel_mps2[3]");
         assert_eq!(wave_of(wave_index(3, BINS - 1)), Some((3, BINS - 1)));
         assert_eq!(wave_of(ZERO_SHIFT_SQ), None);
+    }
+
+    /// The front floor is the lowest 0.1 ms mean: under noise it reads a
+    /// dip's bottom within a fraction of the noise, not the noise's own
+    /// lowest draw; where that stretch sits on the transducer's floor, it
+    /// is not read.
+    #[test]
+    fn the_front_floor_reads_the_dip_not_the_noise() {
+        let dt = 1e-5;
+        let mut rng = hammer_sim::sensor::Rng::new(3);
+        // A cycle at 2 bar with a 1 ms flat dip to 0.3 bar, 500 Pa noise.
+        let p: Vec<f64> = (0..5000)
+            .map(|i| if (2000..2100).contains(&i) { 0.3e5 } else { 2e5 } + 500.0 * rng.normal())
+            .collect();
+        let floor = front_floor_pa(&p, f64::NEG_INFINITY, dt);
+        // Eleven samples average the noise to 150 Pa; the lowest of the
+        // ninety such means in the dip lies about 2.5 of those below it.
+        assert!((floor - 0.3e5).abs() < 4.0 * 500.0 / 11f64.sqrt(), "{floor} Pa");
+        // The plain minimum sits about 2.5 noise deviations (1250 Pa) below.
+        let lowest = p.iter().copied().fold(f64::INFINITY, f64::min);
+        assert!(lowest < floor - 500.0, "{lowest} Pa");
+        assert!(front_floor_pa(&p, 0.3e5, dt).is_nan(), "at the transducer's floor");
+        assert!(
+            front_floor_pa(&p[..5], f64::NEG_INFINITY, dt).is_nan(),
+            "shorter than the window"
+        );
     }
 
     /// A floor is a reading held for many samples; a smooth signal's minimum is not.

@@ -10,8 +10,8 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 use super::features::{
     feature_name, wave_index, wave_of, Summary, BINS, CHAMBER_FEATURES, ENERGY, FRONT_AREA, FRONT_EXPONENT, FRONT_FEED,
-    F_BACKHAUL, F_STROKE, GAIN_FRONT, GAIN_REAR, N_FEATURES, PERIOD, REAR_AREA, REAR_EXPONENT, REAR_FEED, VISCOUS,
-    WAVE_SIGNALS, ZERO_SHIFT_SQ,
+    FRONT_FLOOR, F_BACKHAUL, F_STROKE, GAIN_FRONT, GAIN_REAR, N_FEATURES, PERIOD, REAR_AREA, REAR_EXPONENT, REAR_FEED,
+    VISCOUS, WAVE_SIGNALS, ZERO_SHIFT_SQ,
 };
 use super::model::{Candidate, ModelRunner, NUISANCE};
 use super::options::Floors;
@@ -506,6 +506,7 @@ pub(crate) fn sigmas(s: &Summary, nominal: &[f64], f: &Floors) -> Vec<f64> {
                 FRONT_FEED | REAR_FEED => f.feed_onset_s,
                 FRONT_EXPONENT | REAR_EXPONENT => f.closed_exponent,
                 FRONT_AREA | REAR_AREA => f.feed_area_rel * nominal[j].abs(),
+                FRONT_FLOOR => f.front_floor_pa,
                 _ => f.wave_rel * wave_scale[wave_of(j).map_or(0, |w| w.0)],
             };
             let sd = if s.sd[j].is_finite() { s.sd[j] } else { 0.0 };

@@ -76,6 +76,10 @@ pub struct EffectResult {
     /// effect the force balance cannot see.
     #[serde(default)]
     pub model_free_z: Option<f64>,
+    /// A measured change since the reference that the effect (a single)
+    /// cannot make: it is not named (see `Diagnosed::contradicted`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub contradicted_by: Option<String>,
     pub simulations: usize,
     #[serde(skip)]
     pub candidate: Candidate,

@@ -155,6 +155,14 @@ pub(super) trait Diagnosed: Effect {
         None
     }
 
+    /// A measured change since the reference record that the effect cannot
+    /// make, in words; `None` where there is none (or no reference). Such
+    /// an effect is not named alone, however its waveforms score: the
+    /// model's law for it may well fit a change of another cause.
+    fn contradicted(_fs: &FitSet) -> Option<String> {
+        None
+    }
+
     /// The magnitude (a catalogue key and its value) at which its
     /// force-balance signature stands `z_min` standard errors off nominal:
     /// below it, the verdict cannot exclude the effect. `None` if the force
@@ -191,6 +199,7 @@ pub(super) trait DiagnosisEntry: Sync {
     fn model_free_floor(&self, fs: &FitSet, z_min: f64) -> Option<(&'static str, f64)>;
     fn seen_in_chambers(&self) -> bool;
     fn measured_size(&self, fs: &FitSet) -> Option<(Vec<f64>, Vec<f64>)>;
+    fn contradicted(&self, fs: &FitSet) -> Option<String>;
     fn pressure_reading_factors(&self, effects: &Effects) -> (f64, f64);
     fn shift_expected_features(&self, effects: &Effects, mean: &mut [f64]);
     fn draw(&self, effects: &mut Effects, rng: &mut Rng);
@@ -227,6 +236,9 @@ impl<T: Diagnosed> DiagnosisEntry for Entry<T> {
     }
     fn measured_size(&self, fs: &FitSet) -> Option<(Vec<f64>, Vec<f64>)> {
         T::measured_size(fs)
+    }
+    fn contradicted(&self, fs: &FitSet) -> Option<String> {
+        T::contradicted(fs)
     }
     fn pressure_reading_factors(&self, effects: &Effects) -> (f64, f64) {
         T::get(effects).map_or((1.0, 1.0), |e| e.pressure_reading_factors())

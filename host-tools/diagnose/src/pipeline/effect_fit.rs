@@ -244,6 +244,10 @@ fn result(
         .iter()
         .filter_map(|n| diagnosis(n).and_then(|d| d.model_free_z(fs)))
         .reduce(f64::max);
+    let contradicted_by = match names {
+        [name] => diagnosis(name).and_then(|d| d.contradicted(fs)),
+        _ => None,
+    };
     EffectResult {
         name: names.join("+"),
         params: if names.len() == 1 {
@@ -257,6 +261,7 @@ fn result(
         explained_fraction: explained,
         evidence,
         model_free_z,
+        contradicted_by,
         simulations: fs.sims.load(Ordering::Relaxed) - sims_before,
         candidate: cand,
     }

@@ -79,6 +79,7 @@ mod tests {
             explained_fraction: explained,
             evidence: vec![format!("force balance: evidence for {name}")],
             model_free_z: Some(9.5),
+            contradicted_by: None,
             simulations: 10,
             candidate: Candidate::default(),
         }

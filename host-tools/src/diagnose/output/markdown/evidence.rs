@@ -31,7 +31,7 @@ pub(super) fn chambers_md(s: &mut String, report: &Report) {
     };
     stats_md(
         s,
-        "Chamber characteristics (valve switching, fills, closed phases)",
+        "Chamber characteristics (valve switching, fills, closed phases, the front exhaust's floor)",
         note,
         measured,
         &report.chambers,
