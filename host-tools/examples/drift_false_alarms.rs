@@ -109,7 +109,7 @@ fn main() {
     for i in 0..N_CHARACTERISTICS {
         println!(
             "{:<30} {:>8.2} %           {:>8.1}",
-            feature_name(hammer_host::diagnose::features::CHAMBER_FEATURES[i]),
+            feature_name(hammer_host::diagnose::features::ESTIMATOR_CHARACTERISTICS[i]),
             100.0 * beyond[i] as f64 / n,
             1e4 * onsets[i] as f64 / n
         );

@@ -4,8 +4,7 @@
 //! difference and an alarm when it stays beyond it.
 //!
 //! The characteristics are the diagnosis' model-free ones (feed onsets,
-//! closed-phase exponents, feed areas: `hammer_estimator::chambers`; the
-//! front chamber's floor, which a leak past the piston raises), read
+//! closed-phase exponents, feed areas: `hammer_estimator::chambers`), read
 //! by the same extractor from the record's traces and from the live
 //! captures, so whatever the extractor reads slightly wrong it reads wrong
 //! on both sides, and the model's form error never enters. The board cannot
@@ -36,11 +35,13 @@ use hammer_trace::trace::Trace;
 use serde::Serialize;
 
 use crate::diagnose::engine::extractor_for;
-use crate::diagnose::features::{feature_name, steady_from, CycleFeatures, Extractor, Signals, CHAMBER_FEATURES};
+use crate::diagnose::features::{
+    feature_name, steady_from, CycleFeatures, Extractor, Signals, ESTIMATOR_CHARACTERISTICS,
+};
 use crate::diagnose::record::Record;
 
-/// Characteristics read, in [`CHAMBER_FEATURES`] order.
-pub const N_CHARACTERISTICS: usize = CHAMBER_FEATURES.len();
+/// Characteristics read, in [`ESTIMATOR_CHARACTERISTICS`] order.
+pub const N_CHARACTERISTICS: usize = ESTIMATOR_CHARACTERISTICS.len();
 
 /// A record's operating point within this of the board's configured supply
 /// pressure is the one a capture is read against.
@@ -133,7 +134,7 @@ pub struct Commissioned {
 pub type Reading = [f64; N_CHARACTERISTICS];
 
 fn reading(c: &CycleFeatures) -> Reading {
-    CHAMBER_FEATURES.map(|j| c.values[j])
+    ESTIMATOR_CHARACTERISTICS.map(|j| c.values[j])
 }
 
 impl Commissioned {
@@ -394,7 +395,7 @@ impl Drift {
 
 /// A name's stem and its unit suffix (`front_feed_s` → `front_feed`, `_s`).
 fn split_unit(name: &str) -> (&str, &str) {
-    ["_s", "_m2", "_pa"]
+    ["_s", "_m2"]
         .iter()
         .find_map(|u| name.strip_suffix(u).map(|stem| (stem, *u)))
         .unwrap_or((name, ""))
@@ -406,8 +407,6 @@ pub fn unit_of(name: &str) -> (f64, &'static str) {
         (1e3, " ms")
     } else if name.ends_with("_m2") {
         (1e6, " mm²")
-    } else if name.ends_with("_pa") {
-        (1e-2, " mbar")
     } else {
         (1.0, "")
     }
@@ -492,7 +491,7 @@ impl Window {
                     (median(&pooled) - b.median[i]).abs() > ALARM_Z * u_of(i, pooled.len())
                 };
                 Characteristic {
-                    name: feature_name(CHAMBER_FEATURES[i]),
+                    name: feature_name(ESTIMATOR_CHARACTERISTICS[i]),
                     measured,
                     reference: b.median[i],
                     drift,
@@ -539,8 +538,8 @@ mod tests {
     fn baseline() -> Baseline {
         Baseline {
             supply_bar: 4.0,
-            median: [1e-3, 2e-3, 1.3, 1.35, 5e-6, 6e-6, 8e3],
-            spread: [1e-4, 1e-4, 0.02, 0.02, 2e-7, 2e-7, 150.0],
+            median: [1e-3, 2e-3, 1.3, 1.35, 5e-6, 6e-6],
+            spread: [1e-4, 1e-4, 0.02, 0.02, 2e-7, 2e-7],
             cycles: [30; N_CHARACTERISTICS],
         }
     }

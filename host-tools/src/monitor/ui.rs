@@ -760,14 +760,14 @@ mod tests {
         let mut w = crate::drift::Window::new(
             crate::drift::Baseline {
                 supply_bar: 4.0,
-                median: [1e-3, 2e-3, 1.3, 1.3, 5e-6, 5e-6, 8e3],
-                spread: [1e-4, 1e-4, 0.02, 0.02, 2e-7, 2e-7, 150.0],
-                cycles: [30; crate::drift::N_CHARACTERISTICS],
+                median: [1e-3, 2e-3, 1.3, 1.3, 5e-6, 5e-6],
+                spread: [1e-4, 1e-4, 0.02, 0.02, 2e-7, 2e-7],
+                cycles: [30; 6],
             },
             1,
             2,
         );
-        let moved = [1.5e-3, 2e-3, 1.3, 1.3, 5e-6, 5e-6, 8e3];
+        let moved = [1.5e-3, 2e-3, 1.3, 1.3, 5e-6, 5e-6];
         for _ in 0..2 {
             let d = w.push(moved).unwrap();
             app.on_event(&Stamped {
