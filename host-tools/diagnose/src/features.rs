@@ -198,7 +198,9 @@ pub fn front_floor_pa(p: &[f64], transducer_floor_pa: f64, dt_s: f64) -> f64 {
             (lowest, at) = (sum, k + 1 - w);
         }
     }
-    if p[at..at + w].iter().any(|&x| !(x > transducer_floor_pa)) {
+    // A sample that is not a number leaves the running sum one from there
+    // on: no floor rather than one read from part of the cycle.
+    if !sum.is_finite() || p[at..at + w].iter().any(|&x| !(x > transducer_floor_pa)) {
         return f64::NAN;
     }
     lowest / w as f64
@@ -726,6 +728,12 @@ mod tests {
         assert!(
             front_floor_pa(&p[..5], f64::NEG_INFINITY, dt).is_nan(),
             "shorter than the window"
+        );
+        let mut gap = p.clone();
+        gap[4000] = f64::NAN;
+        assert!(
+            front_floor_pa(&gap, f64::NEG_INFINITY, dt).is_nan(),
+            "a sample not read"
         );
     }
 

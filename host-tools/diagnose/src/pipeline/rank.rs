@@ -427,17 +427,17 @@ fn evidence_phrase(e: &EffectResult, opts: &Options) -> String {
 
 /// Why the best single was not named, in the terms of the rule it failed.
 fn none_reason(effects: &[EffectResult], opts: &Options) -> String {
-    let Some(best) = effects.iter().find(|e| e.contradicted_by.is_none()) else {
+    let Some(k) = effects.iter().position(|e| e.contradicted_by.is_none()) else {
         return format!("every effect is ruled out{}", contradicted_phrase(effects));
     };
-    let ruled_out = effects.iter().take_while(|e| e.contradicted_by.is_some());
+    let best = &effects[k];
     format!(
         "no effect shows enough evidence: best {} scores {:.0} (needs > {:.0}); {}{}",
         best.name,
         best.score,
         opts.min_score,
         evidence_phrase(best, opts),
-        contradicted_phrase(&ruled_out.cloned().collect::<Vec<_>>())
+        contradicted_phrase(&effects[..k])
     )
 }
 
