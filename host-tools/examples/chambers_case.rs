@@ -37,14 +37,7 @@ fn main() {
             }
             let g = generate(&VariantParams::default(), s, &e, bar, 1.0, 3);
             let t = &g.trace;
-            let sig = Signals {
-                dt_s: t.dt_s,
-                p_rear_pa: &t.p_rear_pa,
-                p_front_pa: &t.p_front_pa,
-                accel_mps2: &t.accel_mps2,
-                supply_pa: bar * 1e5,
-            };
-            let c = ex.cycles(&sig);
+            let c = ex.cycles(&Signals::of_trace(t, bar));
             let m = summarize(&c[2..]);
             println!(
                 "{bar} {spec:45} n {:2} front {:+.3} ms rear {:+.3} ms n_f {:.3} n_r {:.3} A_f {:.3e} A_r {:.3e}",

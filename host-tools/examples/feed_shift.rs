@@ -28,13 +28,7 @@ fn median(mut v: Vec<f64>) -> f64 {
 }
 
 fn cycles(ex: &Extractor, t: &Trace, bar: f64) -> Vec<CycleFeatures> {
-    ex.cycles(&Signals {
-        dt_s: t.dt_s,
-        p_rear_pa: &t.p_rear_pa,
-        p_front_pa: &t.p_front_pa,
-        accel_mps2: &t.accel_mps2,
-        supply_pa: bar * 1e5,
-    })
+    ex.cycles(&Signals::of_trace(t, bar))
 }
 
 /// The median time from each cycle's opening impact to the nearest spool

@@ -18,18 +18,12 @@ use std::collections::BTreeMap;
 /// The settled cycles' front floors (after the benchmark's 0.27 s start-up).
 fn floors(t: &Trace, bar: f64) -> Vec<f64> {
     let ex = extractor_for(&SimConfig::default());
-    ex.cycles(&Signals {
-        dt_s: t.dt_s,
-        p_rear_pa: &t.p_rear_pa,
-        p_front_pa: &t.p_front_pa,
-        accel_mps2: &t.accel_mps2,
-        supply_pa: bar * 1e5,
-    })
-    .iter()
-    .filter(|c| c.t_impact_s > 0.27)
-    .map(|c| c.values[FRONT_FLOOR])
-    .filter(|x| x.is_finite())
-    .collect()
+    ex.cycles(&Signals::of_trace(t, bar))
+        .iter()
+        .filter(|c| c.t_impact_s > 0.27)
+        .map(|c| c.values[FRONT_FLOOR])
+        .filter(|x| x.is_finite())
+        .collect()
 }
 
 fn mean_se(v: &[f64]) -> (f64, f64) {

@@ -271,14 +271,7 @@ pub fn readings_of(extractor: &Extractor, trace: &Trace, supply_bar: f64) -> Vec
 
 /// The steady cycles of a trace, as the diagnosis reads a record's.
 fn cycles_of(extractor: &Extractor, trace: &Trace, supply_bar: f64) -> Vec<CycleFeatures> {
-    let s = Signals {
-        dt_s: trace.dt_s,
-        p_rear_pa: &trace.p_rear_pa,
-        p_front_pa: &trace.p_front_pa,
-        accel_mps2: &trace.accel_mps2,
-        supply_pa: supply_bar * 1e5,
-    };
-    let all = extractor.cycles(&s);
+    let all = extractor.cycles(&Signals::of_trace(trace, supply_bar));
     let from = steady_from(&all);
     all[from..].to_vec()
 }

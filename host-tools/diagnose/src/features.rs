@@ -130,7 +130,18 @@ pub struct Signals<'a> {
     pub supply_pa: f64,
 }
 
-impl Signals<'_> {
+impl<'a> Signals<'a> {
+    /// A trace's three channels, its feeds set against `supply_bar` (gauge).
+    pub fn of_trace(trace: &'a hammer_trace::trace::Trace, supply_bar: f64) -> Self {
+        Signals {
+            dt_s: trace.dt_s,
+            p_rear_pa: &trace.p_rear_pa,
+            p_front_pa: &trace.p_front_pa,
+            accel_mps2: &trace.accel_mps2,
+            supply_pa: supply_bar * 1e5,
+        }
+    }
+
     fn len(&self) -> usize {
         self.p_rear_pa
             .len()

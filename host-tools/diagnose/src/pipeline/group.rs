@@ -80,14 +80,7 @@ fn split(inp: &MeasuredInput, is_fit: bool, extractor: &Extractor) -> Result<Spl
     if !(inp.supply_bar.is_finite() && inp.supply_bar > 0.0) {
         return Err(DiagnoseError::NoPressure(inp.label.clone()));
     }
-    let s = Signals {
-        dt_s: inp.trace.dt_s,
-        p_rear_pa: &inp.trace.p_rear_pa,
-        p_front_pa: &inp.trace.p_front_pa,
-        accel_mps2: &inp.trace.accel_mps2,
-        supply_pa: inp.supply_bar * 1e5,
-    };
-    let all = extractor.cycles(&s);
+    let all = extractor.cycles(&Signals::of_trace(&inp.trace, inp.supply_bar));
     let st = steady_from(&all);
     let steady = &all[st..];
     if steady.is_empty() {
