@@ -102,7 +102,7 @@ fn smoke_run(targets: &[&Target], execs: u64, minutes: Option<u64>, seed: u64) -
     let mut corpora = Vec::with_capacity(targets.len());
     for t in targets {
         match smoke::load_corpus(&fuzz_dir().join("corpus"), t) {
-            Ok(c) if !c.is_empty() => corpora.push(std::sync::Mutex::new(Some(c))),
+            Ok(c) if !c.is_empty() => corpora.push(c),
             Ok(_) | Err(_) => {
                 eprintln!(
                     "{}: no seed corpus in fuzz/corpus/{} (run `hammer-fuzz seeds`)",
@@ -113,42 +113,40 @@ fn smoke_run(targets: &[&Target], execs: u64, minutes: Option<u64>, seed: u64) -
         }
     }
     let next = std::sync::atomic::AtomicUsize::new(0);
-    let results: Vec<std::sync::Mutex<Option<smoke::RunStats>>> =
-        targets.iter().map(|_| std::sync::Mutex::new(None)).collect();
     let workers = std::thread::available_parallelism()
         .map_or(1, |n| n.get())
         .min(targets.len());
     let rounds = targets.len().div_ceil(workers.max(1)).max(1) as u64;
     let deadline = minutes.map(|m| Duration::from_secs(m * 60 / rounds));
     let artifacts = fuzz_dir().join("artifacts");
-    std::thread::scope(|scope| {
-        for _ in 0..workers {
-            scope.spawn(|| loop {
-                let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                let Some(t) = targets.get(i) else { break };
-                let corpus = corpora[i]
-                    .lock()
-                    .map(|mut c| c.take())
-                    .ok()
-                    .flatten()
-                    .unwrap_or_default();
-                let s = smoke::run(t, corpus, execs, deadline, seed, &artifacts);
-                if let Ok(mut slot) = results[i].lock() {
-                    *slot = Some(s);
-                }
-            });
-        }
+    // Each worker takes the next target until none is left; the results
+    // come back with their index and are put in the list's order.
+    let mut results: Vec<(usize, smoke::RunStats)> = std::thread::scope(|scope| {
+        let handles: Vec<_> = (0..workers)
+            .map(|_| {
+                scope.spawn(|| {
+                    let mut done = Vec::new();
+                    loop {
+                        let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                        let Some(t) = targets.get(i) else { break done };
+                        done.push((i, smoke::run(t, corpora[i].clone(), execs, deadline, seed, &artifacts)));
+                    }
+                })
+            })
+            .collect();
+        handles.into_iter().flat_map(|h| h.join().unwrap_or_default()).collect()
     });
+    results.sort_by_key(|(i, _)| *i);
+    if results.len() != targets.len() {
+        eprintln!("a fuzz worker stopped before its targets were run");
+        return ExitCode::from(2);
+    }
     let (mut total, mut failed) = (0u64, 0usize);
     println!(
         "{:<10} {:>12} {:>9} {:>11} {:>9} {:>5}  findings",
         "target", "executions", "seconds", "exec/s", "outcomes", "pool"
     );
-    for (t, slot) in targets.iter().zip(results) {
-        let Some(s) = slot.into_inner().ok().flatten() else {
-            eprintln!("{}: its run did not finish", t.name);
-            return ExitCode::from(2);
-        };
+    for (_, s) in &results {
         let secs = s.elapsed.as_secs_f64();
         println!(
             "{:<10} {:>12} {:>9.1} {:>11.0} {:>9} {:>5}  {}",
