@@ -32,6 +32,13 @@ fn main() {
             c.variants, c.hidden, c.named, c.diagnose_s
         );
         println!("  hidden params: {}", c.hidden_params);
+        println!("  parameter errors: {:?}", c.param_errors);
+        if let Some(t) = c.true_port_delay_s {
+            println!(
+                "  the front port truly opens {:+.3} ms later than without the delay",
+                1e3 * t
+            );
+        }
         for f in &r.detection_floors {
             println!("  floor: {}", f.statement);
         }

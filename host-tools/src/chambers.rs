@@ -8,7 +8,9 @@
 //! pressures with the force balance's position track.
 
 use hammer_estimator::chambers::{Characteristics, Feed};
-use hammer_sim::characteristics::{characterise_cycles, CycleFeeds, Signals};
+use hammer_sim::characteristics::{
+    characterise_cycles, mean_opening_after_impact_s, opening_times_s, CycleFeeds, Signals,
+};
 use hammer_sim::effects::Effects;
 use hammer_sim::estimation;
 use hammer_sim::SimConfig;
@@ -50,14 +52,6 @@ pub struct Compared {
     /// Times the front and the rear supply port began to open.
     pub front_port_opens_s: Vec<f64>,
     pub rear_port_opens_s: Vec<f64>,
-}
-
-/// Times at which `open(i)` becomes true, from sample 0.
-fn crossings(dt_s: f64, n: usize, open: impl Fn(usize) -> bool) -> Vec<f64> {
-    (1..n)
-        .filter(|&i| open(i) && !open(i - 1))
-        .map(|i| i as f64 * dt_s)
-        .collect()
 }
 
 fn column<'a>(t: &'a Trace, name: &str) -> &'a [f64] {
@@ -109,10 +103,16 @@ pub fn run(family: Family, bar: f64, effects: &Effects, seconds: f64, seed: u64)
     Compared {
         measured: characterise_cycles(&measured, &reports, &config, &chambers),
         truth: characterise_cycles(&truth, &reports, &config, &chambers),
-        front_port_opens_s: crossings(trace.dt_s, spool.len(), |i| front_open(spool[i])),
-        rear_port_opens_s: crossings(trace.dt_s, spool.len(), |i| rear_open(spool[i])),
+        front_port_opens_s: opening_times_s(trace.dt_s, spool.len(), |i| front_open(spool[i])),
+        rear_port_opens_s: opening_times_s(trace.dt_s, spool.len(), |i| rear_open(spool[i])),
     }
 }
+
+/// The aims for a characteristic's expanded uncertainty: a feed's
+/// onset, a closed phase's exponent, a feed's area (relative).
+pub const ONSET_AIM_S: f64 = 0.3e-3;
+pub const EXPONENT_AIM: f64 = 0.02;
+pub const AREA_AIM: f64 = 0.05;
 
 /// One characteristic's agreement with its truth over many cycles.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -122,18 +122,22 @@ pub struct Agreement {
     pub covered: usize,
     /// The largest expanded uncertainty, relative where `relative`.
     pub max_u: f64,
+    /// Cycles whose expanded uncertainty is within the aim for the
+    /// characteristic ([`ONSET_AIM_S`], [`EXPONENT_AIM`], [`AREA_AIM`]).
+    pub within_aim: usize,
     pub sum_d: f64,
     pub sum_dd: f64,
 }
 
 impl Agreement {
-    fn add(&mut self, measured: f64, truth: f64, u: f64, scale: f64) {
+    fn add(&mut self, measured: f64, truth: f64, u: f64, scale: f64, aim: f64) {
         if !(measured.is_finite() && truth.is_finite() && u.is_finite()) {
             return;
         }
         let d = (measured - truth) / scale;
         self.cycles += 1;
         self.covered += usize::from(d.abs() <= u / scale);
+        self.within_aim += usize::from(u / scale <= aim);
         self.max_u = self.max_u.max(u / scale);
         self.sum_d += d;
         self.sum_dd += d * d;
@@ -142,6 +146,7 @@ impl Agreement {
     fn merge(&mut self, o: &Agreement) {
         self.cycles += o.cycles;
         self.covered += o.covered;
+        self.within_aim += o.within_aim;
         self.max_u = self.max_u.max(o.max_u);
         self.sum_d += o.sum_d;
         self.sum_dd += o.sum_dd;
@@ -149,6 +154,11 @@ impl Agreement {
 
     pub fn coverage(&self) -> f64 {
         self.covered as f64 / self.cycles.max(1) as f64
+    }
+
+    /// The share of cycles whose uncertainty is within the aim.
+    pub fn within_aim(&self) -> f64 {
+        self.within_aim as f64 / self.cycles.max(1) as f64
     }
 
     pub fn mean(&self) -> f64 {
@@ -199,18 +209,26 @@ impl Tally {
         } else {
             (&mut self.rear_onset, &mut self.rear_exponent, &mut self.rear_area)
         };
-        onset.add(m.onset_s as f64, tr.onset_s as f64, m.onset_uncertainty_s as f64, 1.0);
+        onset.add(
+            m.onset_s as f64,
+            tr.onset_s as f64,
+            m.onset_uncertainty_s as f64,
+            1.0,
+            ONSET_AIM_S,
+        );
         exponent.add(
             m.closed_exponent as f64,
             tr.closed_exponent as f64,
             m.closed_exponent_uncertainty as f64,
             1.0,
+            EXPONENT_AIM,
         );
         area.add(
             m.feed_area_m2 as f64,
             tr.feed_area_m2 as f64,
             m.feed_area_uncertainty_m2 as f64,
             tr.feed_area_m2 as f64,
+            AREA_AIM,
         );
     }
 
@@ -244,20 +262,22 @@ impl Tally {
         ]
     }
 
-    /// One line: per characteristic, coverage, largest U, mean and RMS difference.
+    /// One line: per characteristic, coverage, largest U, the share of
+    /// cycles whose U is within the aim, mean and RMS difference.
     pub fn line(&self) -> String {
         let a = self.all();
         let ms = |x: f64| x * 1e3;
+        let aim = |x: &Agreement| 100.0 * x.within_aim();
         format!(
-            "cycles {:3} missing {:2} | front onset cov {:3.0}% U≤{:.3} ms d {:+.3}±{:.3} | rear onset cov {:3.0}% U≤{:.3} ms d {:+.3}±{:.3} | n_f cov {:3.0}% U≤{:.3} d {:+.3}±{:.3} | n_r cov {:3.0}% U≤{:.3} d {:+.3}±{:.3} | A_f cov {:3.0}% U≤{:.1}% d {:+.1}±{:.1}% | A_r cov {:3.0}% U≤{:.1}% d {:+.1}±{:.1}%",
+            "cycles {:3} missing {:2} | front onset cov {:3.0}% U≤{:.3} ms aim {:3.0}% d {:+.3}±{:.3} | rear onset cov {:3.0}% U≤{:.3} ms aim {:3.0}% d {:+.3}±{:.3} | n_f cov {:3.0}% U≤{:.3} aim {:3.0}% d {:+.3}±{:.3} | n_r cov {:3.0}% U≤{:.3} aim {:3.0}% d {:+.3}±{:.3} | A_f cov {:3.0}% U≤{:.1}% aim {:3.0}% d {:+.1}±{:.1}% | A_r cov {:3.0}% U≤{:.1}% aim {:3.0}% d {:+.1}±{:.1}%",
             self.cycles,
             self.missing,
-            100.0 * a[0].coverage(), ms(a[0].max_u), ms(a[0].mean()), ms(a[0].rms()),
-            100.0 * a[1].coverage(), ms(a[1].max_u), ms(a[1].mean()), ms(a[1].rms()),
-            100.0 * a[2].coverage(), a[2].max_u, a[2].mean(), a[2].rms(),
-            100.0 * a[3].coverage(), a[3].max_u, a[3].mean(), a[3].rms(),
-            100.0 * a[4].coverage(), 100.0 * a[4].max_u, 100.0 * a[4].mean(), 100.0 * a[4].rms(),
-            100.0 * a[5].coverage(), 100.0 * a[5].max_u, 100.0 * a[5].mean(), 100.0 * a[5].rms(),
+            100.0 * a[0].coverage(), ms(a[0].max_u), aim(&a[0]), ms(a[0].mean()), ms(a[0].rms()),
+            100.0 * a[1].coverage(), ms(a[1].max_u), aim(&a[1]), ms(a[1].mean()), ms(a[1].rms()),
+            100.0 * a[2].coverage(), a[2].max_u, aim(&a[2]), a[2].mean(), a[2].rms(),
+            100.0 * a[3].coverage(), a[3].max_u, aim(&a[3]), a[3].mean(), a[3].rms(),
+            100.0 * a[4].coverage(), 100.0 * a[4].max_u, aim(&a[4]), 100.0 * a[4].mean(), 100.0 * a[4].rms(),
+            100.0 * a[5].coverage(), 100.0 * a[5].max_u, aim(&a[5]), 100.0 * a[5].mean(), 100.0 * a[5].rms(),
         )
     }
 }
@@ -281,17 +301,6 @@ pub fn mean_onset_s(cycles: &[CycleFeeds], front: bool) -> Option<f64> {
 /// Mean time from each cycle's closing impact to the nearest opening of
 /// the front port (the spool's true crossing), over the cycles measured.
 pub fn mean_front_port_opening_s(c: &Compared) -> Option<f64> {
-    let v: Vec<f64> = c
-        .measured
-        .iter()
-        .filter_map(|m| {
-            let t = m.t_impact_s;
-            c.front_port_opens_s
-                .iter()
-                .map(|&o| o - t)
-                .filter(|d| d.abs() < 10e-3)
-                .min_by(|a, b| a.abs().total_cmp(&b.abs()))
-        })
-        .collect();
-    (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
+    let impacts: Vec<f64> = c.measured.iter().map(|m| m.t_impact_s).collect();
+    mean_opening_after_impact_s(&impacts, &c.front_port_opens_s)
 }

@@ -9,6 +9,8 @@ use serde::{Deserialize, Serialize};
 
 use super::effects::diagnosis;
 use super::engine::{diagnose_against, MeasuredInput, Options};
+use super::model::SETTLE_S;
+use super::valve_timing::{front_port_opening_of_model, front_port_opening_of_variant};
 use hammer_sim::effects::{Effects, EFFECT_NAMES};
 use hammer_sim::sensor::Rng;
 use hammer_sim::simulate::simulate;
@@ -220,6 +222,12 @@ pub struct CaseResult {
     pub correct: bool,
     /// Relative error of each named-right effect's magnitude.
     pub param_errors: BTreeMap<String, f64>,
+    /// A hidden valve delay's size in physical terms: how much later the
+    /// front port opened after the impact than without it (the mean over
+    /// the points). Beside τ it says what any reading of the port, the
+    /// delay's model-free evidence, can give of τ on this hammer's law.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub true_port_delay_s: Option<f64>,
     pub score: f64,
     pub energy_error_before: f64,
     pub energy_error_after: f64,
@@ -264,6 +272,10 @@ pub struct DrawnCase {
     pub structural: Option<(Structure, VariantParams)>,
     pub inputs: Vec<MeasuredInput>,
     pub references: Vec<MeasuredInput>,
+    /// With a hidden valve delay: how much later the front port opened after
+    /// the impact than in the same hammer without it, the mean over the
+    /// points (the truth of the delay's size in physical terms).
+    pub true_port_delay_s: Option<f64>,
 }
 
 /// Draws case `index` of the plan and records its traces.
@@ -279,43 +291,73 @@ pub fn draw_case(opts: &BenchOptions, index: usize) -> anyhow::Result<DrawnCase>
     let mut inputs = Vec::new();
     let mut references = Vec::new();
     let last = opts.points.len().saturating_sub(1);
-    let record = |effects: &Effects, bar: f64, seed: u64| -> anyhow::Result<Trace> {
+    // A trace, and its front port's true opening after the impact.
+    let record = |effects: &Effects, bar: f64, seed: u64| -> anyhow::Result<(Trace, Option<f64>)> {
         Ok(match &structural {
-            Some((structure, params)) => generate(params, *structure, effects, bar, opts.duration_s, seed).trace,
+            Some((structure, params)) => {
+                let g = generate(params, *structure, effects, bar, opts.duration_s, seed);
+                let opening = front_port_opening_of_variant(&g, SETTLE_S);
+                (g.trace, opening)
+            }
             None => {
                 let mut c = gen.clone();
                 c.effects = effects.clone();
                 c.supply.pressure_bar = bar;
                 c.seed = seed;
-                simulate(&c)?.trace()
+                let sim = simulate(&c)?;
+                let opening = front_port_opening_of_model(&sim.run, &c, SETTLE_S);
+                (sim.trace(), opening)
             }
         })
     };
+    let delayed = hidden.names().iter().any(|n| n == "valve_delay");
+    let mut port_delays = Vec::new();
     for (k, &bar) in opts.points.iter().enumerate() {
         let seed = rng.next_u64();
+        let (trace, opening) = record(&gen.effects, bar, seed)?;
         inputs.push(MeasuredInput {
             label: format!("case {index} at {bar} bar"),
             supply_bar: bar,
-            trace: record(&gen.effects, bar, seed)?,
+            trace,
             fit: k == 0 || k == last,
         });
+        let mut sound_opening = None;
         if opts.reference {
             // Its own noise, without drawing from the case's generator:
             // the cases stay those of the benchmark without references.
+            let (trace, opening) = record(&Effects::default(), bar, seed ^ 0x5EED_5EED_5EED_5EED)?;
+            sound_opening = opening;
             references.push(MeasuredInput {
                 label: format!("case {index} reference at {bar} bar"),
                 supply_bar: bar,
-                trace: record(&Effects::default(), bar, seed ^ 0x5EED_5EED_5EED_5EED)?,
+                trace,
                 fit: false,
             });
         }
+        if delayed {
+            // The truth of a delay's size: the same hammer without it (a
+            // pair's other effect kept), which a single's reference is.
+            let mut without = gen.effects.clone();
+            without.valve_delay = None;
+            if !(opts.reference && without.active().is_empty()) {
+                sound_opening = record(&without, bar, seed)?.1;
+            }
+            port_delays.push(opening.zip(sound_opening).map(|(d, s)| d - s));
+        }
     }
+    let true_port_delay_s = port_delays
+        .iter()
+        .copied()
+        .collect::<Option<Vec<f64>>>()
+        .filter(|v| !v.is_empty())
+        .map(|v| v.iter().sum::<f64>() / v.len() as f64);
     Ok(DrawnCase {
         hidden,
         gen,
         structural,
         inputs,
         references,
+        true_port_delay_s,
     })
 }
 
@@ -327,6 +369,7 @@ pub fn run_case(opts: &BenchOptions, index: usize, diag: &Options) -> anyhow::Re
         structural,
         inputs,
         references,
+        true_port_delay_s,
     } = draw_case(opts, index)?;
     let base = SimConfig::default();
     let t = std::time::Instant::now();
@@ -352,6 +395,7 @@ pub fn run_case(opts: &BenchOptions, index: usize, diag: &Options) -> anyhow::Re
             }
         }
     }
+
     let s = &r.shrink;
     let front_dead_volume_error = match (&structural, r.dead_volumes.iter().find(|d| d.chamber == "front")) {
         (Some((_, p)), Some(d)) => Some(d.used_m3 / p.front_dead_m3 - 1.0),
@@ -368,6 +412,7 @@ pub fn run_case(opts: &BenchOptions, index: usize, diag: &Options) -> anyhow::Re
         confusable_with: r.verdict.confusable_with.clone(),
         correct,
         param_errors,
+        true_port_delay_s,
         score: r.verdict.score,
         energy_error_before: s.impact_energy_error_before,
         energy_error_after: s.impact_energy_error_after,

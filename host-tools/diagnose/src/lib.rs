@@ -28,8 +28,11 @@
 //!    given (traces or commissioning folders, progress, refusals);
 //! 2. [`report`]: the schema of `report.json` (the candidate models
 //!    included), apart so a schema change is one diff;
-//! 3. [`gap`], [`features`]: what is compared — cycles cut from traces and
-//!    their waveforms, per-cycle features and the extractor for a config;
+//! 3. [`gap`], [`features`], [`valve_timing`]: what is compared — cycles
+//!    cut from traces and their waveforms, per-cycle features and the
+//!    extractor for a config; a valve's timing read off any hammer with a
+//!    true position, and its front port's true opening (a valve delay's
+//!    size in physical terms);
 //! 4. [`model`], then `fitset`, then `effects`: the candidate models, the
 //!    statistics (weights, nuisance profile, recalibration) in one place so
 //!    every stage weighs a residual the same way, and the catalogue's
@@ -39,9 +42,7 @@
 //!    (`ModelRunner::new` is defined with the hooks), so it imports neither;
 //! 5. `pipeline`: the stages above;
 //! 6. [`engine`]: the entry point, re-exporting the vocabulary of rows 1–3;
-//! 7. [`bench`](mod@bench), [`isolability`]: proving it on generated data;
-//!    [`valve_timing`]: a valve's timing read off any hammer with a true
-//!    position.
+//! 7. [`bench`](mod@bench), [`isolability`]: proving it on generated data.
 //!
 //! No terminal, plotting or argument parsing: the `hammer` CLI
 //! (`hammer-host`) renders the report for people (Markdown, terminal,

@@ -37,6 +37,11 @@ pub trait SensorReads: Sync + std::fmt::Debug {
     fn shift_expected_features(&self, effects: &Effects, mean: &mut [f64]);
 }
 
+/// The model's runs are averaged over the cycles after this: its start-up
+/// (from rest, the chambers at ambient) has settled by then. A truth read
+/// off a run to compare with the model's leaves out the same start.
+pub const SETTLE_S: f64 = 0.27;
+
 /// Runs the model at operating points and reads it like a measurement
 /// (`ModelRunner::new`, in [`crate::effects`], reads it through the
 /// catalogue's sensor effects).

@@ -358,9 +358,55 @@ pub fn characterise_cycles(
     out
 }
 
+/// A port's true openings: the times, from sample 0, at which `open(i)`
+/// turns true (the spool's or the valve's crossing of the port's edge, in
+/// a truth column sampled every `dt_s`).
+pub fn opening_times_s(dt_s: f64, n: usize, open: impl Fn(usize) -> bool) -> Vec<f64> {
+    (1..n)
+        .filter(|&i| open(i) && !open(i - 1))
+        .map(|i| i as f64 * dt_s)
+        .collect()
+}
+
+/// How far from an impact a port's opening is still taken for that impact's.
+const OPENING_NEAR_IMPACT_S: f64 = 10e-3;
+
+/// Mean signed time from each impact to the port opening nearest it (within
+/// 10 ms; before the impact negative), over the impacts that have one: the
+/// valve's switching as the port sees it. A valve delay's size in physical
+/// terms is this time's shift, which no law for the delay changes the
+/// meaning of (`None` without an opening near any impact).
+pub fn mean_opening_after_impact_s(impacts_s: &[f64], openings_s: &[f64]) -> Option<f64> {
+    let v: Vec<f64> = impacts_s
+        .iter()
+        .filter_map(|&t| {
+            openings_s
+                .iter()
+                .map(|&o| o - t)
+                .filter(|d| d.abs() < OPENING_NEAR_IMPACT_S)
+                .min_by(|a, b| a.abs().total_cmp(&b.abs()))
+        })
+        .collect();
+    (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_port_opening_is_read_against_the_impact_nearest_it() {
+        // A column that opens at samples 3 and 13 (dt 1 ms), closed between.
+        let col = [0, 0, 0, 1, 1, 0, 0, 0, 0, 0, 0, 0, 0, 1, 1];
+        let opens = opening_times_s(1e-3, col.len(), |i| col[i] == 1);
+        assert_eq!(opens.len(), 2);
+        assert!((opens[0] - 3e-3).abs() < 1e-12 && (opens[1] - 13e-3).abs() < 1e-12);
+        // Impacts at 2 ms (opens 1 ms after) and 14 ms (opened 1 ms before);
+        // one at 40 ms has no opening within 10 ms and is left out.
+        let m = mean_opening_after_impact_s(&[2e-3, 14e-3, 40e-3], &opens).expect("two impacts read");
+        assert!(m.abs() < 1e-12, "{m}");
+        assert_eq!(mean_opening_after_impact_s(&[40e-3], &opens), None);
+    }
     use crate::SimConfig;
 
     /// Without the track term (the diagnosis' reading) every value is the

@@ -29,7 +29,8 @@ pub const W_CONTACT: usize = 12; // ∫ F_contact·v dt, J
 pub const W_GRAVITY: usize = 13; // ∫ m·g·sinθ·v dt, J
 pub const M_IN: usize = 14; // air drawn from the source, kg
 pub const M_OUT: usize = 15; // air vented to atmosphere, kg
-pub const N: usize = 16;
+pub const Q_WALL: usize = 16; // ∫ heat from the walls into both chambers' air dt, J
+pub const N: usize = 17;
 pub const N_DYN: usize = 10;
 
 /// Forces on the piston at one instant.
@@ -392,5 +393,6 @@ impl OdeSystem<N> for HammerModel {
         dy[W_GRAVITY] = f.gravity_n * v;
         dy[M_IN] = q_src;
         dy[M_OUT] = atm.dm;
+        dy[Q_WALL] = q1 + q2;
     }
 }

@@ -190,6 +190,12 @@ pub struct CycleTruth {
     /// before it was recorded).
     #[serde(default)]
     pub air_drawn_kg: f64,
+    /// Heat the walls gave both chambers' air over the cycle (negative:
+    /// the air lost it): heat exchange's size in physical terms, which
+    /// does not depend on the law that carries it (absent in sidecars
+    /// written before it was recorded).
+    #[serde(default)]
+    pub wall_heat_j: f64,
 }
 
 /// Air mass bookkeeping over the run.
@@ -625,6 +631,7 @@ impl CycleTracker {
                 peak_rear_pa: self.peak_rear_pa,
                 peak_front_pa: self.peak_front_pa,
                 air_drawn_kg: d(model::M_IN),
+                wall_heat_j: d(model::Q_WALL),
             });
         }
         self.prev_impact = Some(*imp);

@@ -5,7 +5,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::plant::{Plant, N, V, WC, WF, WP, X, XT};
+use crate::plant::{Plant, N, QW, V, WC, WF, WP, X, XT};
 use crate::sensors::{FrontEndState, Noise};
 use crate::structure::AnvilLaw;
 
@@ -23,6 +23,10 @@ pub struct VariantCycle {
     pub friction_stroke_n: f64,
     pub friction_backhaul_n: f64,
     pub friction_work_j: f64,
+    /// Heat the walls gave both chambers' air over the cycle (negative:
+    /// the air lost it); absent in truth files written before it was kept.
+    #[serde(default)]
+    pub wall_heat_j: f64,
 }
 
 /// Samples on the output grid plus the truth.
@@ -97,7 +101,7 @@ pub fn run(plant: &Plant, fe: &mut FrontEndState, seed: u64, duration_s: f64, h_
     };
     // Cycle bookkeeping.
     let mut in_contact = false;
-    let mut last_impact: Option<(f64, f64)> = None; // (t, friction work then)
+    let mut last_impact: Option<(f64, f64, f64)> = None; // (t, friction work and wall heat then)
     let mut stroke_start_x: Option<f64> = None;
     let (mut stroke, mut backhaul) = (Phase::default(), Phase::default());
     let mut in_stroke = false;
@@ -157,7 +161,7 @@ pub fn run(plant: &Plant, fe: &mut FrontEndState, seed: u64, duration_s: f64, h_
             let f = -d0 / (d1 - d0);
             let t_imp = t + f * h_s;
             let v_imp = y0[V] + f * (y[V] - y0[V]);
-            if let (Some((t_last, w_last)), Some(x_turn)) = (last_impact, stroke_start_x) {
+            if let (Some((t_last, w_last, q_last)), Some(x_turn)) = (last_impact, stroke_start_x) {
                 let period = t_imp - t_last;
                 out.cycles.push(VariantCycle {
                     t_impact_s: t_imp,
@@ -169,9 +173,10 @@ pub fn run(plant: &Plant, fe: &mut FrontEndState, seed: u64, duration_s: f64, h_
                     friction_stroke_n: stroke.mean(),
                     friction_backhaul_n: backhaul.mean(),
                     friction_work_j: y[WF] - w_last,
+                    wall_heat_j: y[QW] - q_last,
                 });
             }
-            last_impact = Some((t_imp, y[WF]));
+            last_impact = Some((t_imp, y[WF], y[QW]));
             stroke_start_x = None;
             in_stroke = false;
             stroke = Phase::default();

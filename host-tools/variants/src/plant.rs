@@ -31,7 +31,9 @@ pub const WF: usize = 13;
 /// Work of the pressure forces and of the contacts on the piston, J.
 pub const WP: usize = 14;
 pub const WC: usize = 15;
-pub const N: usize = 16;
+/// Heat the walls gave both chambers' air, J.
+pub const QW: usize = 16;
+pub const N: usize = 17;
 
 /// Collar stiffness that holds the tool against the feed force.
 const COLLAR_N_PER_M: f64 = 1e8;
@@ -236,6 +238,7 @@ impl Plant {
             qw1 = h.h_w_per_m2_k * wall(v1, self.a1, PI * p.bore_m) * (ta - t1);
             qw2 = h.h_w_per_m2_k * wall(v2, self.a2, PI * (p.bore_m + p.rod_m)) * (ta - t2);
         }
+        dy[QW] = qw1 + qw2;
         let (dv1, dv2) = (self.a1 * v, -self.a2 * v);
         dy[M1] = dm1;
         dy[M2] = dm2;

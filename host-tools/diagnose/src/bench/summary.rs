@@ -27,6 +27,11 @@ pub struct BenchSummary {
     pub params_within_15pct: (usize, usize),
     pub median_param_error: BTreeMap<String, f64>,
     pub max_param_error: BTreeMap<String, f64>,
+    /// Each hidden valve delay's true port shift over its τ, sorted: a
+    /// reading of the port, the delay's model-free evidence, falls this
+    /// far short of τ on the hammer's law (1 where the port moves by τ).
+    #[serde(default)]
+    pub port_shift_per_tau: Vec<f64>,
     /// Mean over cases with an effect, %.
     pub energy_error_before: f64,
     pub energy_error_after: f64,
@@ -75,6 +80,7 @@ pub fn summarize(options: &BenchOptions, cases: Vec<CaseResult>, not_run: Vec<(u
     let mut confusion: BTreeMap<String, BTreeMap<String, usize>> = BTreeMap::new();
     let (mut single, mut none, mut pair, mut params) = ((0, 0), (0, 0), (0, 0), (0, 0));
     let mut params15 = (0, 0);
+    let mut port_shift_per_tau = Vec::new();
     let mut errs: BTreeMap<String, Vec<f64>> = BTreeMap::new();
     let (mut wrong_flagged, mut right_flagged) = ((0, 0), (0, 0));
     let (mut floor_above, mut floor_below) = ((0, 0), (0, 0));
@@ -121,7 +127,15 @@ pub fn summarize(options: &BenchOptions, cases: Vec<CaseResult>, not_run: Vec<(u
             params15.0 += usize::from(*e <= 0.15);
             errs.entry(k.clone()).or_default().push(*e);
         }
+        let tau = c
+            .hidden_params
+            .get("valve_delay")
+            .and_then(|d| d.get("tau_s")?.as_f64());
+        if let (Some(shift), Some(tau)) = (c.true_port_delay_s, tau) {
+            port_shift_per_tau.push(shift / tau);
+        }
     }
+    port_shift_per_tau.sort_by(f64::total_cmp);
     let with_effect: Vec<&CaseResult> = cases.iter().filter(|c| c.hidden != Hidden::None).collect();
     let mean = |f: &dyn Fn(&CaseResult) -> f64| {
         with_effect.iter().map(|c| f(c)).sum::<f64>() / with_effect.len().max(1) as f64
@@ -143,6 +157,7 @@ pub fn summarize(options: &BenchOptions, cases: Vec<CaseResult>, not_run: Vec<(u
         params_within_15pct: params15,
         median_param_error,
         max_param_error,
+        port_shift_per_tau,
         energy_error_before: mean(&|c| c.energy_error_before),
         energy_error_after: mean(&|c| c.energy_error_after),
         energy_error_after_median: {
@@ -248,6 +263,15 @@ pub fn render(s: &BenchSummary) -> String {
             "{k:>28} {:>9.1} % {:>7.1} %",
             100.0 * m,
             100.0 * s.max_param_error.get(k).copied().unwrap_or(0.0)
+        );
+    }
+    if let (Some(lo), Some(hi)) = (s.port_shift_per_tau.first(), s.port_shift_per_tau.last()) {
+        let r = &s.port_shift_per_tau;
+        let _ = writeln!(
+            out,
+            "valve delays hidden: the front port truly opened {lo:.2}–{hi:.2} τ later (median {:.2}, {} cases); a reading of the port is that far from τ",
+            r[r.len() / 2],
+            r.len()
         );
     }
     let _ = writeln!(

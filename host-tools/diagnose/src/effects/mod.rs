@@ -73,7 +73,7 @@ impl ModelRunner {
             extractor,
             reads: &CatalogueReads,
             duration_s: 0.45,
-            settle_s: 0.27,
+            settle_s: crate::model::SETTLE_S,
         }
     }
 }
