@@ -101,6 +101,17 @@ fn a_valve_delay_is_named_against_the_commissioning_record_and_a_stale_one_is_re
         .find(|c| c["feature"] == "front_feed_s")
         .unwrap();
     assert!(front["z"].as_f64().unwrap() >= 3.0, "{front}");
+    // The table gives the hammer's own values beside the change: the
+    // record's onset (the emulated board's hammer is the model's, so about
+    // the nominal model's), and a change of about the delay (the model's
+    // port moves 1.0–1.2 τ, docs/estimator.md).
+    let value = |k: &str| front[k].as_f64().unwrap_or(f64::NAN);
+    let change = value("measured") - value("nominal");
+    assert!((1.2e-3..=2.0e-3).contains(&change), "change {change} s: {front}");
+    assert!((value("reference") - value("nominal")).abs() < 0.3e-3, "{front}");
+    assert!(value("recalibrated").is_finite(), "{front}");
+    let md = std::fs::read_to_string(out.join("report.md")).unwrap();
+    assert!(md.contains("| quantity | reference record | now | change |"), "{md}");
 
     // A recalibration since: the measured captures carry another hash.
     let side_path = measured.join("4.0bar/cycle-000.json");

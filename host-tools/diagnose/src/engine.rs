@@ -112,10 +112,12 @@ pub fn diagnose_against(
     progress(0, total_steps, "nominal model");
     let nominal = nominal::nominal(&grouped.points, &runner, opts, &step)?;
     let mut reference_infos = Vec::new();
+    let mut baselines = Vec::new();
     if !references.is_empty() {
-        let (baselines, infos) = reference::baselines(references, &hammer)?;
-        reference::transplant(&mut grouped.points, &nominal.features, &baselines)?;
+        let (read, infos) = reference::baselines(references, &hammer)?;
+        reference::transplant(&mut grouped.points, &nominal.features, &read)?;
         reference_infos = infos;
+        baselines = read;
     }
     let points = &grouped.points;
     // Against a reference the model's form error has cancelled: what the
@@ -141,6 +143,7 @@ pub fn diagnose_against(
     let shrink = held_out::shrink(points, &nominal.features, &models);
     let located = where_::locate(inputs, &grouped, &nominal, &models, base, opts);
     let recalibration = held_out::recalibration(base, &models, opts.nominal_uncertainty);
+    let chambers = chamber_table(&fs, &nominal.bars, &models, &baselines);
 
     let simulations = fs.simulations() + models.simulations();
     Ok(Outcome {
@@ -158,7 +161,7 @@ pub fn diagnose_against(
             remainder: located.remainder,
             model_form,
             model_free: fs.model_free_stats(),
-            chambers: fs.chamber_stats(),
+            chambers,
             detection_floors,
             shrink,
             chi2_nominal: ranking.chi2_nominal,
@@ -170,4 +173,45 @@ pub fn diagnose_against(
         },
         waves: located.waves,
     })
+}
+
+/// The chamber characteristics against the nominal model (with references:
+/// their change since them, on the nominal model's values), with the
+/// recalibrated nominal model's value and the reference record's own, each
+/// the mean over the fit points: where the gap lies in physical terms,
+/// true whether or not an effect is named.
+fn chamber_table(
+    fs: &crate::fitset::FitSet,
+    bars: &[f64],
+    models: &held_out::Models,
+    baselines: &[reference::Baseline],
+) -> Vec<ModelFreeStat> {
+    let fit_bars = fs.bars();
+    let index = |bar: f64| bars.iter().position(|b| (b - bar).abs() < 0.005);
+    let recal: Option<Vec<Vec<f64>>> = fit_bars
+        .iter()
+        .map(|&bar| held_out::recalibrated_features(models, index(bar)?, bar))
+        .collect();
+    let reference: Option<Vec<&Vec<f64>>> = fit_bars
+        .iter()
+        .map(|&bar| {
+            baselines
+                .iter()
+                .find(|b| (b.supply_bar - bar).abs() < 0.005)
+                .map(|b| &b.mean)
+        })
+        .collect();
+    let mean_of = |rows: &[&Vec<f64>], j: usize| {
+        let v: Vec<f64> = rows.iter().map(|r| r[j]).filter(|x| x.is_finite()).collect();
+        (v.len() == rows.len() && !v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
+    };
+    fs.chamber_stats()
+        .into_iter()
+        .zip(crate::features::CHAMBER_FEATURES)
+        .map(|(stat, j)| ModelFreeStat {
+            recalibrated: recal.as_ref().and_then(|r| mean_of(&r.iter().collect::<Vec<_>>(), j)),
+            reference: reference.as_ref().filter(|r| !r.is_empty()).and_then(|r| mean_of(r, j)),
+            ..stat
+        })
+        .collect()
 }

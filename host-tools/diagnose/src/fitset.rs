@@ -155,6 +155,8 @@ impl<'a> FitSet<'a> {
                     nominal,
                     se,
                     z: if se > 0.0 { d / se } else { 0.0 },
+                    recalibrated: None,
+                    reference: None,
                 }
             })
             .collect()

@@ -207,6 +207,17 @@ pub struct ModelFreeStat {
     pub se: f64,
     /// (measured − nominal) / se.
     pub z: f64,
+    /// The nominal model with its uncertain parameters refitted, no effect
+    /// (the chamber characteristics only): what of the difference the
+    /// recalibration closes, and so what the model's form leaves.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub recalibrated: Option<f64>,
+    /// The reference record's own mean over the fit points (the chamber
+    /// characteristics, against a reference only): `measured` is then the
+    /// nominal model's value plus the change, and the hammer's own value
+    /// now is this plus the change.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reference: Option<f64>,
 }
 
 /// A nominal parameter the fit moved: its value and standard deviation

@@ -119,6 +119,15 @@ pub(crate) fn models(fs: &FitSet, bars: &[f64], verdict: Option<&EffectResult>, 
     }
 }
 
+/// The recalibrated nominal model's features at point `i` (at `bar`), as
+/// the measurement is read; None where its run failed.
+pub(crate) fn recalibrated_features(models: &Models, i: usize, bar: f64) -> Option<Vec<f64>> {
+    let run = models.recal_runs.get(i)?.as_ref()?;
+    models
+        .recal_runner
+        .features_of_truth(&run.truth, &Candidate::default().effects, bar)
+}
+
 /// The shrink at every point with held-out cycles, judged on the held-out points.
 pub(crate) fn shrink(points: &[Point], nominal_features: &[Vec<f64>], models: &Models) -> Shrink {
     let held_out_points: Vec<f64> = points

@@ -24,18 +24,62 @@ pub(super) fn model_free_md(s: &mut String, report: &Report) {
 /// since the reference: where the gap lies in physical terms, true also
 /// when no effect can be named.
 pub(super) fn chambers_md(s: &mut String, report: &Report) {
-    let (note, measured) = if report.references.is_empty() {
-        ("Fit points' mean, read from the pressures and the piston's track with no valve or port model (docs/estimator.md). Against the model alone a difference includes the model's form error.", "measured")
-    } else {
-        ("Fit points' mean; the change since the reference record, set on the nominal model's value (the form error cancels).", "nominal + change")
-    };
-    stats_md(
+    let stats = &report.chambers;
+    if stats.is_empty() {
+        return;
+    }
+    let opt = |v: Option<f64>| v.map_or_else(|| "–".to_string(), num);
+    line!(
         s,
-        "Chamber characteristics (valve switching, fills, closed phases, the front exhaust's floor)",
-        note,
-        measured,
-        &report.chambers,
+        "### Chamber characteristics (valve switching, fills, closed phases, the front exhaust's floor)"
     );
+    line!(s);
+    if report.references.is_empty() {
+        line!(s, "Fit points' mean, read from the pressures and the piston's track with no valve or port model (docs/estimator.md). Against the model alone a difference includes the model's form error; what the recalibrated model (its uncertain parameters refitted, no effect) still misses is the form's or an effect's.");
+        line!(s);
+        line!(
+            s,
+            "| quantity | measured | nominal model | recalibrated model | measured − nominal | ± | z |"
+        );
+        line!(s, "|---|---:|---:|---:|---:|---:|---:|");
+        for m in stats {
+            line!(
+                s,
+                "| {} | {} | {} | {} | {} | {} | {} |",
+                m.feature,
+                num(m.measured),
+                num(m.nominal),
+                opt(m.recalibrated),
+                num(m.measured - m.nominal),
+                num(m.se),
+                num(m.z)
+            );
+        }
+    } else {
+        line!(s, "Fit points' mean. The change since the reference record is the evidence (the hammer's form cancels); the models' columns say how far the model's form is from this hammer.");
+        line!(s);
+        line!(
+            s,
+            "| quantity | reference record | now | change | ± | z | nominal model | recalibrated model |"
+        );
+        line!(s, "|---|---:|---:|---:|---:|---:|---:|---:|");
+        for m in stats {
+            let change = m.measured - m.nominal;
+            line!(
+                s,
+                "| {} | {} | {} | {} | {} | {} | {} | {} |",
+                m.feature,
+                opt(m.reference),
+                opt(m.reference.map(|r| r + change)),
+                num(change),
+                num(m.se),
+                num(m.z),
+                num(m.nominal),
+                opt(m.recalibrated)
+            );
+        }
+    }
+    line!(s);
 }
 
 /// A table of features against the nominal model under `title`; `measured`
