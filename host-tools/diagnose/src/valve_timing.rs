@@ -35,13 +35,7 @@ pub fn front_port_opening_of_model(run: &SimRun, cfg: &SimConfig, settle_s: f64)
     let valve = &run.truth.valve_m;
     let opening = cfg.valve.opening_m;
     let openings = opening_times_s(run.truth.dt_s, valve.len(), |i| valve[i] < opening);
-    let impacts: Vec<f64> = run
-        .cycles
-        .iter()
-        .map(|c| c.t_impact_s)
-        .filter(|&t| t >= settle_s)
-        .collect();
-    mean_opening_after_impact_s(&impacts, &openings)
+    settled_opening(run.cycles.iter().map(|c| c.t_impact_s), settle_s, &openings)
 }
 
 /// The same on a second-family hammer's truth: its spool opens the front
@@ -49,14 +43,13 @@ pub fn front_port_opening_of_model(run: &SimRun, cfg: &SimConfig, settle_s: f64)
 pub fn front_port_opening_of_variant(g: &Generated, settle_s: f64) -> Option<f64> {
     let spool = g.trace.extra.get("spool")?;
     let openings = opening_times_s(g.trace.dt_s, spool.len(), |i| spool[i] < 0.5);
-    let impacts: Vec<f64> = g
-        .truth
-        .cycles
-        .iter()
-        .map(|c| c.t_impact_s)
-        .filter(|&t| t >= settle_s)
-        .collect();
-    mean_opening_after_impact_s(&impacts, &openings)
+    settled_opening(g.truth.cycles.iter().map(|c| c.t_impact_s), settle_s, &openings)
+}
+
+/// [`mean_opening_after_impact_s`] over the impacts after `settle_s`.
+fn settled_opening(impacts_s: impl Iterator<Item = f64>, settle_s: f64, openings_s: &[f64]) -> Option<f64> {
+    let impacts: Vec<f64> = impacts_s.filter(|&t| t >= settle_s).collect();
+    mean_opening_after_impact_s(&impacts, openings_s)
 }
 
 /// One run's true position and front pressure, with the chamber's geometry.

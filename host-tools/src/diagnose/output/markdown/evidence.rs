@@ -29,55 +29,56 @@ pub(super) fn chambers_md(s: &mut String, report: &Report) {
         return;
     }
     let opt = |v: Option<f64>| v.map_or_else(|| "–".to_string(), num);
+    let (note, header, rows): (&str, &[&str], Vec<Vec<String>>) = if report.references.is_empty() {
+        (
+            "Fit points' mean, read from the pressures and the piston's track with no valve or port model (docs/estimator.md). Against the model alone a difference includes the model's form error; what the recalibrated model (its uncertain parameters refitted, no effect) still misses is the form's or an effect's.",
+            &["measured", "nominal model", "recalibrated model", "measured − nominal", "±", "z"],
+            stats
+                .iter()
+                .map(|m| {
+                    vec![
+                        num(m.measured),
+                        num(m.nominal),
+                        opt(m.recalibrated),
+                        num(m.measured - m.nominal),
+                        num(m.se),
+                        num(m.z),
+                    ]
+                })
+                .collect(),
+        )
+    } else {
+        (
+            "Fit points' mean. The change since the reference record is the evidence (the hammer's form cancels); the models' columns say how far the model's form is from this hammer.",
+            &["reference record", "now", "change", "±", "z", "nominal model", "recalibrated model"],
+            stats
+                .iter()
+                .map(|m| {
+                    let change = m.measured - m.nominal;
+                    vec![
+                        opt(m.reference),
+                        opt(m.reference.map(|r| r + change)),
+                        num(change),
+                        num(m.se),
+                        num(m.z),
+                        num(m.nominal),
+                        opt(m.recalibrated),
+                    ]
+                })
+                .collect(),
+        )
+    };
     line!(
         s,
         "### Chamber characteristics (valve switching, fills, closed phases, the front exhaust's floor)"
     );
     line!(s);
-    if report.references.is_empty() {
-        line!(s, "Fit points' mean, read from the pressures and the piston's track with no valve or port model (docs/estimator.md). Against the model alone a difference includes the model's form error; what the recalibrated model (its uncertain parameters refitted, no effect) still misses is the form's or an effect's.");
-        line!(s);
-        line!(
-            s,
-            "| quantity | measured | nominal model | recalibrated model | measured − nominal | ± | z |"
-        );
-        line!(s, "|---|---:|---:|---:|---:|---:|---:|");
-        for m in stats {
-            line!(
-                s,
-                "| {} | {} | {} | {} | {} | {} | {} |",
-                m.feature,
-                num(m.measured),
-                num(m.nominal),
-                opt(m.recalibrated),
-                num(m.measured - m.nominal),
-                num(m.se),
-                num(m.z)
-            );
-        }
-    } else {
-        line!(s, "Fit points' mean. The change since the reference record is the evidence (the hammer's form cancels); the models' columns say how far the model's form is from this hammer.");
-        line!(s);
-        line!(
-            s,
-            "| quantity | reference record | now | change | ± | z | nominal model | recalibrated model |"
-        );
-        line!(s, "|---|---:|---:|---:|---:|---:|---:|---:|");
-        for m in stats {
-            let change = m.measured - m.nominal;
-            line!(
-                s,
-                "| {} | {} | {} | {} | {} | {} | {} | {} |",
-                m.feature,
-                opt(m.reference),
-                opt(m.reference.map(|r| r + change)),
-                num(change),
-                num(m.se),
-                num(m.z),
-                num(m.nominal),
-                opt(m.recalibrated)
-            );
-        }
+    line!(s, "{note}");
+    line!(s);
+    line!(s, "| quantity | {} |", header.join(" | "));
+    line!(s, "|---|{}", "---:|".repeat(header.len()));
+    for (m, row) in stats.iter().zip(rows) {
+        line!(s, "| {} | {} |", m.feature, row.join(" | "));
     }
     line!(s);
 }
