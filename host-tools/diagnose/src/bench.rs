@@ -11,7 +11,7 @@ use super::effects::diagnosis;
 use super::engine::{diagnose_against, MeasuredInput, Options};
 use super::model::SETTLE_S;
 use super::valve_timing::{front_port_opening_of_model, front_port_opening_of_variant};
-use hammer_sim::effects::{Effects, EFFECT_NAMES};
+use hammer_sim::effects::{EffectSlot, Effects, ValveDelay, EFFECT_NAMES};
 use hammer_sim::sensor::Rng;
 use hammer_sim::simulate::simulate;
 use hammer_sim::SimConfig;
@@ -310,7 +310,7 @@ pub fn draw_case(opts: &BenchOptions, index: usize) -> anyhow::Result<DrawnCase>
             }
         })
     };
-    let delayed = hidden.names().iter().any(|n| n == "valve_delay");
+    let delayed = hidden.names().iter().any(|n| n == ValveDelay::NAME);
     let mut port_delays = Vec::new();
     for (k, &bar) in opts.points.iter().enumerate() {
         let seed = rng.next_u64();

@@ -87,20 +87,10 @@ pub fn diagnose_against(
             .collect();
         runner.extractor.calibrated(&cycles)
     };
-    let dead_volumes = match (references.is_empty(), runner.extractor.chambers, hammer.chambers) {
-        (false, Some(nominal), Some(used)) => vec![
-            DeadVolume {
-                chamber: "rear".into(),
-                nominal_m3: nominal.rear_dead_m3,
-                used_m3: used.rear_dead_m3,
-            },
-            DeadVolume {
-                chamber: "front".into(),
-                nominal_m3: nominal.front_dead_m3,
-                used_m3: used.front_dead_m3,
-            },
-        ],
-        _ => Vec::new(),
+    let dead_volumes = if references.is_empty() {
+        Vec::new()
+    } else {
+        dead_volume_rows(&runner.extractor, &hammer)
     };
     let mut grouped = group::group(inputs, &hammer)?;
     let total_steps = grouped.points.len() + EFFECT_NAMES.len() + 3;
@@ -214,4 +204,24 @@ fn chamber_table(
             ..stat
         })
         .collect()
+}
+
+/// The dead volumes the records were read through against the model's
+/// (empty where either extractor reads no chambers).
+fn dead_volume_rows(model: &Extractor, hammer: &Extractor) -> Vec<DeadVolume> {
+    let (Some(nominal), Some(used)) = (model.chambers, hammer.chambers) else {
+        return Vec::new();
+    };
+    vec![
+        DeadVolume {
+            chamber: "rear".into(),
+            nominal_m3: nominal.rear_dead_m3,
+            used_m3: used.rear_dead_m3,
+        },
+        DeadVolume {
+            chamber: "front".into(),
+            nominal_m3: nominal.front_dead_m3,
+            used_m3: used.front_dead_m3,
+        },
+    ]
 }

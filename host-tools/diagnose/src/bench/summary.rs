@@ -6,7 +6,7 @@ use std::collections::BTreeMap;
 use serde::{Deserialize, Serialize};
 
 use super::{BenchOptions, CaseResult, Hidden};
-use hammer_sim::effects::EFFECT_NAMES;
+use hammer_sim::effects::{EffectSlot, ValveDelay, EFFECT_NAMES};
 use hammer_trace::numfmt::fraction;
 
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -129,7 +129,7 @@ pub fn summarize(options: &BenchOptions, cases: Vec<CaseResult>, not_run: Vec<(u
         }
         let tau = c
             .hidden_params
-            .get("valve_delay")
+            .get(ValveDelay::NAME)
             .and_then(|d| d.get("tau_s")?.as_f64());
         if let (Some(shift), Some(tau)) = (c.true_port_delay_s, tau) {
             port_shift_per_tau.push(shift / tau);
@@ -265,15 +265,7 @@ pub fn render(s: &BenchSummary) -> String {
             100.0 * s.max_param_error.get(k).copied().unwrap_or(0.0)
         );
     }
-    if let (Some(lo), Some(hi)) = (s.port_shift_per_tau.first(), s.port_shift_per_tau.last()) {
-        let r = &s.port_shift_per_tau;
-        let _ = writeln!(
-            out,
-            "valve delays hidden: the front port truly opened {lo:.2}–{hi:.2} τ later (median {:.2}, {} cases); a reading of the port is that far from τ",
-            r[r.len() / 2],
-            r.len()
-        );
-    }
+    port_shifts(&mut out, &s.port_shift_per_tau);
     let _ = writeln!(
         out,
         "\nheld-out shrink (cases with an effect, mean): impact energy {:.2} % → {:.2} %, frequency {:.2} % → {:.2} %",
@@ -305,6 +297,19 @@ pub fn render(s: &BenchSummary) -> String {
     calibration_and_gaps(&mut out, s);
     misnamed(&mut out, s);
     out
+}
+
+/// The hidden delays' true port shifts in τ, where there were any.
+fn port_shifts(out: &mut String, r: &[f64]) {
+    use std::fmt::Write as _;
+    if let (Some(lo), Some(hi)) = (r.first(), r.last()) {
+        let _ = writeln!(
+            out,
+            "valve delays hidden: the front port truly opened {lo:.2}–{hi:.2} τ later (median {:.2}, {} cases); a reading of the port is that far from τ",
+            r[r.len() / 2],
+            r.len()
+        );
+    }
 }
 
 /// How well the records gave each hammer's front dead volume, and the cases
