@@ -138,17 +138,19 @@ pub fn point(path: &Path, file: &SimConfig, supply_bar: Option<f64>) -> Result<P
     }
     // The air per blow, from the chambers' states (every report: a cycle's
     // characteristics need the valid ones either side of it).
-    let hammer = input
+    let described = input
         .sidecar
         .as_ref()
         .and_then(|s| s.simulation.as_ref())
-        .map_or(&file.hammer, |s| &s.config.hammer);
+        .map_or(file, |s| &s.config);
+    let hammer = &described.hammer;
     let signals = Signals {
         dt_s: input.trace.dt_s,
         p_rear_pa: &input.trace.p_rear_pa,
         p_front_pa: &input.trace.p_front_pa,
         accel_mps2: &input.trace.accel_mps2,
         x_m: None,
+        pressure_lag_s: described.sensors.front.group_delay_s(input.trace.dt_s),
     };
     let air: Vec<f64> = characterise_cycles(&signals, &reports, &input.config, &hammer.chambers())
         .iter()

@@ -58,8 +58,8 @@ fn the_second_familys_front_feed_starts_before_the_impact_and_the_models_after()
 
 /// A hidden valve delay of 1.5 ms moves the measured front feed by the
 /// spool's true shift within 0.25 ms on both families (measured over 1 s
-/// runs: model +0.095 / +0.002 ms at 4 / 7 bar, second family −0.054 /
-/// +0.169 ms; docs/estimator.md).
+/// runs: model +0.085 / −0.004 ms at 4 / 7 bar, second family −0.071 /
+/// +0.237 ms; docs/estimator.md).
 #[test]
 fn a_hidden_valve_delay_moves_the_measured_switching_with_the_spool() {
     for bar in [4.0, 7.0] {
@@ -82,11 +82,14 @@ fn a_hidden_valve_delay_moves_the_measured_switching_with_the_spool() {
 /// calibration terms) against the truth, over both families at 4 and 7 bar
 /// with no effect and each effect but the pressure gain error (a
 /// calibration error, which the stated uncertainty leaves out by design).
-/// Measured over 1 s runs (docs/estimator.md): onsets 89 % (front) and 95 %
-/// (rear), exponents 97 % / 98 %, areas 97 % / 100 %, the onsets' mean
-/// differences −0.008 and −0.004 ms. Here 0.5 s runs: each at least 85 %,
-/// every onset's mean difference within 0.03 ms (it was −0.056 ms on the
-/// rear feed while the band was chosen by the noisy samples).
+/// Measured over 1 s runs (docs/estimator.md), with the pressures read
+/// back by their transducers' delay: onsets 98 % / 98 %, exponents 99 % /
+/// 99 %, areas 98 % / 99 %, the onsets' mean differences −0.004 and
+/// −0.012 ms (without it the front onset covered 89 %, the areas 97 % /
+/// 100 %). Here 0.5 s runs: each within the 90–99.5 % (the upper
+/// bound: a U that covers every cycle is too wide), every onset's mean
+/// difference within 0.03 ms (it was −0.056 ms on the rear feed while the
+/// band was chosen by the noisy samples).
 #[test]
 fn the_stated_uncertainties_cover_the_truth_in_most_cycles() {
     let mut total = Tally::default();
@@ -99,7 +102,7 @@ fn the_stated_uncertainties_cover_the_truth_in_most_cycles() {
     }
     let line = total.line();
     for a in total.all() {
-        assert!(a.cycles >= 200 && a.coverage() >= 0.85, "{line}");
+        assert!(a.cycles >= 200 && (0.90..=0.995).contains(&a.coverage()), "{line}");
     }
     assert!(
         total.front_onset.mean().abs() < 0.03e-3 && total.rear_onset.mean().abs() < 0.03e-3,

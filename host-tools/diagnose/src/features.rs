@@ -382,6 +382,11 @@ impl Extractor {
                 p_front_pa: s.p_front_pa,
                 accel_mps2: s.accel_mps2,
                 x_m: None,
+                // Not brought back yet: the diagnosis' verdicts and
+                // benchmarks were measured without it, and against a
+                // reference record, where the characteristics are
+                // evidence, both records' lag cancels (docs/estimator.md).
+                pressure_lag_s: 0.0,
             },
             &spans,
             &reading,

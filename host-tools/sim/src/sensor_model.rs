@@ -30,6 +30,18 @@ pub struct SensorChannel {
 }
 
 impl SensorChannel {
+    /// The channel's delay at low frequencies when sampled every `dt_s`:
+    /// the group delay of its one-pole filter as [`crate::sensor`] runs it,
+    /// (1 − α)/α samples with α = 1 − exp(−2π·f·dt) (4 µs for 20 kHz at
+    /// 10 µs; none without a filter).
+    pub fn group_delay_s(&self, dt_s: f64) -> f64 {
+        if !(self.bandwidth_hz > 0.0 && dt_s > 0.0) {
+            return 0.0;
+        }
+        let alpha = 1.0 - (-2.0 * std::f64::consts::PI * self.bandwidth_hz * dt_s).exp();
+        (1.0 - alpha) / alpha * dt_s
+    }
+
     pub fn lsb(&self) -> f64 {
         (self.range_max - self.range_min) / self.full_scale_code() as f64
     }
