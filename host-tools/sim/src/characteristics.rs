@@ -421,6 +421,22 @@ pub fn mean_opening_after_impact_s(impacts_s: &[f64], openings_s: &[f64]) -> Opt
 mod tests {
     use super::*;
 
+    /// A channel late by a filter's delay is read that much later: a ramp
+    /// moves by the slope times the lag, whole and fractional samples
+    /// alike, the end repeats, and no lag leaves it as it is.
+    #[test]
+    fn a_late_channel_is_read_back_by_its_delay() {
+        let ramp: Vec<f64> = (0..10).map(|i| 3.0 * i as f64).collect();
+        let a = advanced(&ramp, 0.4);
+        assert!((a[2] - 7.2).abs() < 1e-6 && (a[8] - 25.2).abs() < 1e-5, "{a:?}");
+        let b = advanced(&ramp, 1.5);
+        assert!((b[0] - 4.5).abs() < 1e-6 && b[9] == 27.0, "{b:?}");
+        assert_eq!(advanced(&ramp, 0.0), ramp.iter().map(|&x| x as f32).collect::<Vec<_>>());
+        let sensors = crate::sensor_model::SensorModel::default();
+        let d = sensors.front.group_delay_s(1e-5);
+        assert!((d / 1e-5 - 0.398).abs() < 0.002, "{d}");
+    }
+
     #[test]
     fn a_port_opening_is_read_against_the_impact_nearest_it() {
         // A column that opens at samples 3 and 13 (dt 1 ms), closed between.
