@@ -24,12 +24,12 @@ fn model_energy_j(bar: f64, h: f64) -> f64 {
             .expect("catalogue effect");
     }
     let r = hammer_sim::simulate_truth(&c).expect("the model runs");
-    let e: Vec<f64> = r
-        .cycles
-        .iter()
-        .filter(|c| c.t_impact_s >= SETTLE_S)
-        .map(|c| c.impact_energy_j)
-        .collect();
+    settled_mean(r.cycles.iter().map(|c| (c.t_impact_s, c.impact_energy_j)))
+}
+
+/// The mean impact energy over the cycles after the start-up.
+fn settled_mean(cycles: impl Iterator<Item = (f64, f64)>) -> f64 {
+    let e: Vec<f64> = cycles.filter(|c| c.0 >= SETTLE_S).map(|c| c.1).collect();
     e.iter().sum::<f64>() / e.len().max(1) as f64
 }
 
@@ -40,14 +40,7 @@ fn variant_energy_j(s: Structure, bar: f64, h: f64) -> f64 {
             .expect("catalogue effect");
     }
     let g = generate(&VariantParams::default(), s, &e, bar, 0.6, 3);
-    let v: Vec<f64> = g
-        .truth
-        .cycles
-        .iter()
-        .filter(|c| c.t_impact_s >= SETTLE_S)
-        .map(|c| c.impact_energy_j)
-        .collect();
-    v.iter().sum::<f64>() / v.len().max(1) as f64
+    settled_mean(g.truth.cycles.iter().map(|c| (c.t_impact_s, c.impact_energy_j)))
 }
 
 fn main() {

@@ -191,6 +191,7 @@ fn chamber_table(
                 .map(|b| &b.mean)
         })
         .collect();
+    let recal_rows: Option<Vec<&Vec<f64>>> = recal.as_ref().map(|r| r.iter().collect());
     let mean_of = |rows: &[&Vec<f64>], j: usize| {
         let v: Vec<f64> = rows.iter().map(|r| r[j]).filter(|x| x.is_finite()).collect();
         (v.len() == rows.len() && !v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
@@ -199,7 +200,7 @@ fn chamber_table(
         .into_iter()
         .zip(crate::features::CHAMBER_FEATURES)
         .map(|(stat, j)| ModelFreeStat {
-            recalibrated: recal.as_ref().and_then(|r| mean_of(&r.iter().collect::<Vec<_>>(), j)),
+            recalibrated: recal_rows.as_ref().and_then(|r| mean_of(r, j)),
             reference: reference.as_ref().filter(|r| !r.is_empty()).and_then(|r| mean_of(r, j)),
             ..stat
         })

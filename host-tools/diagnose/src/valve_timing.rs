@@ -152,7 +152,7 @@ mod tests {
                 .expect("catalogue effect");
         }
         let run = hammer_sim::simulate_truth(&c).expect("the model runs");
-        front_port_opening_of_model(&run, &c, 0.27).expect("the port opens")
+        front_port_opening_of_model(&run, &c, crate::model::SETTLE_S).expect("the port opens")
     }
 
     fn variant_port_s(bar: f64, tau_s: f64) -> f64 {
@@ -162,7 +162,7 @@ mod tests {
                 .expect("catalogue effect");
         }
         let g = generate(&VariantParams::default(), Structure::BASE, &e, bar, 0.45, 3);
-        front_port_opening_of_variant(&g, 0.27).expect("the port opens")
+        front_port_opening_of_variant(&g, crate::model::SETTLE_S).expect("the port opens")
     }
 
     /// The model's delay lags a pilot force that moves like a ramp: its

@@ -191,9 +191,11 @@ pub struct CycleTruth {
     #[serde(default)]
     pub air_drawn_kg: f64,
     /// Heat the walls gave both chambers' air over the cycle (negative:
-    /// the air lost it): heat exchange's size in physical terms, which
-    /// does not depend on the law that carries it (absent in sidecars
-    /// written before it was recorded).
+    /// the air lost it; absent in sidecars written before it was
+    /// recorded). A truth of the chambers' heat flow, not a size of heat
+    /// exchange: the net heat is what the air gains where expansion cooled
+    /// it less what it loses where compression warmed it, and does not
+    /// grow steadily with h (examples/heat_equivalent.rs).
     #[serde(default)]
     pub wall_heat_j: f64,
 }

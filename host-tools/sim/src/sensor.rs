@@ -50,13 +50,8 @@ struct ChannelState {
 
 impl ChannelState {
     fn new(ch: &SensorChannel, dt_s: f64, seed: u64) -> Self {
-        let alpha = if ch.bandwidth_hz > 0.0 {
-            1.0 - (-2.0 * std::f64::consts::PI * ch.bandwidth_hz * dt_s).exp()
-        } else {
-            1.0
-        };
         Self {
-            alpha,
+            alpha: ch.filter_alpha(dt_s),
             state: None,
             rng: Rng::new(seed),
             clipped: 0,

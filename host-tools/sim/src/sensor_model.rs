@@ -35,11 +35,23 @@ impl SensorChannel {
     /// (1 − α)/α samples with α = 1 − exp(−2π·f·dt) (4 µs for 20 kHz at
     /// 10 µs; none without a filter).
     pub fn group_delay_s(&self, dt_s: f64) -> f64 {
-        if !(self.bandwidth_hz > 0.0 && dt_s > 0.0) {
-            return 0.0;
+        let alpha = self.filter_alpha(dt_s);
+        if alpha < 1.0 && alpha > 0.0 {
+            (1.0 - alpha) / alpha * dt_s
+        } else {
+            0.0
         }
-        let alpha = 1.0 - (-2.0 * std::f64::consts::PI * self.bandwidth_hz * dt_s).exp();
-        (1.0 - alpha) / alpha * dt_s
+    }
+
+    /// The one-pole filter's step weight at a sample every `dt_s`:
+    /// y += α·(x − y), α = 1 − exp(−2π·f·dt); 1 (no filter) without a
+    /// bandwidth.
+    pub fn filter_alpha(&self, dt_s: f64) -> f64 {
+        if self.bandwidth_hz > 0.0 {
+            1.0 - (-2.0 * std::f64::consts::PI * self.bandwidth_hz * dt_s).exp()
+        } else {
+            1.0
+        }
     }
 
     pub fn lsb(&self) -> f64 {
