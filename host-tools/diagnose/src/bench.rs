@@ -18,7 +18,9 @@ use hammer_sim::SimConfig;
 use hammer_trace::trace::Trace;
 use hammer_variants::{generate, Structure, VariantParams};
 
+mod ceiling;
 mod summary;
+pub use ceiling::{model_alone_ceiling, FormSpan, ModelAloneCeiling};
 pub use summary::{above_floor, render, summarize, BenchSummary};
 
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -249,6 +251,9 @@ pub struct CaseResult {
     /// The force balance against nominal, and the model-form factors.
     #[serde(default)]
     pub model_free: Vec<super::report::ModelFreeStat>,
+    /// The chamber characteristics against nominal (or the reference).
+    #[serde(default)]
+    pub chambers: Vec<super::report::ModelFreeStat>,
     #[serde(default)]
     pub model_form: Vec<super::report::ModelForm>,
     /// How large each unseen effect would have had to be to be named.
@@ -423,6 +428,7 @@ pub fn run_case(opts: &BenchOptions, index: usize, diag: &Options) -> anyhow::Re
         ranking: r.effects.iter().map(Ranked::of).collect(),
         pairs: r.pairs.iter().map(Ranked::of).collect(),
         model_free: r.model_free.clone(),
+        chambers: r.chambers.clone(),
         model_form: r.model_form.clone(),
         detection_floors: r.detection_floors.clone(),
         front_dead_volume_error,

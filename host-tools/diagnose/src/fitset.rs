@@ -157,6 +157,7 @@ impl<'a> FitSet<'a> {
                     z: if se > 0.0 { d / se } else { 0.0 },
                     recalibrated: None,
                     reference: None,
+                    read: self.points.iter().any(|p| p.1.mean[j].is_finite()),
                 }
             })
             .collect()

@@ -218,6 +218,15 @@ pub struct ModelFreeStat {
     /// now is this plus the change.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub reference: Option<f64>,
+    /// Whether any fit point read it (a chamber characteristic is not read
+    /// where, say, no feed onset stood out): unread, `measured` is the
+    /// nominal model's and `z` 0, which is no evidence either way.
+    #[serde(default = "read_by_default")]
+    pub read: bool,
+}
+
+fn read_by_default() -> bool {
+    true
 }
 
 /// A nominal parameter the fit moved: its value and standard deviation

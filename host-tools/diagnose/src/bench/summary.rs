@@ -54,6 +54,10 @@ pub struct BenchSummary {
     pub floor_above: (usize, usize),
     #[serde(default)]
     pub floor_below: (usize, usize),
+    /// Against the model alone: what its evidence can reach on these
+    /// hammers (`None` with references).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub model_alone_ceiling: Option<super::ModelAloneCeiling>,
     /// Cases whose report warned that the refitted model predicts the
     /// held-out data worse than nominal.
     #[serde(default)]
@@ -173,6 +177,7 @@ pub fn summarize(options: &BenchOptions, cases: Vec<CaseResult>, not_run: Vec<(u
         floor_above,
         floor_below,
         cautioned: cases.iter().filter(|c| c.cautioned).count(),
+        model_alone_ceiling: (!options.reference).then(|| super::model_alone_ceiling(&cases)),
         cases,
         not_run,
     }
@@ -288,6 +293,9 @@ pub fn render(s: &BenchSummary) -> String {
         out,
         "unseen single effects against the detection floor their diagnosis reported: at or beyond it {ar} of {an} named right, below it {br} of {bn}"
     );
+    if let Some(c) = &s.model_alone_ceiling {
+        super::ceiling::render(&mut out, c);
+    }
     let _ = writeln!(
         out,
         "refitted model worse than nominal on the held-out data (a caution in the report): {} of {} cases",

@@ -62,7 +62,7 @@ mod tests {
     };
     use crate::diagnose::gap::{CycleSignals, SIGNALS};
     use crate::diagnose::model::Candidate;
-    use crate::diagnose::report::DetectionFloor;
+    use crate::diagnose::report::{DetectionFloor, ModelFreeStat};
     use crate::diagnose::stages::Stage;
 
     fn effect(name: &str, score: f64, explained: f64, value: f64) -> EffectResult {
@@ -305,6 +305,45 @@ mod tests {
     /// (the structural benchmark's case 0 with a three-step recalibration:
     /// friction named right, energy 17 % → 22 %) is said so in both outputs;
     /// one that predicts better is not.
+    /// A chamber characteristic no fit point read is said so, not shown as
+    /// a measurement equal to the model's with z 0; a read one keeps its
+    /// numbers (the layout against the model alone).
+    #[test]
+    fn an_unread_chamber_characteristic_is_not_shown_as_measured() {
+        let stat = |feature: &str, read: bool| ModelFreeStat {
+            feature: feature.into(),
+            measured: if read { 1.4321 } else { 1.4 },
+            nominal: 1.4,
+            se: 0.003,
+            z: if read { 10.7 } else { 0.0 },
+            recalibrated: Some(1.41),
+            reference: None,
+            read,
+        };
+        let mut r = report();
+        r.chambers = vec![stat("front_closed_exponent", false), stat("rear_closed_exponent", true)];
+        let md = markdown(&r, &[]);
+        let row = |name: &str| {
+            md.lines()
+                .find(|l| l.starts_with(&format!("| {name} |")))
+                .unwrap()
+                .to_string()
+        };
+        let unread = row("front_closed_exponent");
+        assert_eq!(unread.matches("not read").count(), 3, "{unread}");
+        let read = row("rear_closed_exponent");
+        assert!(
+            !read.contains("not read") && read.contains("0.0321") && read.contains("10.7"),
+            "{read}"
+        );
+        // The JSON of an older report, without the flag, reads as read.
+        let json = serde_json::to_value(&r.chambers[1]).unwrap();
+        let mut old = json.as_object().unwrap().clone();
+        old.remove("read");
+        let back: ModelFreeStat = serde_json::from_value(serde_json::Value::Object(old)).unwrap();
+        assert!(back.read);
+    }
+
     #[test]
     fn a_refit_worse_than_nominal_on_held_out_data_is_said() {
         let good = report();

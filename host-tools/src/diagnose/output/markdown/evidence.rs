@@ -36,13 +36,14 @@ pub(super) fn chambers_md(s: &mut String, report: &Report) {
             stats
                 .iter()
                 .map(|m| {
+                    let read = |v: f64| if m.read { num(v) } else { "not read".to_string() };
                     vec![
-                        num(m.measured),
+                        read(m.measured),
                         num(m.nominal),
                         opt(m.recalibrated),
-                        num(m.measured - m.nominal),
+                        read(m.measured - m.nominal),
                         num(m.se),
-                        num(m.z),
+                        read(m.z),
                     ]
                 })
                 .collect(),
@@ -55,12 +56,13 @@ pub(super) fn chambers_md(s: &mut String, report: &Report) {
                 .iter()
                 .map(|m| {
                     let change = m.measured - m.nominal;
+                    let read = |v: Option<f64>| if m.read { opt(v) } else { "not read".to_string() };
                     vec![
                         opt(m.reference),
-                        opt(m.reference.map(|r| r + change)),
-                        num(change),
+                        read(m.reference.map(|r| r + change)),
+                        read(Some(change)),
                         num(m.se),
-                        num(m.z),
+                        read(Some(m.z)),
                         num(m.nominal),
                         opt(m.recalibrated),
                     ]
