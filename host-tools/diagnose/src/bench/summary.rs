@@ -288,14 +288,7 @@ pub fn render(s: &BenchSummary) -> String {
         out,
         "named an effect not hidden: {wn} cases, {wf} of them flagged confusable; named right: {rn} cases, {rf} flagged"
     );
-    let ((ar, an), (br, bn)) = (s.floor_above, s.floor_below);
-    let _ = writeln!(
-        out,
-        "unseen single effects against the detection floor their diagnosis reported: at or beyond it {ar} of {an} named right, below it {br} of {bn}"
-    );
-    if let Some(c) = &s.model_alone_ceiling {
-        super::ceiling::render(&mut out, c);
-    }
+    floors(&mut out, s);
     let _ = writeln!(
         out,
         "refitted model worse than nominal on the held-out data (a caution in the report): {} of {} cases",
@@ -305,6 +298,20 @@ pub fn render(s: &BenchSummary) -> String {
     calibration_and_gaps(&mut out, s);
     misnamed(&mut out, s);
     out
+}
+
+/// The scoring against the detection floors, and against the model alone
+/// what its evidence can reach.
+fn floors(out: &mut String, s: &BenchSummary) {
+    use std::fmt::Write as _;
+    let ((ar, an), (br, bn)) = (s.floor_above, s.floor_below);
+    let _ = writeln!(
+        out,
+        "unseen single effects against the detection floor their diagnosis reported: at or beyond it {ar} of {an} named right, below it {br} of {bn}"
+    );
+    if let Some(c) = &s.model_alone_ceiling {
+        super::ceiling::render(out, c);
+    }
 }
 
 /// The hidden delays' true port shifts in τ, where there were any.
