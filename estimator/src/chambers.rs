@@ -257,6 +257,13 @@ fn feed(
         Some(logs) => closed::onset_of(&logs, w.dt_s),
         None => closed::onset(p, x, &volume, w.dt_s),
     }?;
+    // A feed of this cycle starts after the impact that opened it. A slow
+    // rise (a leak feeding the closed chamber) can have a tangent so
+    // shallow that it meets zero cycles earlier: no onset of this cycle.
+    // A feed that began a little before its chamber closed is kept.
+    if !(o.onset_s >= -((start - w.open) as f32) * w.dt_s) {
+        return None;
+    }
     // Onset time from the reference impact.
     let t_ref = (reference as f32 - start as f32) * w.dt_s;
     let at = |s: &[f32]| interpolate(s, start, o.onset_s / w.dt_s);

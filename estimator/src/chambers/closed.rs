@@ -304,12 +304,6 @@ fn read(logs: &impl Logs, dt_s: f32, base_end: usize) -> Option<Onset> {
         return None;
     }
     let k0 = tangent.root();
-    // A tangent so shallow that it meets zero before the chamber closed
-    // reads no feed of this closed phase: a slow rise (a leak feeding
-    // it) extrapolated back by tens of milliseconds, into other cycles.
-    if !(k0 >= 0.0) {
-        return None;
-    }
     // Its uncertainty: the band's mean and slope (independent about the
     // band's centre), the baseline's level, the sample grid; a noise σ in r
     // is σ/(2√r) in √r.
