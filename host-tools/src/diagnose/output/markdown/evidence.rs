@@ -29,6 +29,8 @@ pub(super) fn chambers_md(s: &mut String, report: &Report) {
         return;
     }
     let opt = |v: Option<f64>| v.map_or_else(|| "–".to_string(), num);
+    // A measured column of a characteristic no fit point read.
+    let measured = |m: &ModelFreeStat, v: f64| if m.read { num(v) } else { "not read".to_string() };
     let (note, header, rows): (&str, &[&str], Vec<Vec<String>>) = if report.references.is_empty() {
         (
             "Fit points' mean, read from the pressures and the piston's track with no valve or port model (docs/estimator.md). Against the model alone a difference includes the model's form error; what the recalibrated model (its uncertain parameters refitted, no effect) still misses is the form's or an effect's.",
@@ -36,14 +38,13 @@ pub(super) fn chambers_md(s: &mut String, report: &Report) {
             stats
                 .iter()
                 .map(|m| {
-                    let read = |v: f64| if m.read { num(v) } else { "not read".to_string() };
                     vec![
-                        read(m.measured),
+                        measured(m, m.measured),
                         num(m.nominal),
                         opt(m.recalibrated),
-                        read(m.measured - m.nominal),
+                        measured(m, m.measured - m.nominal),
                         num(m.se),
-                        read(m.z),
+                        measured(m, m.z),
                     ]
                 })
                 .collect(),
@@ -56,13 +57,16 @@ pub(super) fn chambers_md(s: &mut String, report: &Report) {
                 .iter()
                 .map(|m| {
                     let change = m.measured - m.nominal;
-                    let read = |v: Option<f64>| if m.read { opt(v) } else { "not read".to_string() };
                     vec![
                         opt(m.reference),
-                        read(m.reference.map(|r| r + change)),
-                        read(Some(change)),
+                        if m.read {
+                            opt(m.reference.map(|r| r + change))
+                        } else {
+                            "not read".to_string()
+                        },
+                        measured(m, change),
                         num(m.se),
-                        read(Some(m.z)),
+                        measured(m, m.z),
                         num(m.nominal),
                         opt(m.recalibrated),
                     ]
