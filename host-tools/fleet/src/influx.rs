@@ -191,9 +191,10 @@ struct HttpAccess {
 
 impl Destination {
     pub fn parse(s: &str) -> Result<Self> {
+        let shown = crate::tls::redacted_url(s);
         if let Some(rest) = s.strip_prefix("udp://") {
             if rest.is_empty() || !rest.contains(':') {
-                bail!("--influx {s}: a UDP destination is udp://HOST:PORT");
+                bail!("--influx {shown}: a UDP destination is udp://HOST:PORT");
             }
             return Ok(Self::Udp(rest.to_string()));
         }
@@ -208,7 +209,7 @@ impl Destination {
                 None => (rest, "/write"),
             };
             if host.is_empty() {
-                bail!("--influx {s}: no host");
+                bail!("--influx {shown}: no host");
             }
             let secret_param = path.split_once('?').is_some_and(|(_, q)| {
                 q.split('&')
@@ -218,7 +219,7 @@ impl Destination {
                 bail!("--influx: no password or token in the URL (they would show in `ps` and in messages); the token comes from {TOKEN_ENV} or --influx-token-file (v1 with a login: `user:password` as the token)");
             }
             if host.contains('@') {
-                bail!("--influx {s}: no credentials in the URL (they would show in `ps`); the token comes from {TOKEN_ENV} or --influx-token-file");
+                bail!("--influx {shown}: no credentials in the URL (they would show in `ps`); the token comes from {TOKEN_ENV} or --influx-token-file");
             }
             let host = if host.contains(':') {
                 host.to_string()
@@ -233,7 +234,7 @@ impl Destination {
             });
         }
         if s.contains("://") {
-            bail!("--influx {s}: a FILE, udp://HOST:PORT or http(s)://HOST:PORT/PATH");
+            bail!("--influx {shown}: a FILE, udp://HOST:PORT or http(s)://HOST:PORT/PATH");
         }
         Ok(Self::File(PathBuf::from(s)))
     }
@@ -613,7 +614,10 @@ mod tests {
                 tls: true,
             }
         );
-        assert!(Destination::parse("https://user:token@x/write").is_err());
+        let e = Destination::parse("https://user:t0ken@x/write").unwrap_err();
+        assert!(!format!("{e:#}").contains("t0ken"), "the refusal names no credential: {e:#}");
+        let e = Destination::parse("https://:t0ken@/write").unwrap_err();
+        assert!(!format!("{e:#}").contains("t0ken"), "{e:#}");
         let e = Destination::parse("http://x:8086/write?db=h&u=me&p=s3cret").unwrap_err();
         assert!(!format!("{e:#}").contains("s3cret"), "{e:#}");
         assert_eq!(

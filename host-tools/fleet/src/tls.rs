@@ -65,6 +65,39 @@ pub struct TlsFiles {
     pub insecure: bool,
 }
 
+/// A URL as a message may show it: the user information before `@` and the
+/// values of query parameters that carry secrets (`p`, `password`, `token`)
+/// replaced by `<redacted>`. A refusal of a URL that holds credentials must
+/// not print them: messages land in logs and terminals.
+pub fn redacted_url(url: &str) -> String {
+    let (scheme, rest) = match url.find("://") {
+        Some(i) => url.split_at(i + 3),
+        None => ("", url),
+    };
+    let end = rest.find(['/', '?', '#']).unwrap_or(rest.len());
+    let (authority, tail) = rest.split_at(end);
+    let authority = match authority.rfind('@') {
+        Some(i) => format!("<redacted>{}", &authority[i..]),
+        None => authority.to_string(),
+    };
+    let tail = match tail.split_once('?') {
+        Some((path, query)) => {
+            let (query, fragment) = query.split_once('#').map_or((query, None), |(q, f)| (q, Some(f)));
+            let kept: Vec<String> = query
+                .split('&')
+                .map(|kv| match kv.split_once('=') {
+                    Some((k, _)) if matches!(k, "p" | "password" | "token") => format!("{k}=<redacted>"),
+                    _ => kv.to_string(),
+                })
+                .collect();
+            let fragment = fragment.map(|f| format!("#{f}")).unwrap_or_default();
+            format!("{path}?{}{fragment}", kept.join("&"))
+        }
+        None => tail.to_string(),
+    };
+    format!("{scheme}{authority}{tail}")
+}
+
 /// The warning a link without verification gives at every connection.
 pub fn insecure_warning(endpoint: &str, flag: &str) -> String {
     format!(
@@ -261,6 +294,18 @@ pub fn explain(e: &rustls::Error, endpoint: &str, host: &str, flag: &str, plain:
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_url_is_shown_without_its_credentials() {
+        assert_eq!(redacted_url("mqtts://u:hunter2@broker:8883"), "mqtts://<redacted>@broker:8883");
+        assert_eq!(
+            redacted_url("https://a:b@h:8086/write?db=x&p=hunter2#f"),
+            "https://<redacted>@h:8086/write?db=x&p=<redacted>#f"
+        );
+        assert_eq!(redacted_url("http://h/api/v2/write?token=t0k&org=o"), "http://h/api/v2/write?token=<redacted>&org=o");
+        assert_eq!(redacted_url("mqtt://broker:1883"), "mqtt://broker:1883");
+        assert_eq!(redacted_url("u:pw@host"), "<redacted>@host");
+    }
 
     #[test]
     fn a_missing_or_empty_ca_file_is_named() {

@@ -113,23 +113,24 @@ pub fn topic(site: &str, device: &str, kind: Kind) -> String {
 /// `mqtt://HOST[:PORT]` (1883) or `mqtts://HOST[:PORT]` (TLS, 8883) →
 /// (host, port, tls).
 pub fn parse_url(url: &str) -> Result<(String, u16, bool)> {
+    let shown = crate::tls::redacted_url(url);
     let (rest, tls) = if let Some(r) = url.strip_prefix("mqtts://") {
         (r, true)
     } else if let Some(r) = url.strip_prefix("mqtt://") {
         (r, false)
     } else {
-        bail!("--mqtt {url}: an MQTT broker is mqtt://HOST[:PORT] or, over TLS, mqtts://HOST[:PORT]");
+        bail!("--mqtt {shown}: an MQTT broker is mqtt://HOST[:PORT] or, over TLS, mqtts://HOST[:PORT]");
     };
     let rest = rest.trim_end_matches('/');
     if rest.contains('@') {
-        bail!("--mqtt {url}: no user or password in the URL (they would show in `ps`); use --mqtt-user and HAMMER_MQTT_PASSWORD or --mqtt-password-file");
+        bail!("--mqtt {shown}: no user or password in the URL (they would show in `ps`); use --mqtt-user and HAMMER_MQTT_PASSWORD or --mqtt-password-file");
     }
     let (host, port) = match rest.rsplit_once(':') {
-        Some((h, p)) => (h, p.parse().with_context(|| format!("--mqtt {url}: port {p:?}"))?),
+        Some((h, p)) => (h, p.parse().with_context(|| format!("--mqtt {shown}: port {p:?}"))?),
         None => (rest, if tls { 8883 } else { 1883 }),
     };
     if host.is_empty() {
-        bail!("--mqtt {url}: no host");
+        bail!("--mqtt {shown}: no host");
     }
     Ok((host.to_string(), port, tls))
 }
@@ -624,7 +625,10 @@ mod tests {
         );
         assert_eq!(parse_url("mqtt://broker").unwrap(), ("broker".into(), 1883, false));
         assert_eq!(parse_url("mqtts://b").unwrap(), ("b".into(), 8883, true));
-        assert!(parse_url("mqtts://u:secret@b").is_err(), "no credentials in a URL");
+        let e = parse_url("mqtts://u:secret@b").unwrap_err().to_string();
+        assert!(!e.contains("secret") && e.contains("<redacted>@b"), "no credentials in a URL, nor in its refusal: {e}");
+        let e = parse_url("tcp://u:secret@b").unwrap_err().to_string();
+        assert!(!e.contains("secret"), "{e}");
         assert!(parse_url("ssl://b").is_err());
         assert!(parse_url("mqtt://:1883").is_err());
         assert!(parse_url("mqtt://b:x").is_err());
