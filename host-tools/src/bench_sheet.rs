@@ -22,6 +22,7 @@ use hammer_estimator::CycleReport;
 use hammer_sim::characteristics::{characterise_cycles, Signals};
 use hammer_sim::estimation::open_for_estimation;
 use hammer_sim::gas::R_AIR;
+use hammer_sim::params::{HammerParams, DURATION_S_RANGE, SUPPLY_BAR_RANGE};
 use hammer_sim::{simulate_truth, SimConfig};
 
 use crate::chart::render::figure_png;
@@ -73,6 +74,9 @@ pub struct Point {
     pub air_cycles: usize,
     /// The simulator's truth when the trace is simulated.
     pub truth: Option<Truth>,
+    /// The hammer the trace's sidecar states (a simulated trace's), which
+    /// its estimate was read with.
+    pub hammer: Option<HammerParams>,
 }
 
 /// The simulator's means over the cycles the estimator reported valid.
@@ -194,7 +198,50 @@ pub fn point(path: &Path, file: &SimConfig, supply_bar: Option<f64>) -> Result<P
         air_m3: air.iter().sum::<f64>() / air.len() as f64,
         air_cycles: air.len(),
         truth,
+        hammer: input
+            .sidecar
+            .as_ref()
+            .and_then(|s| s.simulation.as_ref())
+            .map(|s| s.config.hammer.clone()),
     })
+}
+
+/// The paper's bench ran 4 to 7 bar: the model's anchors (docs/model.md).
+const PAPER_SUPPLY_BAR: (f64, f64) = (4.0, 7.0);
+
+/// The one hammer a sheet is of. Traces whose sidecars state different
+/// hammers are refused (one friction law over two hammers means nothing),
+/// and so is a `--config` naming another hammer than the sidecars (the
+/// points would be read with one and the model's curves drawn with the
+/// other). Returns the sidecars' hammer, for the model's curves.
+fn one_hammer(points: &[Point], config: Option<&Path>, configured: &HammerParams) -> Result<Option<HammerParams>> {
+    let mut stated = points.iter().filter_map(|p| p.hammer.as_ref().map(|h| (p, h)));
+    let Some((first, hammer)) = stated.next() else {
+        return Ok(None);
+    };
+    for (p, h) in stated {
+        let d = hammer.differences(h, &[]);
+        if !d.is_empty() {
+            bail!(
+                "{} and {}: their sidecars state different hammers ({}): a sheet is of one hammer; make one per hammer",
+                first.trace,
+                p.trace,
+                d.join(", ")
+            );
+        }
+    }
+    if let Some(config) = config {
+        let d = hammer.differences(configured, &[]);
+        if !d.is_empty() {
+            bail!(
+                "{}'s sidecar states another hammer than --config {} ({}, sidecar vs config): the points would be read with one and the model drawn with the other; leave out --config or give the traces' hammer",
+                first.trace,
+                config.display(),
+                d.join(", ")
+            );
+        }
+    }
+    Ok(Some(hammer.clone()))
 }
 
 /// The friction law F = F0 + k·p (p gauge, bar), least squares over the points.
@@ -257,8 +304,29 @@ pub struct Sheet {
     pub model: Vec<ModelPoint>,
 }
 
+impl Sheet {
+    /// What the reader must know before trusting the model's curves: where
+    /// they leave the supply pressures the model was checked at.
+    pub fn caveats(&self) -> Vec<String> {
+        let (lo, hi) = PAPER_SUPPLY_BAR;
+        let outside: Vec<String> = self
+            .points
+            .iter()
+            .filter(|p| p.supply_bar < lo - 1e-9 || p.supply_bar > hi + 1e-9)
+            .map(|p| format!("{}", p.supply_bar))
+            .collect();
+        if outside.is_empty() {
+            return Vec::new();
+        }
+        vec![format!(
+            "the model's curves at {} bar are an extrapolation: the model is anchored to the paper's bench at {lo}–{hi} bar (docs/model.md)",
+            outside.join(", ")
+        )]
+    }
+}
+
 pub fn compute(args: &BenchSheetArgs) -> Result<Sheet> {
-    let file = args.mapping.load()?;
+    let mut file = args.mapping.load()?;
     if !args.supply_bar.is_empty() && args.supply_bar.len() != args.traces.len() {
         bail!(
             "--supply-bar gives {} pressures for {} traces: give one per trace, in order",
@@ -266,9 +334,31 @@ pub fn compute(args: &BenchSheetArgs) -> Result<Sheet> {
             args.traces.len()
         );
     }
+    let (lo_s, hi_s) = DURATION_S_RANGE;
+    if !(args.model_duration_s >= lo_s && args.model_duration_s <= hi_s) {
+        bail!(
+            "--model-duration-s {}: the model runs {lo_s} to {hi_s} s per point",
+            args.model_duration_s
+        );
+    }
+    let (lo, hi) = SUPPLY_BAR_RANGE;
+    if let Some(bar) = args.supply_bar.iter().find(|b| !(**b >= lo && **b <= hi)) {
+        bail!("--supply-bar {bar}: the model's curves run from {lo} to {hi} bar (gauge)");
+    }
     let mut points = Vec::new();
     for (i, t) in args.traces.iter().enumerate() {
         points.push(point(t, &file, args.supply_bar.get(i).copied())?);
+    }
+    if let Some(p) = points.iter().find(|p| !(p.supply_bar >= lo && p.supply_bar <= hi)) {
+        bail!(
+            "{}: supply pressure {} bar (from its sidecar or the mapping): the model's curves run from {lo} to {hi} bar (gauge)",
+            p.trace,
+            p.supply_bar
+        );
+    }
+    if let Some(hammer) = one_hammer(&points, args.mapping.config.as_deref(), &file.hammer)? {
+        // The model's curves are of the hammer the traces were read with.
+        file.hammer = hammer;
     }
     points.sort_by(|a, b| a.supply_bar.total_cmp(&b.supply_bar));
     let law = fit_friction_law(&points);
@@ -306,6 +396,9 @@ fn write_file(path: &Path, text: &str) -> Result<()> {
 /// Writes the sheet into `args.out`; returns the files written.
 pub fn run(args: &BenchSheetArgs) -> Result<Vec<PathBuf>> {
     let sheet = compute(args)?;
+    for c in sheet.caveats() {
+        eprintln!("caveat: {c}");
+    }
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
     let mut files = Vec::new();
     let out = |name: &str| args.out.join(name);
@@ -494,6 +587,16 @@ pub fn run(args: &BenchSheetArgs) -> Result<Vec<PathBuf>> {
     Ok(files)
 }
 
+/// A table's energy cell: a value the sheet has none of (the model with a
+/// friction law, from one pressure) is a dash, not "NaN".
+fn joules(v: f64) -> String {
+    if v.is_finite() {
+        format!("{v:.3}")
+    } else {
+        "–".into()
+    }
+}
+
 fn html(sheet: &Sheet) -> String {
     let mut h = String::from(
         "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<title>Bench sheet</title>\n<style>body{font-family:sans-serif;max-width:1000px;margin:auto}table{border-collapse:collapse}td,th{border:1px solid #bbb;padding:3px 8px;text-align:right}img{max-width:100%}</style>\n</head>\n<body>\n<h1>Bench sheet</h1>\n",
@@ -509,7 +612,12 @@ fn html(sheet: &Sheet) -> String {
                 "<p>Friction law fitted over the points (least squares): <b>F = {f0:.3} N + {k:.4} N/bar · p</b> (p gauge supply pressure). The model's curve with friction uses it.</p>"
             );
         }
-        None => h.push_str("<p>One pressure only: no friction law fitted.</p>\n"),
+        None => h.push_str(
+            "<p>One pressure only: no friction law fitted, so the model with friction is not drawn (–).</p>\n",
+        ),
+    }
+    for c in sheet.caveats() {
+        let _ = writeln!(h, "<p><b>Caveat:</b> {c}.</p>");
     }
     h.push_str("<h2>Operating points</h2>\n<table>\n<tr><th>supply, bar</th><th>friction, N (± U)</th><th>stroke, N</th><th>backhaul, N</th><th>energy, J (± U)</th><th>energy w/o friction, J</th><th>frequency, Hz</th><th>blows/min</th><th>impact power, W</th><th>stroke, mm</th><th>friction work share</th><th>cycles used</th></tr>\n");
     for p in &sheet.points {
@@ -553,15 +661,15 @@ fn html(sheet: &Sheet) -> String {
         let (mn, mf) = m.map_or((f64::NAN, f64::NAN), |m| (m.energy_nominal_j, m.energy_friction_j));
         let _ = writeln!(
             h,
-            "<tr><td>{:.2}</td><td>{:.3}</td><td>{:.3}</td><td>{:.3}</td><td>{:.1} %</td><td>{:.3}</td><td>{:.3}</td><td>{:.3}</td></tr>",
+            "<tr><td>{:.2}</td><td>{:.3}</td><td>{:.3}</td><td>{:.3}</td><td>{:.1} %</td><td>{}</td><td>{}</td><td>{}</td></tr>",
             p.supply_bar,
             p.impact_energy_j,
             p.impact_energy_frictionless_j,
             p.friction_energy_loss_j(),
             100.0 * p.friction_energy_loss_j() / p.impact_energy_frictionless_j,
-            mn,
-            mf,
-            mn - mf
+            joules(mn),
+            joules(mf),
+            joules(mn - mf)
         );
     }
     h.push_str("</table>\n<h2>Curves over supply pressure (the paper's Figures 13–14)</h2>\n");

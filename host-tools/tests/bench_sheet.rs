@@ -205,3 +205,100 @@ fn the_bench_sheet_of_a_simulated_sweep() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A simulated trace at `bar` (0.3 s, the paper's friction), with `config`.
+fn simulated(dir: &Path, name: &str, bar: &str, config: Option<&Path>) -> PathBuf {
+    let t = dir.join(name);
+    let mut args = vec![
+        "simulate",
+        "--supply-bar",
+        bar,
+        "--duration",
+        "0.3",
+        "--effect",
+        "coulomb_friction",
+        "--seed",
+        "3",
+        "--out",
+        t.to_str().unwrap(),
+    ];
+    if let Some(c) = config {
+        args.extend(["--config", c.to_str().unwrap()]);
+    }
+    let (code, _, err) = hammer(&args);
+    assert_eq!(code, 0, "{err}");
+    t
+}
+
+/// Issue 48 item 5: traces of two hammers, or traces of one hammer and a
+/// --config of another, are refused, naming the traces, the config and the
+/// field that differs; nothing is written.
+#[test]
+fn a_sheet_of_mixed_hammers_is_refused() {
+    let dir = tmp_dir("mixed");
+    let heavy = dir.join("heavy.toml");
+    std::fs::write(&heavy, "[hammer]\npiston_mass_kg = 2.0\n").unwrap();
+    let light4 = simulated(&dir, "light4.csv", "4", None);
+    let heavy7 = simulated(&dir, "heavy7.csv", "7", Some(&heavy));
+    let out = dir.join("sheet");
+    let (code, _, err) = hammer(&[
+        "bench-sheet",
+        light4.to_str().unwrap(),
+        heavy7.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("light4.csv") && err.contains("heavy7.csv"), "{err}");
+    assert!(err.contains("piston_mass_kg = 1.12 vs 2.0"), "{err}");
+    assert!(!out.exists(), "nothing written");
+    let light7 = simulated(&dir, "light7.csv", "7", None);
+    let (code, _, err) = hammer(&[
+        "bench-sheet",
+        light4.to_str().unwrap(),
+        light7.to_str().unwrap(),
+        "--config",
+        heavy.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("--config") && err.contains("heavy.toml"), "{err}");
+    assert!(err.contains("piston_mass_kg = 1.12 vs 2.0"), "{err}");
+}
+
+/// Issue 48 item 15: the sheet's refusals name the user's flags, not the
+/// configuration keys behind them; one pressure gives no "NaN" in the paper's
+/// Table 3; a point outside the paper's 4–7 bar carries a caveat.
+#[test]
+fn the_sheet_names_flags_and_says_what_it_cannot_draw() {
+    let dir = tmp_dir("flags");
+    let t8 = simulated(&dir, "s8.csv", "8", None);
+    let out = dir.join("sheet");
+    let t8s = t8.to_str().unwrap();
+    let outs = out.to_str().unwrap();
+    let (code, _, err) = hammer(&["bench-sheet", t8s, "--model-duration-s", "0", "--out", outs]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("--model-duration-s") && !err.contains("solver.duration_s"),
+        "{err}"
+    );
+    let (code, _, err) = hammer(&["bench-sheet", t8s, "--supply-bar", "20.25", "--out", outs]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("--supply-bar") && !err.contains("supply.pressure_bar"),
+        "{err}"
+    );
+    let (code, _, err) = hammer(&["bench-sheet", t8s, "--out", outs]);
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        err.contains("caveat: the model's curves at 8 bar are an extrapolation"),
+        "{err}"
+    );
+    let html = std::fs::read_to_string(out.join("index.html")).unwrap();
+    assert!(!html.contains("NaN"), "{html}");
+    assert!(
+        html.contains("Caveat:") && html.contains("no friction law fitted"),
+        "{html}"
+    );
+}

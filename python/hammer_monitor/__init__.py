@@ -175,6 +175,10 @@ def simulate(
 
 
 def _traces(items, what: str) -> list:
+    # One path on its own is one trace (a string is iterable: its characters
+    # are not paths).
+    if isinstance(items, (str, bytes, os.PathLike)):
+        items = [items]
     out = []
     for item in items or []:
         if isinstance(item, (str, os.PathLike)):
@@ -199,7 +203,7 @@ def diagnose(
 ):
     """The sim-to-real gap diagnosis, as ``hammer diagnose`` runs it (docs/diagnosis.md).
 
-    ``measured`` lists trace files, each a path (its supply pressure from the
+    ``measured`` is one trace file or a list of them, each a path (its supply pressure from the
     sidecar) or ``(path, supply_bar)`` with the gauge supply pressure in bar,
     or folders ``hammer commission`` wrote (all their captures);
     ``reference`` likewise lists records of the same hammer when it was known
@@ -221,7 +225,7 @@ def diagnose(
     report, waves = _native.diagnose(
         _traces(measured, "measured"),
         _traces(reference, "reference"),
-        [os.fspath(p) for p in fit_on or []],
+        [path for path, _ in _traces(fit_on, "fit_on")],
         _path(config),
         float(nominal_uncertainty),
         bool(figures),

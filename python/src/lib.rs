@@ -74,7 +74,7 @@ fn read_trace(py: Python<'_>, path: PathBuf, map: Option<PathBuf>) -> PyResult<P
             .map_err(|e| e.to_string())
     })?
     .map_err(PyValueError::new_err)?;
-    trace_columns(py, &trace)
+    trace_columns(py, trace)
 }
 
 /// `hammer estimate --format jsonl` on a trace file: one JSON object per record.
@@ -162,12 +162,14 @@ fn simulate(
         Some(p) => refused(format!("{}: {e}", p.display())),
         None => refused(e),
     })?;
-    let sim = run_interruptible(py, move || {
-        hammer_sim::simulate(&cfg).map_err(|e| format!("simulation failed: {e}"))
+    // The trace alone, built as the run goes: the whole simulation would
+    // also keep the solver's truth and the ADC codes (about 4x the table).
+    let (trace, info) = run_interruptible(py, move || {
+        hammer_sim::simulate_trace(&cfg).map_err(|e| format!("simulation failed: {e}"))
     })?
     .map_err(PyValueError::new_err)?;
-    let truth = serde_json::to_string(&sim.run.cycles).map_err(refused)?;
-    Ok((trace_columns(py, &sim.trace())?, truth))
+    let truth = serde_json::to_string(&info.cycles).map_err(refused)?;
+    Ok((trace_columns(py, trace)?, truth))
 }
 
 /// `hammer diagnose` on traces: `report.json`'s content as JSON, and with

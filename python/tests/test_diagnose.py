@@ -55,3 +55,14 @@ def test_a_trace_without_supply_pressure_is_the_clis_message(hammer, friction_tr
         hm.diagnose([bare])
     assert "supply pressure unknown" in str(e.value)
     assert str(e.value) == hammer.error("diagnose", "--measured", bare, "--out", tmp_path / "out")
+
+
+def test_one_path_on_its_own_is_one_trace(hammer, friction_traces, tmp_path):
+    """A string is iterable: its characters must not be read as paths."""
+    bare = tmp_path / "bare.csv"
+    bare.write_bytes(friction_traces[0].read_bytes())
+    expected = hammer.error("diagnose", "--measured", bare, "--out", tmp_path / "out")
+    for given in (str(bare), bare):
+        with pytest.raises(ValueError) as e:
+            hm.diagnose(given, fit_on=given)
+        assert str(e.value) == expected

@@ -615,7 +615,10 @@ mod tests {
             }
         );
         let e = Destination::parse("https://user:t0ken@x/write").unwrap_err();
-        assert!(!format!("{e:#}").contains("t0ken"), "the refusal names no credential: {e:#}");
+        assert!(
+            !format!("{e:#}").contains("t0ken"),
+            "the refusal names no credential: {e:#}"
+        );
         let e = Destination::parse("https://:t0ken@/write").unwrap_err();
         assert!(!format!("{e:#}").contains("t0ken"), "{e:#}");
         let e = Destination::parse("http://x:8086/write?db=h&u=me&p=s3cret").unwrap_err();

@@ -297,12 +297,18 @@ mod tests {
 
     #[test]
     fn a_url_is_shown_without_its_credentials() {
-        assert_eq!(redacted_url("mqtts://u:hunter2@broker:8883"), "mqtts://<redacted>@broker:8883");
+        assert_eq!(
+            redacted_url("mqtts://u:hunter2@broker:8883"),
+            "mqtts://<redacted>@broker:8883"
+        );
         assert_eq!(
             redacted_url("https://a:b@h:8086/write?db=x&p=hunter2#f"),
             "https://<redacted>@h:8086/write?db=x&p=<redacted>#f"
         );
-        assert_eq!(redacted_url("http://h/api/v2/write?token=t0k&org=o"), "http://h/api/v2/write?token=<redacted>&org=o");
+        assert_eq!(
+            redacted_url("http://h/api/v2/write?token=t0k&org=o"),
+            "http://h/api/v2/write?token=<redacted>&org=o"
+        );
         assert_eq!(redacted_url("mqtt://broker:1883"), "mqtt://broker:1883");
         assert_eq!(redacted_url("u:pw@host"), "<redacted>@host");
     }

@@ -32,4 +32,6 @@ pub mod solver;
 pub use effects::{Effects, EFFECT_NAMES, REGISTRY};
 pub use params::SimConfig;
 pub use run::{simulate_truth, CycleTruth, SimRun, TruthTrace};
-pub use simulate::{simulate, simulate_to_file, stream_codes, SimulateError, Simulation, SimulationInfo};
+pub use simulate::{
+    simulate, simulate_to_file, simulate_trace, stream_codes, SimulateError, Simulation, SimulationInfo,
+};

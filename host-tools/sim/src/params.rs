@@ -63,6 +63,25 @@ impl Default for HammerParams {
 }
 
 impl HammerParams {
+    /// Where `other` is another hammer: each field whose value differs, as
+    /// `name = mine vs other`, leaving out the fields named in `skip` (those
+    /// a caller fits anyway). Read off the serialised form, so a field added
+    /// to the hammer is compared without a list to keep.
+    pub fn differences(&self, other: &HammerParams, skip: &[&str]) -> Vec<String> {
+        let (Ok(serde_json::Value::Object(a)), Ok(serde_json::Value::Object(b))) =
+            (serde_json::to_value(self), serde_json::to_value(other))
+        else {
+            return vec!["the hammer's parameters cannot be compared".into()];
+        };
+        a.iter()
+            .filter(|(k, _)| !skip.contains(&k.as_str()))
+            .filter_map(|(k, v)| {
+                let w = b.get(k)?;
+                (v != w).then(|| format!("{k} = {v} vs {w}"))
+            })
+            .collect()
+    }
+
     pub fn geometry(&self) -> hammer_estimator::Geometry {
         hammer_estimator::Geometry {
             piston_mass_kg: self.piston_mass_kg,
@@ -226,6 +245,11 @@ impl ContactParams {
     }
 }
 
+/// The gauge supply pressures the model runs at, bar (`supply.pressure_bar`).
+pub const SUPPLY_BAR_RANGE: (f64, f64) = (0.5, 20.0);
+/// The simulated times a run accepts, s (`solver.duration_s`).
+pub const DURATION_S_RANGE: (f64, f64) = (1e-3, 600.0);
+
 /// Supply and ambient conditions.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -248,7 +272,8 @@ impl Default for SupplyParams {
 
 impl SupplyParams {
     fn validate(&self) -> Result<(), ConfigError> {
-        check_range("supply.pressure_bar", self.pressure_bar, 0.5, 20.0)?;
+        let (lo, hi) = SUPPLY_BAR_RANGE;
+        check_range("supply.pressure_bar", self.pressure_bar, lo, hi)?;
         check_range("supply.temperature_k", self.temperature_k, 200.0, 400.0)?;
         check_range("supply.ambient_temperature_k", self.ambient_temperature_k, 200.0, 400.0)?;
         Ok(())
@@ -279,7 +304,8 @@ impl Default for SolverParams {
 
 impl SolverParams {
     fn validate(&self) -> Result<(), ConfigError> {
-        check_range("solver.duration_s", self.duration_s, 1e-3, 600.0)?;
+        let (lo, hi) = DURATION_S_RANGE;
+        check_range("solver.duration_s", self.duration_s, lo, hi)?;
         check_range("solver.output_step_s", self.output_step_s, 1e-7, 1e-2)?;
         check_range("solver.rtol", self.rtol, 1e-12, 1e-2)?;
         check_range("solver.max_step_s", self.max_step_s, 1e-7, 1e-2)?;

@@ -248,6 +248,60 @@ pub fn simulate_to_file(config: &SimConfig, out: Option<&Path>) -> Result<Simula
     Ok(info)
 }
 
+/// The trace's columns filled as the run makes them, each allocated once
+/// for the whole run: what a caller that wants the trace and nothing else
+/// per sample keeps (the Python package's `simulate`).
+struct TraceColumns {
+    trace: Trace,
+    truth: [Vec<f64>; 7],
+}
+
+impl MeasuredSink for TraceColumns {
+    type Error = std::convert::Infallible;
+    fn sample(&mut self, truth: &TruthSample, m: ChainSample) -> Result<(), Self::Error> {
+        let [rear, front, accel] = m.values;
+        self.trace.t_s.push(truth.t_s);
+        self.trace.p_rear_pa.push(rear);
+        self.trace.p_front_pa.push(front);
+        self.trace.accel_mps2.push(accel);
+        for (col, (_, f)) in self.truth.iter_mut().zip(TRUTH_COLUMNS) {
+            col.push(f(truth));
+        }
+        Ok(())
+    }
+}
+
+/// A simulation kept as its trace alone (the columns [`Simulation::trace`]
+/// gives, the same values) and what its sidecar records: about a quarter
+/// of [`simulate`]'s memory, which also keeps the solver's truth, the sensor
+/// chain's codes and then copies them into the trace.
+pub fn simulate_trace(config: &SimConfig) -> Result<(Trace, SimulationInfo), SolverError> {
+    let n = crate::run::output_len(config);
+    let column = || Vec::with_capacity(n);
+    let out = TraceColumns {
+        trace: Trace {
+            dt_s: config.solver.output_step_s,
+            t_s: column(),
+            p_rear_pa: column(),
+            p_front_pa: column(),
+            accel_mps2: column(),
+            extra: Default::default(),
+            gaps: Vec::new(),
+        },
+        truth: std::array::from_fn(|_| column()),
+    };
+    let (summary, out, clipped) = run_measured(config, out).map_err(|e| match e {
+        RunError::Solver(e) => e,
+        RunError::Sink(never) => match never {},
+    })?;
+    let mut trace = out.trace;
+    for ((name, _), col) in TRUTH_COLUMNS.iter().zip(out.truth) {
+        trace.extra.insert(name.to_string(), col);
+    }
+    let info = SimulationInfo::new(config, summary.cycles, summary.mass_balance, summary.stats, clipped);
+    Ok((trace, info))
+}
+
 impl Simulation {
     /// The measured channels plus truth columns, in the project's trace format.
     pub fn trace(&self) -> Trace {
@@ -403,6 +457,40 @@ mod tests {
     use super::*;
     use crate::sensor::measure;
     use hammer_trace::trace::write_csv;
+
+    /// The trace kept alone is the whole simulation's trace, value for
+    /// value, with the same cycles and sidecar record.
+    #[test]
+    fn the_trace_kept_alone_is_the_simulations_trace() {
+        let cfg = short_run_with_sensor_effects();
+        let sim = simulate(&cfg).unwrap();
+        let (trace, info) = simulate_trace(&cfg).unwrap();
+        let whole = sim.trace();
+        assert_eq!(trace.t_s.len(), whole.t_s.len());
+        assert_eq!(trace.dt_s.to_bits(), whole.dt_s.to_bits());
+        for (a, b) in [
+            (&trace.t_s, &whole.t_s),
+            (&trace.p_rear_pa, &whole.p_rear_pa),
+            (&trace.p_front_pa, &whole.p_front_pa),
+            (&trace.accel_mps2, &whole.accel_mps2),
+        ] {
+            assert!(a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits()));
+        }
+        assert_eq!(
+            trace.extra.keys().collect::<Vec<_>>(),
+            whole.extra.keys().collect::<Vec<_>>()
+        );
+        for (name, col) in &whole.extra {
+            assert!(
+                trace.extra[name]
+                    .iter()
+                    .zip(col)
+                    .all(|(x, y)| x.to_bits() == y.to_bits()),
+                "{name}"
+            );
+        }
+        assert_eq!(info, sim.info());
+    }
 
     /// The codes a simulation carries are the ADC's own (with the chain on:
     /// the code the channel converted, read back through the board's

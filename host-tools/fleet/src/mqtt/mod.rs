@@ -626,7 +626,10 @@ mod tests {
         assert_eq!(parse_url("mqtt://broker").unwrap(), ("broker".into(), 1883, false));
         assert_eq!(parse_url("mqtts://b").unwrap(), ("b".into(), 8883, true));
         let e = parse_url("mqtts://u:secret@b").unwrap_err().to_string();
-        assert!(!e.contains("secret") && e.contains("<redacted>@b"), "no credentials in a URL, nor in its refusal: {e}");
+        assert!(
+            !e.contains("secret") && e.contains("<redacted>@b"),
+            "no credentials in a URL, nor in its refusal: {e}"
+        );
         let e = parse_url("tcp://u:secret@b").unwrap_err().to_string();
         assert!(!e.contains("secret"), "{e}");
         assert!(parse_url("ssl://b").is_err());

@@ -1,0 +1,48 @@
+"""How much memory `hammer_monitor.simulate` holds per simulated second,
+against the table it returns (issue 48: it held 3.9x the table).
+
+    python python/bench/simulate_memory.py [--seconds 1 2 4]
+
+Each figure comes from a fresh interpreter's peak resident set (ru_maxrss),
+less that of an interpreter that imported the package and did nothing else.
+Prints the figures; it asserts nothing (a figure to read, not a timed test).
+"""
+
+import argparse
+import subprocess
+import sys
+
+CHILD = """
+import resource, sys
+import hammer_monitor as hm
+seconds = float(sys.argv[1])
+if seconds > 0:
+    trace, truth = hm.simulate(4.0, seconds, seed=1)
+    table = trace.nbytes
+else:
+    table = 0
+print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024, table)
+"""
+
+
+def peak(seconds: float) -> tuple[int, int]:
+    out = subprocess.run([sys.executable, "-c", CHILD, str(seconds)], check=True, capture_output=True, text=True)
+    rss, table = out.stdout.split()
+    return int(rss), int(table)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--seconds", type=float, nargs="+", default=[1.0, 2.0, 4.0])
+    args = ap.parse_args()
+    base, _ = peak(0)
+    print(f"interpreter with the package imported: {base / 1e6:.1f} MB peak")
+    print("simulated s   peak above it (MB)   table (MB)   peak / table")
+    for s in args.seconds:
+        rss, table = peak(s)
+        grown = rss - base
+        print(f"{s:11.1f}   {grown / 1e6:18.1f}   {table / 1e6:10.1f}   {grown / table:12.2f}")
+
+
+if __name__ == "__main__":
+    main()
