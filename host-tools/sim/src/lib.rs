@@ -7,6 +7,7 @@
 //! - [`effects`]: the effect catalogue, all off in the nominal model;
 //! - [`gas`], [`model`]: the equations (`docs/model.md`), [`solver`]: Dormand–Prince 5(4);
 //! - [`run`]: one solution with events, per-cycle truth and balances, handed to a sink as it is produced;
+//! - [`stepper`]: that solution advanced from outside, communication point by communication point;
 //! - [`rng`]: the seeded random numbers (xoshiro256++, ziggurat normal deviates);
 //! - [`sensor`]: bandwidth, noise, clipping, quantisation and the sensor-side effects
 //!   (the channels' settings in [`sensor_model`], below [`params`], which holds them);
@@ -28,6 +29,7 @@ pub mod sensor;
 pub mod sensor_model;
 pub mod simulate;
 pub mod solver;
+pub mod stepper;
 
 pub use effects::{Effects, EFFECT_NAMES, REGISTRY};
 pub use params::SimConfig;

@@ -4,9 +4,10 @@
 use serde::{Deserialize, Serialize};
 
 use super::gas::P_ATM_PA;
-use super::model::{self, HammerModel, N, N_DYN};
+use super::model::{self, HammerModel, N};
 use super::params::SimConfig;
-use super::solver::{Dense, Dopri5, SolverError, SolverStats, MIN_STEP_S};
+use super::solver::{SolverError, SolverStats};
+pub use super::stepper::Stepper;
 
 /// The noiseless solution on the output grid (SI, gauge pressures).
 #[derive(Debug, Clone, Default)]
@@ -227,24 +228,6 @@ pub struct RunSummary {
     pub stats: SolverStats,
 }
 
-#[derive(Debug, Clone, Copy, PartialEq)]
-enum EventKind {
-    Kink,
-    ContactOnset,
-    ContactEnd,
-    ValveLeftStop,
-    ValveRightStop,
-    StrokeStart,
-    VelocityZeroDown,
-}
-
-struct EventFn {
-    kind_up: Option<EventKind>,
-    kind_down: Option<EventKind>,
-    component: usize,
-    level: f64,
-}
-
 /// Runs the model of `cfg` and extracts its per-cycle truth.
 pub fn simulate_truth(cfg: &SimConfig) -> Result<SimRun, SolverError> {
     let mut truth = TruthTrace::with_capacity_for(cfg);
@@ -262,232 +245,16 @@ pub fn simulate_truth(cfg: &SimConfig) -> Result<SimRun, SolverError> {
 }
 
 /// Runs the model of `cfg`, handing each output sample and impact to `sink`
-/// as it is produced; the per-cycle truth is extracted on the fly.
+/// as it is produced; the per-cycle truth is extracted on the fly. One
+/// [`Stepper`] advanced to the end in one go: a run advanced in pieces
+/// gives the same samples.
 pub fn run_model<S: TruthSink>(cfg: &SimConfig, sink: &mut S) -> Result<RunSummary, RunError<S::Error>> {
-    let model = HammerModel::new(cfg);
-    let y0 = model.initial_state(cfg.hammer.initial_position_m);
-    let rtol = cfg.solver.rtol;
-    let mut atol = [0.0; N];
-    let scale = [0.05, 3.0, 1e-4, 5e5, 1e-4, 5e5, 2e-3, 2.0, 5e5, 30.0];
-    for i in 0..N_DYN {
-        atol[i] = rtol * scale[i];
-    }
-    let mut solver = Dopri5::new(&model, 0.0, y0, rtol, atol, N_DYN, cfg.solver.max_step_s);
-
-    let mut fns = Vec::new();
-    for level in model.kink_positions() {
-        let is_contact = (level - model.x_impact_m).abs() < 1e-15;
-        fns.push(EventFn {
-            kind_up: Some(if is_contact {
-                EventKind::ContactOnset
-            } else {
-                EventKind::Kink
-            }),
-            kind_down: Some(if is_contact {
-                EventKind::ContactEnd
-            } else {
-                EventKind::Kink
-            }),
-            component: model::X,
-            level,
-        });
-    }
-    fns.push(EventFn {
-        kind_up: Some(EventKind::Kink),
-        kind_down: Some(EventKind::Kink),
-        component: model::X,
-        level: 0.0,
-    });
-    for level in model.valve_kinks() {
-        fns.push(EventFn {
-            kind_up: Some(EventKind::Kink),
-            kind_down: Some(EventKind::Kink),
-            component: model::XV,
-            level,
-        });
-    }
-    fns.push(EventFn {
-        kind_up: None,
-        kind_down: Some(EventKind::ValveLeftStop),
-        component: model::XV,
-        level: 0.0,
-    });
-    fns.push(EventFn {
-        kind_up: Some(EventKind::ValveRightStop),
-        kind_down: None,
-        component: model::XV,
-        level: model.valve_travel_m,
-    });
-    fns.push(EventFn {
-        kind_up: Some(EventKind::StrokeStart),
-        kind_down: Some(EventKind::VelocityZeroDown),
-        component: model::V,
-        level: 0.0,
-    });
-
-    let t_end = cfg.solver.duration_s;
-    let dt = cfg.solver.output_step_s;
-    let n_out = output_len(cfg);
-    let mut cycles = CycleTracker::new(&model);
-    let emit = |cycles: &mut CycleTracker, sink: &mut S, index: usize, t: f64, y: &[f64; N]| {
-        let s = truth_sample(&model, index, t, y);
-        cycles.sample(&s);
-        sink.sample(&s).map_err(RunError::Sink)
-    };
-    let mut next_out = 0usize;
-    emit(&mut cycles, sink, next_out, 0.0, &y0)?;
-    next_out += 1;
-
-    let mut events = Events::default();
-    // The redone step may stop a rounding error short of the crossing; the same
-    // crossing must then not count twice.
-    let mut last_event: Option<(usize, f64)> = None;
-    while solver.t < t_end {
-        let checkpoint = solver.checkpoint();
-        let t0 = solver.t;
-        let ya = solver.y;
-        let mut dense = solver.step(&model, t_end)?;
-        let mut earliest = first_event(&fns, &dense, &ya, &solver.y, last_event);
-        if let Some((te, _, _)) = earliest {
-            // The step's later stages saw the far side of a discontinuity, so
-            // its interpolant is polluted there: redo it to end at the event.
-            if te - t0 >= MIN_STEP_S {
-                solver.rewind(&checkpoint);
-                dense = solver.step(&model, te)?;
-                if solver.t < te {
-                    earliest = None; // error control cut the step short; look again next step
-                }
-            } else {
-                dense = Dense::constant(t0, &ya);
-            }
-        }
-        let t_stop = solver.t;
-        while next_out < n_out {
-            let t = next_out as f64 * dt;
-            if t > t_stop {
-                break;
-            }
-            // Only the states the output needs.
-            let mut y = [0.0; N];
-            dense.at_into(
-                t,
-                &[model::X, model::V, model::P1, model::P2, model::XV, model::PS],
-                &mut y,
-            );
-            emit(&mut cycles, sink, next_out, t, &y)?;
-            next_out += 1;
-        }
-
-        if let Some((_, kind, which)) = earliest {
-            let te = solver.t;
-            last_event = Some((which, te));
-            let mut y = solver.y;
-            let rec = EventRecord { t_s: te, y };
-            match kind {
-                EventKind::ContactOnset => {
-                    model.contact_v_in.set(y[model::V]);
-                    cycles.impact(&rec);
-                    sink.impact(&rec).map_err(RunError::Sink)?;
-                    events.impacts.push(rec);
-                }
-                EventKind::ContactEnd => {
-                    cycles.contact_end(&rec);
-                    events.contact_ends.push(rec);
-                }
-                EventKind::StrokeStart => {
-                    cycles.stroke_start(&rec);
-                    events.stroke_starts.push(rec);
-                }
-                EventKind::ValveLeftStop => {
-                    y[model::XV] = 0.0;
-                    y[model::VV] = 0.0;
-                }
-                EventKind::ValveRightStop => {
-                    y[model::XV] = model.valve_travel_m;
-                    y[model::VV] = 0.0;
-                }
-                EventKind::Kink | EventKind::VelocityZeroDown => {}
-            }
-            solver.restart(&model, te, y);
-        }
-    }
-    // The last grid point may sit a rounding error past t_end.
-    while next_out < n_out {
-        let t = next_out as f64 * dt;
-        emit(&mut cycles, sink, next_out, t, &solver.y)?;
-        next_out += 1;
-    }
-
-    let stored = |y: &[f64; N]| y[model::M1] + y[model::M2] + model.line_mass_kg(y);
-    let yf = solver.y;
-    let drawn = yf[model::M_IN];
-    let vented = yf[model::M_OUT];
-    let stored_change = stored(&yf) - stored(&y0);
-    let mass_balance = MassBalance {
-        drawn_kg: drawn,
-        vented_kg: vented,
-        stored_change_kg: stored_change,
-        residual_kg: drawn - vented - stored_change,
-    };
-    Ok(RunSummary {
-        events,
-        cycles: cycles.cycles,
-        mass_balance,
-        stats: solver.stats,
-    })
+    let mut stepper = Stepper::new(cfg);
+    stepper.advance_to(f64::INFINITY, sink)?;
+    stepper.finish(sink)
 }
 
-/// The earliest event function that changes sign over the step.
-fn first_event(
-    fns: &[EventFn],
-    dense: &Dense<N>,
-    ya: &[f64; N],
-    yb: &[f64; N],
-    last: Option<(usize, f64)>,
-) -> Option<(f64, EventKind, usize)> {
-    let mut earliest: Option<(f64, EventKind, usize)> = None;
-    for (which, f) in fns.iter().enumerate() {
-        let g0 = ya[f.component] - f.level;
-        let g1 = yb[f.component] - f.level;
-        let kind = if g0 < 0.0 && g1 >= 0.0 {
-            f.kind_up
-        } else if g0 > 0.0 && g1 <= 0.0 {
-            f.kind_down
-        } else {
-            None
-        };
-        if let Some(kind) = kind {
-            let tr = locate(dense, dense.t0, dense.t1(), f.component, f.level, g0);
-            if last.is_some_and(|(w, t)| w == which && tr - t < 1e-9) {
-                continue;
-            }
-            if earliest.is_none_or(|(te, _, _)| tr < te) {
-                earliest = Some((tr, kind, which));
-            }
-        }
-    }
-    earliest
-}
-
-/// Bisection on the dense output; returns the first time on the far side of the crossing.
-fn locate(dense: &Dense<N>, t0: f64, t1: f64, c: usize, level: f64, g0: f64) -> f64 {
-    let (mut lo, mut hi) = (t0, t1);
-    for _ in 0..60 {
-        let mid = 0.5 * (lo + hi);
-        if mid <= lo || mid >= hi {
-            break;
-        }
-        let g = dense.at(mid, c) - level;
-        if (g < 0.0) == (g0 < 0.0) && g != 0.0 {
-            lo = mid;
-        } else {
-            hi = mid;
-        }
-    }
-    hi
-}
-
-fn truth_sample(model: &HammerModel, index: usize, t: f64, y: &[f64; N]) -> TruthSample {
+pub(crate) fn truth_sample(model: &HammerModel, index: usize, t: f64, y: &[f64; N]) -> TruthSample {
     let f = model.piston_forces(t, y);
     TruthSample {
         index,
@@ -531,7 +298,7 @@ impl FrictionSum {
 /// end after the previous impact, through the last stroke start, to the impact.
 /// Every sample counts towards the interval it was produced in (a sample at an
 /// event's time belongs to the interval before it).
-struct CycleTracker {
+pub(crate) struct CycleTracker {
     mass_kg: f64,
     x_impact_m: f64,
     impacts_seen: usize,
@@ -545,11 +312,11 @@ struct CycleTracker {
     stroke: FrictionSum,
     peak_rear_pa: f64,
     peak_front_pa: f64,
-    cycles: Vec<CycleTruth>,
+    pub(crate) cycles: Vec<CycleTruth>,
 }
 
 impl CycleTracker {
-    fn new(model: &HammerModel) -> Self {
+    pub(crate) fn new(model: &HammerModel) -> Self {
         Self {
             mass_kg: model.mass_kg,
             x_impact_m: model.x_impact_m,
@@ -565,7 +332,7 @@ impl CycleTracker {
         }
     }
 
-    fn sample(&mut self, s: &TruthSample) {
+    pub(crate) fn sample(&mut self, s: &TruthSample) {
         if self.prev_impact.is_none() {
             return;
         }
@@ -581,21 +348,21 @@ impl CycleTracker {
         }
     }
 
-    fn contact_end(&mut self, e: &EventRecord) {
+    pub(crate) fn contact_end(&mut self, e: &EventRecord) {
         if self.prev_impact.is_some() && self.contact_end.is_none() {
             self.contact_end = Some(*e);
             self.backhaul = FrictionSum::default();
         }
     }
 
-    fn stroke_start(&mut self, e: &EventRecord) {
+    pub(crate) fn stroke_start(&mut self, e: &EventRecord) {
         if self.contact_end.is_some() {
             self.stroke_start = Some((*e, self.backhaul));
             self.stroke = FrictionSum::default();
         }
     }
 
-    fn impact(&mut self, imp: &EventRecord) {
+    pub(crate) fn impact(&mut self, imp: &EventRecord) {
         let k = self.impacts_seen;
         self.impacts_seen += 1;
         if let (Some(prev), Some(ce), Some((ss, backhaul))) = (self.prev_impact, self.contact_end, self.stroke_start) {
