@@ -65,6 +65,225 @@ impl Phase {
     }
 }
 
+/// One output sample: the sensors' readings and the states a bench with
+/// a position sensor would have.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Sample {
+    pub t_s: f64,
+    pub p_rear_pa: f64,
+    pub p_front_pa: f64,
+    pub accel_mps2: f64,
+    pub x_m: f64,
+    pub v_mps: f64,
+    pub p_rear_true_pa: f64,
+    pub p_front_true_pa: f64,
+    pub spool: f64,
+}
+
+/// The second family advanced from outside: [`Stepper::advance_to`] runs
+/// the fixed steps that start at or before a communication point and hands
+/// out the samples on the way. The steps are the run's own (1 µs), never
+/// cut at a communication point, so a run cut into pieces of any size is
+/// the same run, sample for sample, as [`run`].
+pub struct Stepper<'p> {
+    plant: &'p Plant,
+    fe: &'p mut FrontEndState,
+    h_s: f64,
+    every: usize,
+    steps: usize,
+    /// The next step's index (its start time is `i · h`).
+    i: usize,
+    y: [f64; N],
+    target: f64,
+    k: [[f64; N]; 4],
+    signs: Noise,
+    offset: f64,
+    in_contact: bool,
+    /// (t, friction work and wall heat then) at the last impact.
+    last_impact: Option<(f64, f64, f64)>,
+    stroke_start_x: Option<f64>,
+    stroke: Phase,
+    backhaul: Phase,
+    in_stroke: bool,
+    cycles: Vec<VariantCycle>,
+}
+
+impl<'p> Stepper<'p> {
+    /// `plant` at rest, to run `duration_s` at step `h_s`, sampling every `every` steps.
+    pub fn new(
+        plant: &'p Plant,
+        fe: &'p mut FrontEndState,
+        seed: u64,
+        duration_s: f64,
+        h_s: f64,
+        every: usize,
+    ) -> Self {
+        Self {
+            plant,
+            fe,
+            h_s,
+            every,
+            steps: (duration_s / h_s).round() as usize,
+            i: 0,
+            y: plant.initial(),
+            target: 1.0,
+            k: [[0.0; N]; 4],
+            signs: Noise::new(seed ^ 0xA11CE),
+            offset: 0.0,
+            in_contact: false,
+            last_impact: None,
+            stroke_start_x: None,
+            stroke: Phase::default(),
+            backhaul: Phase::default(),
+            in_stroke: false,
+            cycles: Vec::new(),
+        }
+    }
+
+    /// The states now (the plant's layout, `crate::plant`).
+    pub fn state(&self) -> &[f64; N] {
+        &self.y
+    }
+
+    /// The cycles closed so far.
+    pub fn cycles(&self) -> &[VariantCycle] {
+        &self.cycles
+    }
+
+    /// Whether the run has reached its duration.
+    pub fn done(&self) -> bool {
+        self.i > self.steps
+    }
+
+    /// Runs every step that starts at or before `t_s` (and within the
+    /// run), handing each output sample to `sample`.
+    pub fn advance_to(&mut self, t_s: f64, sample: &mut impl FnMut(Sample)) {
+        while self.i <= self.steps && self.i as f64 * self.h_s <= t_s {
+            self.step(sample);
+        }
+    }
+
+    fn step(&mut self, sample: &mut impl FnMut(Sample)) {
+        let (plant, h_s, i) = (self.plant, self.h_s, self.i);
+        self.i += 1;
+        let t = i as f64 * h_s;
+        let o = plant.deriv(t, &self.y, self.target, &mut self.k[0]);
+        let p_rear = self.y[crate::plant::P1] - crate::flow::P_ATM;
+        let p_front = self.y[crate::plant::P2] - crate::flow::P_ATM;
+        self.fe.step(h_s, p_rear, p_front, o.accel_mps2);
+        if let Some(z) = &plant.e.accel_zero_shift {
+            self.offset *= (-h_s / z.tau_s).exp();
+        }
+        if i % self.every == 0 {
+            let gains = plant
+                .e
+                .pressure_gain_error
+                .as_ref()
+                .map_or((0.0, 0.0), |g| (g.rear, g.front));
+            let (r, f, a) = self.fe.sample(gains, self.offset);
+            sample(Sample {
+                t_s: t,
+                p_rear_pa: r,
+                p_front_pa: f,
+                accel_mps2: a,
+                x_m: self.y[X],
+                v_mps: self.y[V],
+                p_rear_true_pa: p_rear,
+                p_front_true_pa: p_front,
+                spool: self.y[crate::plant::S],
+            });
+        }
+        if i == self.steps {
+            return;
+        }
+        // Phase accounting on the state at the start of the step.
+        let touching = o.contact_n < 0.0 && self.y[X] > 0.0;
+        if !touching {
+            if self.in_stroke {
+                self.stroke.sum += o.friction_n.abs();
+                self.stroke.n += 1;
+            } else if self.last_impact.is_some() {
+                self.backhaul.sum += o.friction_n.abs();
+                self.backhaul.n += 1;
+            }
+        }
+        // RK4.
+        let y0 = self.y;
+        let mut tmp = [0.0; N];
+        for (stage, c) in [(1usize, 0.5), (2, 0.5), (3, 1.0)] {
+            for j in 0..N {
+                tmp[j] = y0[j] + c * h_s * self.k[stage - 1][j];
+            }
+            let (_, after) = self.k.split_at_mut(stage);
+            plant.deriv(t + c * h_s, &tmp, self.target, &mut after[0]);
+        }
+        let k = &self.k;
+        for j in 0..N {
+            self.y[j] = y0[j] + h_s / 6.0 * (k[0][j] + 2.0 * k[1][j] + 2.0 * k[2][j] + k[3][j]);
+        }
+        self.target = plant.next_target(&self.y, self.target);
+        self.events(t, &y0);
+    }
+
+    /// Events of the step from `y0` at `t`, resolved to the step by linear interpolation.
+    fn events(&mut self, t: f64, y0: &[f64; N]) {
+        let (plant, h_s, y) = (self.plant, self.h_s, self.y);
+        let anvil = |y: &[f64; N]| match plant.s.anvil {
+            AnvilLaw::Fixed => plant.p.x_impact_m,
+            AnvilLaw::MovingTool => y[XT],
+        };
+        let (d0, d1) = (y0[X] - anvil(y0), y[X] - anvil(&y));
+        if !self.in_contact && d0 <= 0.0 && d1 > 0.0 {
+            self.in_contact = true;
+            let f = -d0 / (d1 - d0);
+            let t_imp = t + f * h_s;
+            let v_imp = y0[V] + f * (y[V] - y0[V]);
+            if let (Some((t_last, w_last, q_last)), Some(x_turn)) = (self.last_impact, self.stroke_start_x) {
+                let period = t_imp - t_last;
+                self.cycles.push(VariantCycle {
+                    t_impact_s: t_imp,
+                    impact_velocity_mps: v_imp,
+                    impact_energy_j: 0.5 * plant.p.piston_mass_kg * v_imp * v_imp,
+                    period_s: period,
+                    frequency_hz: 1.0 / period,
+                    stroke_m: anvil(y0) - x_turn,
+                    friction_stroke_n: self.stroke.mean(),
+                    friction_backhaul_n: self.backhaul.mean(),
+                    friction_work_j: y[WF] - w_last,
+                    wall_heat_j: y[QW] - q_last,
+                });
+            }
+            self.last_impact = Some((t_imp, y[WF], y[QW]));
+            self.stroke_start_x = None;
+            self.in_stroke = false;
+            self.stroke = Phase::default();
+            self.backhaul = Phase::default();
+            if let Some(z) = &plant.e.accel_zero_shift {
+                self.offset += if self.signs.next_u64() & 1 == 0 {
+                    z.amplitude_mps2
+                } else {
+                    -z.amplitude_mps2
+                };
+            }
+        } else if self.in_contact && d1 <= 0.0 {
+            self.in_contact = false;
+        }
+        if !self.in_contact && !self.in_stroke && self.last_impact.is_some() && y0[V] <= 0.0 && y[V] > 0.0 {
+            self.in_stroke = true;
+            self.stroke_start_x = Some(y[X]);
+        }
+    }
+
+    /// The work balance at the end: (pressure work, pressure + contact +
+    /// friction work − ΔKE), and the cycles.
+    pub fn finish(self) -> (f64, f64, Vec<VariantCycle>) {
+        let y = self.y;
+        let ke = 0.5 * self.plant.p.piston_mass_kg * y[V] * y[V];
+        // The piston starts at rest.
+        (y[WP], y[WP] + y[WC] - y[WF] - ke, self.cycles)
+    }
+}
+
 /// Runs `plant` for `duration_s` at step `h_s`, sampling every `every` steps.
 pub fn run(plant: &Plant, fe: &mut FrontEndState, seed: u64, duration_s: f64, h_s: f64, every: usize) -> Run {
     let steps = (duration_s / h_s).round() as usize;
@@ -83,122 +302,69 @@ pub fn run(plant: &Plant, fe: &mut FrontEndState, seed: u64, duration_s: f64, h_
         energy_residual_j: 0.0,
         pressure_work_j: 0.0,
     };
-    let mut y = plant.initial();
-    let mut target = 1.0;
-    let mut k = [[0.0; N]; 4];
-    let mut tmp = [0.0; N];
-    let zero_shift = plant.e.accel_zero_shift.clone();
-    let gains = plant
-        .e
-        .pressure_gain_error
-        .as_ref()
-        .map_or((0.0, 0.0), |g| (g.rear, g.front));
-    let mut signs = Noise::new(seed ^ 0xA11CE);
-    let mut offset = 0.0;
-    let anvil = |y: &[f64; N]| match plant.s.anvil {
-        AnvilLaw::Fixed => plant.p.x_impact_m,
-        AnvilLaw::MovingTool => y[XT],
-    };
-    // Cycle bookkeeping.
-    let mut in_contact = false;
-    let mut last_impact: Option<(f64, f64, f64)> = None; // (t, friction work and wall heat then)
-    let mut stroke_start_x: Option<f64> = None;
-    let (mut stroke, mut backhaul) = (Phase::default(), Phase::default());
-    let mut in_stroke = false;
-    for i in 0..=steps {
-        let t = i as f64 * h_s;
-        let o = plant.deriv(t, &y, target, &mut k[0]);
-        let p_rear = y[crate::plant::P1] - crate::flow::P_ATM;
-        let p_front = y[crate::plant::P2] - crate::flow::P_ATM;
-        fe.step(h_s, p_rear, p_front, o.accel_mps2);
-        if let Some(z) = &zero_shift {
-            offset *= (-h_s / z.tau_s).exp();
-        }
-        if i % every == 0 {
-            let (r, f, a) = fe.sample(gains, offset);
-            out.t_s.push(t);
-            out.p_rear_pa.push(r);
-            out.p_front_pa.push(f);
-            out.accel_mps2.push(a);
-            out.x_m.push(y[X]);
-            out.v_mps.push(y[V]);
-            out.p_rear_true_pa.push(p_rear);
-            out.p_front_true_pa.push(p_front);
-            out.spool.push(y[crate::plant::S]);
-        }
-        if i == steps {
-            break;
-        }
-        // Phase accounting on the state at the start of the step.
-        let touching = o.contact_n < 0.0 && y[X] > 0.0;
-        if !touching {
-            if in_stroke {
-                stroke.sum += o.friction_n.abs();
-                stroke.n += 1;
-            } else if last_impact.is_some() {
-                backhaul.sum += o.friction_n.abs();
-                backhaul.n += 1;
-            }
-        }
-        // RK4.
-        let y0 = y;
-        for (stage, c) in [(1usize, 0.5), (2, 0.5), (3, 1.0)] {
-            for j in 0..N {
-                tmp[j] = y0[j] + c * h_s * k[stage - 1][j];
-            }
-            let (_, after) = k.split_at_mut(stage);
-            plant.deriv(t + c * h_s, &tmp, target, &mut after[0]);
-        }
-        for j in 0..N {
-            y[j] = y0[j] + h_s / 6.0 * (k[0][j] + 2.0 * k[1][j] + 2.0 * k[2][j] + k[3][j]);
-        }
-        target = plant.next_target(&y, target);
+    let mut stepper = Stepper::new(plant, fe, seed, duration_s, h_s, every);
+    stepper.advance_to(f64::INFINITY, &mut |s| out.push(s));
+    let (pressure_work_j, energy_residual_j, cycles) = stepper.finish();
+    out.pressure_work_j = pressure_work_j;
+    out.energy_residual_j = energy_residual_j;
+    out.cycles = cycles;
+    out
+}
 
-        // Events, resolved to the step by linear interpolation.
-        let (d0, d1) = (y0[X] - anvil(&y0), y[X] - anvil(&y));
-        if !in_contact && d0 <= 0.0 && d1 > 0.0 {
-            in_contact = true;
-            let f = -d0 / (d1 - d0);
-            let t_imp = t + f * h_s;
-            let v_imp = y0[V] + f * (y[V] - y0[V]);
-            if let (Some((t_last, w_last, q_last)), Some(x_turn)) = (last_impact, stroke_start_x) {
-                let period = t_imp - t_last;
-                out.cycles.push(VariantCycle {
-                    t_impact_s: t_imp,
-                    impact_velocity_mps: v_imp,
-                    impact_energy_j: 0.5 * plant.p.piston_mass_kg * v_imp * v_imp,
-                    period_s: period,
-                    frequency_hz: 1.0 / period,
-                    stroke_m: anvil(&y0) - x_turn,
-                    friction_stroke_n: stroke.mean(),
-                    friction_backhaul_n: backhaul.mean(),
-                    friction_work_j: y[WF] - w_last,
-                    wall_heat_j: y[QW] - q_last,
-                });
+impl Run {
+    fn push(&mut self, s: Sample) {
+        self.t_s.push(s.t_s);
+        self.p_rear_pa.push(s.p_rear_pa);
+        self.p_front_pa.push(s.p_front_pa);
+        self.accel_mps2.push(s.accel_mps2);
+        self.x_m.push(s.x_m);
+        self.v_mps.push(s.v_mps);
+        self.p_rear_true_pa.push(s.p_rear_true_pa);
+        self.p_front_true_pa.push(s.p_front_true_pa);
+        self.spool.push(s.spool);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::structure::{Structure, VariantParams};
+    use hammer_sim::effects::Effects;
+
+    /// Cut into pieces of any size, on every structure, the run is the
+    /// whole run sample for sample and cycle for cycle.
+    #[test]
+    fn the_run_does_not_depend_on_how_it_is_cut() {
+        let mut effects = Effects::default();
+        effects.apply_spec("coulomb_friction").unwrap();
+        effects.apply_spec("accel_zero_shift").unwrap();
+        let mut structures = vec![Structure::BASE];
+        structures.extend(Structure::singles());
+        for (k, s) in structures.into_iter().enumerate() {
+            let plant = Plant::new(VariantParams::default(), s, effects.clone(), 5.0);
+            let (h_s, every, duration_s) = (1e-6, 10, 0.2);
+            let mut fe = FrontEndState::new(s.front_end, 3);
+            let whole = run(&plant, &mut fe, 3, duration_s, h_s, every);
+            for piece_s in [7e-6, 1e-5, 2.5e-3] {
+                let mut fe = FrontEndState::new(s.front_end, 3);
+                let mut stepper = Stepper::new(&plant, &mut fe, 3, duration_s, h_s, every);
+                let mut samples = Vec::new();
+                let mut t = 0.0;
+                while !stepper.done() {
+                    t += piece_s;
+                    stepper.advance_to(t, &mut |x| samples.push(x));
+                }
+                let (_, _, cycles) = stepper.finish();
+                assert_eq!(samples.len(), whole.t_s.len(), "structure {k}, pieces of {piece_s} s");
+                for (i, x) in samples.iter().enumerate() {
+                    assert_eq!(x.t_s.to_bits(), whole.t_s[i].to_bits());
+                    assert_eq!(x.p_rear_pa.to_bits(), whole.p_rear_pa[i].to_bits());
+                    assert_eq!(x.accel_mps2.to_bits(), whole.accel_mps2[i].to_bits());
+                    assert_eq!(x.x_m.to_bits(), whole.x_m[i].to_bits());
+                }
+                assert_eq!(cycles, whole.cycles, "structure {k}, pieces of {piece_s} s");
             }
-            last_impact = Some((t_imp, y[WF], y[QW]));
-            stroke_start_x = None;
-            in_stroke = false;
-            stroke = Phase::default();
-            backhaul = Phase::default();
-            if let Some(z) = &zero_shift {
-                offset += if signs.next_u64() & 1 == 0 {
-                    z.amplitude_mps2
-                } else {
-                    -z.amplitude_mps2
-                };
-            }
-        } else if in_contact && d1 <= 0.0 {
-            in_contact = false;
-        }
-        if !in_contact && !in_stroke && last_impact.is_some() && y0[V] <= 0.0 && y[V] > 0.0 {
-            in_stroke = true;
-            stroke_start_x = Some(y[X]);
+            assert!(!whole.cycles.is_empty(), "structure {k} runs");
         }
     }
-    let ke = 0.5 * plant.p.piston_mass_kg * y[V] * y[V];
-    // The piston starts at rest.
-    out.pressure_work_j = y[WP];
-    out.energy_residual_j = y[WP] + y[WC] - y[WF] - ke;
-    out
 }

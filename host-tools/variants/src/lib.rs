@@ -10,7 +10,7 @@
 //! - [`structure`]: the structural choices and their parameters, drawn per case;
 //! - [`flow`]: compressible flow (ISO 6358), laminar gap leakage, port areas;
 //! - [`plant`]: the state and its derivative;
-//! - [`integrate`]: the time loop, the discrete valve logic, per-cycle truth;
+//! - [`integrate`]: the time loop (a [`integrate::Stepper`] a caller can advance piece by piece), the discrete valve logic, per-cycle truth;
 //! - [`sensors`]: the front ends (first-order, resonant, clipping ranges);
 //! - [`generate`]: one case end to end: trace, sidecar, truth file.
 
