@@ -126,23 +126,36 @@ impl Folder {
         let label = path.display().to_string();
         let text = std::fs::read_to_string(&path).with_context(|| format!("reading {label}"))?;
         let record = Record::parse(&text, &label)?;
+        Folder::of(dir, record, &label)
+    }
+
+    /// `record`'s captures in `dir`, checked as [`Folder::open`] checks
+    /// them (`label` names the record in errors).
+    pub fn of(dir: &Path, record: Record, label: &str) -> Result<Folder> {
+        let root = dir
+            .canonicalize()
+            .with_context(|| format!("{}: not a commissioning folder", dir.display()))?;
         let mut files: HashMap<PathBuf, f64> = HashMap::new();
         let mut points = Vec::new();
         for p in &record.points {
             let mut traces = Vec::new();
             for t in &p.traces {
+                let what = || format!("{label}: the capture {t:?} at {} bar", p.supply_bar);
                 // (Checked by `parse`.)
-                let trace = dir.join(relative(t).map_err(|why| anyhow!("{label}: {t:?} {why}"))?);
-                let real = confined(&root, &trace)
-                    .with_context(|| format!("{label}: the capture {t:?} at {} bar", p.supply_bar))?;
-                if let Some(other) = files.insert(real, p.supply_bar) {
+                let rel = relative(t).map_err(|why| anyhow!("{label}: {t:?} {why}"))?;
+                let trace = dir.join(&rel);
+                let real = confined(&root, &trace).with_context(what)?;
+                if let Some(other) = files.insert(real.clone(), p.supply_bar) {
                     bail!(
                         "{label}: the capture {t:?} at {} bar is the same file as one at {other} bar: each capture belongs to one point",
                         p.supply_bar
                     );
                 }
-                agrees(&root, &record, p, &trace)
-                    .with_context(|| format!("{label}: the capture {t:?} at {} bar", p.supply_bar))?;
+                agrees(&root, &record, p, &trace).with_context(what)?;
+                // A link inside the folder: the file it names has its own sidecar.
+                if real != root.join(&rel) {
+                    agrees(&root, &record, p, &real).with_context(what)?;
+                }
                 traces.push(trace);
             }
             points.push(Point {
