@@ -377,6 +377,14 @@ fn a_record_is_confined_to_its_folder() {
     fifo(&side);
     write_record(&bad, &[(4.0, &["4.0bar/cycle-000.csv"], 4.0)]);
     refused_everywhere(&bad, &measured, &["cycle-000.json", "not a regular file"]);
+    // The record itself a link to /etc/passwd.
+    std::fs::remove_file(bad.join("commission.json")).unwrap();
+    std::os::unix::fs::symlink("/etc/passwd", bad.join("commission.json")).unwrap();
+    refused_everywhere(
+        &bad,
+        &measured,
+        &["commission.json", "outside the commissioning folder"],
+    );
     let _ = std::fs::remove_dir_all(&base);
 }
 
