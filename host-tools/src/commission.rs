@@ -42,7 +42,9 @@ pub struct CommissionArgs {
     pub native: bool,
     /// Gauge supply pressure of an operating point, bar (repeatable). On a
     /// device with a terminal you are asked to set each in turn; without
-    /// one, give one per run (each run adds its point to the folder).
+    /// one, give one per run (each run adds its point to the folder). Each
+    /// point has its own folder, `<bar>bar/` to a tenth of a bar: two
+    /// pressures that name one are refused.
     #[arg(long = "supply-bar", value_name = "BAR", required = true)]
     pub supply_bar: Vec<f64>,
     /// Raw cycles to capture at each operating point. The drift alarm
@@ -71,7 +73,7 @@ fn check_point_dirs(bars: &[f64], existing: Option<&Record>, out: &std::path::Pa
     for (i, &a) in bars.iter().enumerate() {
         if let Some(&b) = bars[..i].iter().find(|&&b| point_dir(b) == point_dir(a)) {
             bail!(
-                "--supply-bar {b} and --supply-bar {a} both name the point folder {}: give operating points at least 0.1 bar apart, each once",
+                "--supply-bar {b} and --supply-bar {a} both name the point folder {}: give each operating point once, in its own tenth of a bar",
                 point_dir(a)
             );
         }
