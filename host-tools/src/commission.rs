@@ -17,7 +17,9 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 
 use crate::client::Client;
-use hammer_diagnose::record::{is_record, PointRecord, Record, RECORD_FILE, RECORD_FORMAT, RECORD_VERSION};
+use hammer_diagnose::record::{
+    is_record, Folder, PointRecord, Record, RECORD_FILE, RECORD_FORMAT, RECORD_VERSION, SUPPLY_AGREE_BAR,
+};
 use hammer_trace::trace::{write_csv, write_sidecar};
 
 #[derive(Args, Debug)]
@@ -40,7 +42,9 @@ pub struct CommissionArgs {
     pub native: bool,
     /// Gauge supply pressure of an operating point, bar (repeatable). On a
     /// device with a terminal you are asked to set each in turn; without
-    /// one, give one per run (each run adds its point to the folder).
+    /// one, give one per run (each run adds its point to the folder). Each
+    /// point has its own folder, `<bar>bar/` to a tenth of a bar: two
+    /// pressures that name one are refused.
     #[arg(long = "supply-bar", value_name = "BAR", required = true)]
     pub supply_bar: Vec<f64>,
     /// Raw cycles to capture at each operating point. The drift alarm
@@ -58,6 +62,36 @@ pub struct CommissionArgs {
 /// The folder name of an operating point.
 fn point_dir(bar: f64) -> String {
     format!("{bar:.1}bar")
+}
+
+/// Refuses supply pressures whose captures would land in one point's
+/// folder (`--supply-bar 4 --supply-bar 4.04` both name `4.0bar/`: the
+/// second would overwrite the first's captures and the record list the
+/// same files twice), among `bars` or against the folder's `existing`
+/// points (one within [`SUPPLY_AGREE_BAR`] is the same point, replaced).
+fn check_point_dirs(bars: &[f64], existing: Option<&Record>, out: &std::path::Path) -> Result<()> {
+    for (i, &a) in bars.iter().enumerate() {
+        if let Some(&b) = bars[..i].iter().find(|&&b| point_dir(b) == point_dir(a)) {
+            bail!(
+                "--supply-bar {b} and --supply-bar {a} both name the point folder {}: give each operating point once, in its own tenth of a bar",
+                point_dir(a)
+            );
+        }
+        let clash = existing
+            .into_iter()
+            .flat_map(|r| &r.points)
+            .find(|p| point_dir(p.supply_bar) == point_dir(a) && (p.supply_bar - a).abs() > SUPPLY_AGREE_BAR);
+        if let Some(p) = clash {
+            bail!(
+                "--supply-bar {a} names the point folder {}, where {} holds its {} bar point: give {} to replace that point, or use a new folder",
+                point_dir(a),
+                out.display(),
+                p.supply_bar,
+                p.supply_bar
+            );
+        }
+    }
+    Ok(())
 }
 
 /// A board to capture from, kept open across captures.
@@ -101,7 +135,10 @@ pub fn run(args: &CommissionArgs) -> Result<()> {
     if !args.demo && args.supply_bar.len() > 1 && !interactive {
         bail!("without a terminal to confirm each supply pressure, give one --supply-bar per run (each run adds its point to {})", args.out.display());
     }
-    let existing = is_record(&args.out).then(|| Record::load(&args.out)).transpose()?;
+    let existing = is_record(&args.out)
+        .then(|| Folder::open(&args.out).map(|f| f.record))
+        .transpose()?;
+    check_point_dirs(&args.supply_bar, existing.as_ref(), &args.out)?;
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
     let timeout = Duration::from_secs(120);
     let mut record: Option<Record> = existing;
@@ -157,7 +194,7 @@ pub fn run(args: &CommissionArgs) -> Result<()> {
             );
         }
         r.firmware_version = firmware;
-        r.points.retain(|p| (p.supply_bar - bar).abs() > 0.005);
+        r.points.retain(|p| (p.supply_bar - bar).abs() > SUPPLY_AGREE_BAR);
         r.points.push(PointRecord {
             supply_bar: bar,
             traces,

@@ -38,7 +38,7 @@ use crate::diagnose::engine::extractor_for;
 use crate::diagnose::features::{
     feature_name, steady_from, CycleFeatures, Extractor, Signals, ESTIMATOR_CHARACTERISTICS,
 };
-use crate::diagnose::record::Record;
+use crate::diagnose::record::{Folder, Record};
 
 /// Characteristics read, in [`ESTIMATOR_CHARACTERISTICS`] order.
 pub const N_CHARACTERISTICS: usize = ESTIMATOR_CHARACTERISTICS.len();
@@ -141,14 +141,13 @@ impl Commissioned {
     /// Reads the record in `dir` and every trace in it, with the hammer
     /// `config` describes (its chambers, its transducers' ranges).
     pub fn load(dir: &Path, config: &SimConfig) -> Result<Self> {
-        let record = Record::load(dir)?;
+        let Folder { record, points, .. } = Folder::open(dir)?;
         let extractor = extractor_for(config);
         let mut baselines = Vec::new();
-        for point in &record.points {
+        for point in &points {
             let mut cycles = Vec::new();
-            for t in &point.traces {
-                let path = dir.join(t);
-                let (trace, _, _) = hammer_trace::import::read_trace(&path, None)
+            for path in &point.traces {
+                let (trace, _, _) = hammer_trace::import::read_trace(path, None)
                     .with_context(|| format!("reading {}", path.display()))?;
                 cycles.extend(cycles_of(&extractor, &trace, point.supply_bar));
             }

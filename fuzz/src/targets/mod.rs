@@ -1,6 +1,7 @@
 //! The fuzz targets: one file each, all listed in [`TARGETS`].
 
 pub mod app;
+pub mod commission;
 pub mod config;
 pub mod frame;
 pub mod import;
@@ -28,6 +29,7 @@ pub const TARGETS: &[Target] = &[
     sidecar::TARGET,
     config::TARGET,
     import::TARGET,
+    commission::TARGET,
 ];
 
 pub fn by_name(name: &str) -> Option<&'static Target> {

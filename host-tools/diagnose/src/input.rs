@@ -11,7 +11,7 @@ use hammer_sim::SimConfig;
 use hammer_trace::config::load_toml;
 use hammer_trace::trace::Trace;
 
-use crate::record::{is_record, Record};
+use crate::record::{is_record, Folder};
 
 /// One measured trace and its role.
 #[derive(Debug, Clone)]
@@ -119,9 +119,13 @@ pub fn read_request(req: &Request) -> Result<Read> {
     // The calibrations the measured traces were made with (device captures).
     let mut measured_hashes = Vec::new();
     for (path, bar) in &req.measured {
-        let folder = is_record(path).then(|| Record::load(path)).transpose()?;
+        let folder = is_record(path).then(|| Folder::open(path)).transpose()?;
         let traces = match &folder {
-            Some(r) => r.traces(path).into_iter().map(|(p, b)| (p, Some(b))).collect(),
+            Some(f) => {
+                // Its captures were made with the record's calibration (checked).
+                measured_hashes.push(f.record.calibration_hash);
+                f.traces().map(|(p, b)| (p.to_path_buf(), Some(b))).collect()
+            }
             None => vec![(path.clone(), *bar)],
         };
         // A folder's traces are one cycle each: all fitted unless told.
@@ -144,7 +148,8 @@ pub fn read_request(req: &Request) -> Result<Read> {
             references.push(read_input(path, *bar, base.import.as_ref())?.0);
             continue;
         }
-        let record = Record::load(path)?;
+        let folder = Folder::open(path)?;
+        let record = &folder.record;
         if let Some(h) = measured_hashes.iter().find(|&&h| h != record.calibration_hash) {
             let what = format!(
                 "{} was commissioned with calibration {:08x}; the measured traces were recorded with {h:08x}: the board was recalibrated since, so the record is stale",
@@ -158,8 +163,8 @@ pub fn read_request(req: &Request) -> Result<Read> {
                 "{what}; the change read includes the recalibration's (--allow-stale-reference)"
             ));
         }
-        for (trace, bar) in record.traces(path) {
-            references.push(read_input(&trace, Some(bar), base.import.as_ref())?.0);
+        for (trace, bar) in folder.traces() {
+            references.push(read_input(trace, Some(bar), base.import.as_ref())?.0);
         }
     }
     for f in &req.fit_on {
