@@ -229,3 +229,42 @@ fn every_rate_from_the_floor_up_reads_right() {
         }
     }
 }
+
+/// Issue 48 item 5: a 2 kg hammer's traces read against the built-in
+/// model (the paper's 1.12 kg piston) were diagnosed as a gain error and
+/// friction, while `estimate` took the sidecar's hammer: the diagnosis now
+/// refuses them, naming the trace, the field and the fix.
+#[test]
+fn a_diagnosis_against_another_hammers_model_is_refused() {
+    let dir = tmp_dir("mixed-hammers");
+    let heavy = dir.join("heavy.toml");
+    std::fs::write(&heavy, "[hammer]\npiston_mass_kg = 2.0\n").unwrap();
+    let trace = dir.join("m4.csv");
+    let (code, _, err) = hammer(&[
+        "simulate",
+        "--supply-bar",
+        "4",
+        "--duration",
+        "0.3",
+        "--config",
+        heavy.to_str().unwrap(),
+        "--out",
+        trace.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let out = dir.join("diag");
+    let (code, _, err) = hammer(&[
+        "diagnose",
+        "--measured",
+        trace.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("m4.csv") && err.contains("piston_mass_kg = 2.0 vs 1.12"),
+        "{err}"
+    );
+    assert!(err.contains("--config"), "{err}");
+    assert!(!out.join("report.json").exists());
+}

@@ -78,6 +78,35 @@ pub fn read_input(
     Ok((input, sidecar))
 }
 
+/// Refuses a trace whose sidecar states another hammer than the model's
+/// (`config`: the `--config` file, `None` for the built-in default), in
+/// what the diagnosis takes as known: every `[hammer]` value but the
+/// nominal ones it recalibrates ([`crate::model::NUISANCE`]). Read against
+/// the wrong piston mass or bore, the force balance's gap would be named
+/// as effects (a 2 kg hammer came out as a gain error and friction).
+pub fn same_hammer(trace: &Path, sidecar: Option<&Sidecar>, model: &SimConfig, config: Option<&Path>) -> Result<()> {
+    let Some(stated) = sidecar.and_then(|s| s.simulation.as_ref()).map(|s| &s.config.hammer) else {
+        return Ok(());
+    };
+    let fitted: Vec<&str> = crate::model::NUISANCE
+        .iter()
+        .filter_map(|(name, _)| name.strip_prefix("hammer."))
+        .collect();
+    let d = stated.differences(&model.hammer, &fitted);
+    if d.is_empty() {
+        return Ok(());
+    }
+    let model_is = match config {
+        Some(c) => format!("--config {}", c.display()),
+        None => "the built-in model (the paper's hammer; no --config)".into(),
+    };
+    bail!(
+        "{}: its sidecar states another hammer than {model_is} ({}, sidecar vs model): give --config with this hammer's [hammer] values",
+        trace.display(),
+        d.join(", ")
+    )
+}
+
 /// What a diagnosis is asked to read: measured traces or commissioning
 /// folders, each with the supply pressure given after it (bar; `None`:
 /// from its sidecar), the same for the references, the traces to fit on,
@@ -132,6 +161,7 @@ pub fn read_request(req: &Request) -> Result<Read> {
         let fit_folder = folder.is_some() && (req.fit_on.is_empty() || req.fit_on.iter().any(|f| same(f, path)));
         for (trace, bar) in traces {
             let (input, sidecar) = read_input(&trace, bar, base.import.as_ref())?;
+            same_hammer(&trace, sidecar.as_ref(), &base, req.config.as_deref())?;
             if inputs.is_empty() && req.config.is_none() {
                 base.sensors = sensors_for(sidecar.as_ref(), &base.sensors);
             }
@@ -145,7 +175,9 @@ pub fn read_request(req: &Request) -> Result<Read> {
     let mut references = Vec::new();
     for (path, bar) in &req.reference {
         if !is_record(path) {
-            references.push(read_input(path, *bar, base.import.as_ref())?.0);
+            let (input, sidecar) = read_input(path, *bar, base.import.as_ref())?;
+            same_hammer(path, sidecar.as_ref(), &base, req.config.as_deref())?;
+            references.push(input);
             continue;
         }
         let folder = Folder::open(path)?;
@@ -164,7 +196,9 @@ pub fn read_request(req: &Request) -> Result<Read> {
             ));
         }
         for (trace, bar) in folder.traces() {
-            references.push(read_input(trace, Some(bar), base.import.as_ref())?.0);
+            let (input, sidecar) = read_input(trace, Some(bar), base.import.as_ref())?;
+            same_hammer(trace, sidecar.as_ref(), &base, req.config.as_deref())?;
+            references.push(input);
         }
     }
     for f in &req.fit_on {
@@ -178,4 +212,42 @@ pub fn read_request(req: &Request) -> Result<Read> {
         base,
         warnings,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use hammer_sim::simulate_to_file;
+
+    fn sidecar_of(cfg: &SimConfig) -> Sidecar {
+        let mut c = cfg.clone();
+        c.solver.duration_s = 0.01;
+        simulate_to_file(&c, None).unwrap().sidecar()
+    }
+
+    /// Another piston mass is refused, naming the trace, the model and the
+    /// field; a nominal value the diagnosis recalibrates (a dead volume) is
+    /// not, nor is the same hammer, nor a trace with no simulated hammer.
+    #[test]
+    fn a_sidecar_of_another_hammer_is_refused_but_not_for_what_is_fitted() {
+        let model = SimConfig::default();
+        let trace = Path::new("m4.csv");
+        let mut heavy = model.clone();
+        heavy.hammer.piston_mass_kg = 2.0;
+        let e = same_hammer(trace, Some(&sidecar_of(&heavy)), &model, None)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with("m4.csv: ") && e.contains("piston_mass_kg = 2.0 vs 1.12"),
+            "{e}"
+        );
+        assert!(e.contains("built-in model") && e.contains("--config"), "{e}");
+        let mut jittered = model.clone();
+        jittered.hammer.rear_dead_volume_m3 *= 1.1;
+        jittered.hammer.outlet_cd *= 0.9;
+        same_hammer(trace, Some(&sidecar_of(&jittered)), &model, None).unwrap();
+        same_hammer(trace, Some(&sidecar_of(&model)), &model, None).unwrap();
+        same_hammer(trace, None, &model, None).unwrap();
+        same_hammer(trace, Some(&sidecar_of(&heavy)), &heavy, Some(Path::new("heavy.toml"))).unwrap();
+    }
 }
