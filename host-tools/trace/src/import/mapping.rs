@@ -146,6 +146,21 @@ impl Resolved {
         let v = if self.absolute { v - atmosphere_pa } else { v };
         self.sign * v
     }
+
+    /// An absolute pressure at or below 0 Pa absolute: impossible in a
+    /// chamber, so the column holds gauge pressure mapped as absolute.
+    #[inline]
+    pub fn below_vacuum(&self, raw: f64) -> bool {
+        self.absolute && raw * self.factor <= 0.0
+    }
+
+    /// What [`Resolved::below_vacuum`] means, for `column`'s `raw` value.
+    pub fn vacuum_message(&self, column: &str, raw: f64) -> String {
+        format!(
+            "`{column}` ({}) reads {raw} {} absolute, at or below vacuum: the column holds gauge pressure; remove `absolute = true` under [import.{}]",
+            self.signal, self.unit, self.signal
+        )
+    }
 }
 
 impl ImportMap {
