@@ -645,4 +645,38 @@ mod tests {
             "{e}"
         );
     }
+
+    /// RFC 4180: a quoted field holds the delimiter and escaped quotes; a
+    /// quote left open or followed by text is malformed.
+    #[test]
+    fn quoted_fields_keep_their_delimiters() {
+        let mut r = Vec::new();
+        let line = "\"0,5\", 7 ,\"a\"\"b\",,\"x\" ";
+        assert!(field_ranges(line, ',', &mut r));
+        let f: Vec<&str> = r.iter().map(|&(a, b)| &line[a..b]).collect();
+        assert_eq!(f, ["0,5", " 7 ", "a\"\"b", "", "x"]);
+        assert_eq!(split(line, ',')[2], "a\"b");
+        assert!(!field_ranges("\"1,5;2", ';', &mut r), "a quote left open");
+        assert!(!field_ranges("\"1\"5;2", ';', &mut r), "text after the closing quote");
+    }
+
+    /// A decimal comma is found from the rows under `;` and inside quotes
+    /// under `,`; a file with points keeps them.
+    #[test]
+    fn the_decimal_comma_is_found_from_the_rows() {
+        let read = |text: &str| {
+            let mut d = Delimited::new(text.as_bytes(), "x.csv", &ImportMap::default()).unwrap();
+            (d.decimal_comma(), d.next_row().unwrap().unwrap())
+        };
+        let head = "t_s;p_rear_pa;p_front_pa;accel_mps2\n";
+        let (comma, r) = read(&format!("{head}0;1,5;-2,25;3\n"));
+        assert!(comma);
+        assert_eq!((r.p_rear_pa, r.p_front_pa, r.accel_mps2), (1.5, -2.25, 3.0));
+        let (comma, r) = read("t_s,p_rear_pa,p_front_pa,accel_mps2\n\"0,0\",\"1,5\",2,\"3,0\"\n");
+        assert!(comma);
+        assert_eq!((r.p_rear_pa, r.p_front_pa), (1.5, 2.0));
+        let (comma, r) = read(&format!("{head}0;1.5;2;3\n"));
+        assert!(!comma);
+        assert_eq!(r.p_rear_pa, 1.5);
+    }
 }
