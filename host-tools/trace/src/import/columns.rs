@@ -64,11 +64,11 @@ pub struct Columns {
     stated: Option<(f64, String)>,
 }
 
-/// Finds a channel by the map's reference: its full name, or a TDMS
-/// channel's name within its group. A name that several channels answer to
-/// (the same channel name in two groups, a name written twice) is refused,
-/// never settled by file order.
-pub fn find(channels: &[Channel], r: &ColumnRef) -> Result<Option<usize>, String> {
+/// Finds signal `key`'s channel by the map's reference: its full name, or a
+/// TDMS channel's name within its group. A name that several channels
+/// answer to (the same channel name in two groups, a name written twice) is
+/// refused, never settled by file order.
+pub fn find(channels: &[Channel], r: &ColumnRef, key: &str) -> Result<Option<usize>, String> {
     match r {
         ColumnRef::Index(i) => Ok((*i >= 1 && *i <= channels.len()).then(|| i - 1)),
         ColumnRef::Name(n) => {
@@ -82,7 +82,7 @@ pub fn find(channels: &[Channel], r: &ColumnRef) -> Result<Option<usize>, String
                 [] => Ok(None),
                 [i] => Ok(Some(i)),
                 _ if hits.iter().all(|&i| channels[i].name == *n) => Err(format!(
-                    "{} channels are named `{n}`: rename them apart, or map the one meant by its position ([import.SIGNAL] column = {})",
+                    "{key}: {} channels are named `{n}`: rename them apart, or map the one meant by its position ([import.{key}] column = {})",
                     hits.len(),
                     hits[0] + 1
                 )),
@@ -92,7 +92,7 @@ pub fn find(channels: &[Channel], r: &ColumnRef) -> Result<Option<usize>, String
                         .filter_map(|&i| channels[i].name.rsplit_once('/').map(|(g, _)| format!("`{g}`")))
                         .collect();
                     Err(format!(
-                        "a channel `{n}` is in the groups {}: choose one with `group = \"{}\"` under [import] (import.group), or name it whole (`group/{n}`)",
+                        "{key}: a channel `{n}` is in the groups {}: choose one with `group = \"{}\"` under [import] (import.group), or name it whole (`group/{n}`)",
                         groups.join(", "),
                         channels[hits[0]].name.rsplit_once('/').map_or("", |(g, _)| g)
                     ))
@@ -148,8 +148,8 @@ impl Columns {
         let mut signals = Vec::new();
         for key in ["p_rear", "p_front", "accel"] {
             let r = map.resolve(key).map_err(|e| err(e.to_string()))?;
-            let i = find(&channels, &r.column)
-                .map_err(|e| err(format!("{key}: {}", e.replace("SIGNAL", key))))?
+            let i = find(&channels, &r.column, key)
+                .map_err(err)?
                 .ok_or_else(|| {
                     err(format!(
                         "no channel {} for {key} (channels: {}); name it in the mapping ([import.{key}] column = ..., docs/trace-format.md)",
@@ -164,12 +164,12 @@ impl Columns {
             .sample_rate_hz
             .map(|fs| (1.0 / fs, format!("import.sample_rate_hz = {fs}")));
         let column = if map.has_time_column() {
-            let i = find(&channels, &t.column)
-                .map_err(|e| err(format!("t: {}", e.replace("SIGNAL", "t"))))?
+            let i = find(&channels, &t.column, "t")
+                .map_err(err)?
                 .ok_or_else(|| err(format!("no time channel {} (channels: {})", t.column, names())))?;
             Some(i)
         } else {
-            find(&channels, &t.column).map_err(|e| err(format!("t: {}", e.replace("SIGNAL", "t"))))?
+            find(&channels, &t.column, "t").map_err(err)?
         };
         // A float32 time column too coarse for the sample interval: the
         // map's rate in its place, or the cause said.
