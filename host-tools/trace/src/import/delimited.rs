@@ -75,9 +75,9 @@ impl<R: BufRead> Delimited<R> {
             map.sample_rate_hz
         };
         let header = map.header.unwrap_or(true);
-        // Read the lines up to the header (or the first row).
-        // The skipped lines are read and dropped (bounded memory whatever
-        // the count); `lines` starts at the header, or the first row.
+        // Read the lines up to the header (or the first row). The skipped
+        // lines are read and dropped (bounded memory whatever the count):
+        // `lines` starts at the header, or the first row.
         let mut lines: Vec<(usize, Vec<u8>)> = Vec::new();
         let skip = map.skip_lines.unwrap_or(0);
         let want = if map.skip_lines.is_some() || !header {
