@@ -374,3 +374,362 @@ fn a_dip_a_recorder_clipped_leaves_the_friction_fit() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Runs a Python snippet (the reference writers) with `args` as `sys.argv[1:]`.
+fn py(script: &str, args: &[&str]) {
+    let out = Command::new("python3")
+        .arg("-c")
+        .arg(script)
+        .args(args)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+}
+
+/// The issue's trace (8 of 8 cycles valid at 4 bar) as the project's four
+/// columns, no sidecar: every layout of it must give this file's numbers.
+fn plain_trace(dir: &Path) -> PathBuf {
+    let sim = dir.join("s4.csv");
+    let (code, _, err) = hammer(&[
+        "simulate",
+        "--supply-bar",
+        "4",
+        "--duration",
+        "0.5",
+        "--seed",
+        "1",
+        "--effect",
+        "coulomb_friction",
+        "--out",
+        sim.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let text = std::fs::read_to_string(&sim).unwrap();
+    let plain: String = text
+        .lines()
+        .map(|l| l.split(',').take(4).collect::<Vec<_>>().join(",") + "\n")
+        .collect();
+    write(dir, "plain4.csv", &plain).into()
+}
+
+/// Refused with exit 2, the file named, each of `says` in the message, no panic.
+fn refused(args: &[&str], file: &str, says: &[&str]) -> String {
+    let (code, out, err) = hammer(args);
+    assert_eq!(code, 2, "{args:?} gave {code}: {out}{err}");
+    assert!(err.contains(file), "{file} named in: {err}");
+    for s in says {
+        assert!(err.contains(s), "`{s}` in: {err}");
+    }
+    assert!(!err.contains("panicked"), "{err}");
+    err
+}
+
+/// Issue 48, item 2: a struct column among a Parquet file's columns moved
+/// every later column's data under the next name (the accelerometer read
+/// from `accel_b_mps2`). Columns are read by their full leaf name: the
+/// struct's fields are `meta.a`, `meta.b`, the rest keep their data, and a
+/// signal inside a struct is mapped by that name.
+#[test]
+fn a_struct_column_in_parquet_moves_no_data() {
+    if !writers() {
+        return;
+    }
+    let dir = tmp_dir("parquet-struct");
+    let plain = plain_trace(&dir);
+    py(
+        "import sys, numpy as np, pandas as pd, pyarrow as pa, pyarrow.parquet as pq\n\
+         df = pd.read_csv(sys.argv[1]); n = len(df); d = sys.argv[2]\n\
+         meta = pa.StructArray.from_arrays([pa.array(np.arange(n, dtype=float)), pa.array(np.ones(n))], names=['a', 'b'])\n\
+         pq.write_table(pa.table({'t_s': df.t_s, 'p_rear_pa': df.p_rear_pa, 'p_front_pa': df.p_front_pa, 'meta': meta,\n\
+             'accel_mps2': df.accel_mps2, 'accel_b_mps2': -3 * df.accel_mps2}), d + '/nested.parquet')\n\
+         inner = pa.StructArray.from_arrays([pa.array(df.accel_mps2), pa.array(np.zeros(n))], names=['accel', 'x'])\n\
+         pq.write_table(pa.table({'t_s': df.t_s, 'sensors': inner, 'p_rear_pa': df.p_rear_pa, 'p_front_pa': df.p_front_pa}), d + '/inner.parquet')\n",
+        &[plain.to_str().unwrap(), dir.to_str().unwrap()],
+    );
+    let want = estimate(&plain, &[]);
+    assert_eq!(want.lines().filter(|l| l.contains(",true,")).count(), 8, "{want}");
+    assert_eq!(
+        estimate(&dir.join("nested.parquet"), &[]),
+        want,
+        "the struct moved columns"
+    );
+    let map = write(&dir, "inner.toml", "accel = { column = \"sensors.accel\" }\n");
+    assert_eq!(
+        estimate(&dir.join("inner.parquet"), &["--map", &map]),
+        want,
+        "a signal inside a struct"
+    );
+    // Unmapped, the signal inside the struct is not found: the error lists the leaves by their names.
+    let f = dir.join("inner.parquet");
+    refused(
+        &["estimate", f.to_str().unwrap(), "--supply-bar", "4"],
+        "inner.parquet",
+        &["no channel `accel_mps2`", "sensors.accel"],
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Issue 48, item 3: a map's `sample_rate_hz` overrode the file's own
+/// `t_s` (8 valid cycles at 15 J from a 4 bar trace read at half its
+/// rate). A rate that contradicts the time column is refused, naming the
+/// file and both rates; one that agrees reads the native numbers.
+#[test]
+fn a_rate_that_contradicts_the_time_column_is_refused() {
+    let dir = tmp_dir("rate");
+    let plain = plain_trace(&dir);
+    let p = plain.to_str().unwrap();
+    let half = write(&dir, "half.toml", "sample_rate_hz = 50000\n");
+    refused(
+        &["estimate", p, "--supply-bar", "4", "--map", &half],
+        "plain4.csv",
+        &["`t_s`", "100000 Hz", "50000 Hz"],
+    );
+    let with_t = write(
+        &dir,
+        "with_t.toml",
+        "sample_rate_hz = 50000\nt = { column = \"t_s\" }\n",
+    );
+    refused(
+        &["estimate", p, "--supply-bar", "4", "--map", &with_t],
+        "plain4.csv",
+        &["100000 Hz", "50000 Hz"],
+    );
+    let agrees = write(&dir, "agrees.toml", "sample_rate_hz = 100000\n");
+    assert_eq!(estimate(&plain, &["--map", &agrees]), estimate(&plain, &[]));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Issue 48, item 4: delimited text. pandas' `to_csv(decimal=",")` quotes
+/// each number under `,` (`"1,5"`): read by RFC 4180 it gives the native
+/// numbers, with the project's names and with a recorder's names mapped
+/// (it imported as garbage, up to 999 756 bar). A `;` file with decimal
+/// commas in the project's names needs no map. A row with more fields than
+/// the header is refused with its file and line.
+#[test]
+fn quoted_fields_and_decimal_commas_read_as_native() {
+    if !writers() {
+        return;
+    }
+    let dir = tmp_dir("text");
+    let plain = plain_trace(&dir);
+    py(
+        "import sys, pandas as pd\n\
+         df = pd.read_csv(sys.argv[1]); d = sys.argv[2]\n\
+         df.to_csv(d + '/quoted.csv', decimal=',', index=False)\n\
+         df.to_csv(d + '/semicolon.csv', sep=';', decimal=',', index=False)\n\
+         df.columns = ['Zeit', 'P1', 'P2', 'A']\n\
+         df.to_csv(d + '/named.csv', decimal=',', index=False)\n",
+        &[plain.to_str().unwrap(), dir.to_str().unwrap()],
+    );
+    assert!(std::fs::read_to_string(dir.join("quoted.csv"))
+        .unwrap()
+        .contains("\",\""));
+    let want = estimate(&plain, &[]);
+    assert_eq!(estimate(&dir.join("quoted.csv"), &[]), want, "quoted decimal commas");
+    assert_eq!(
+        estimate(&dir.join("semicolon.csv"), &[]),
+        want,
+        "`;` and decimal commas, no map"
+    );
+    let map = write(
+        &dir,
+        "named.toml",
+        "decimal = \",\"\nt = { column = \"Zeit\" }\np_rear = { column = \"P1\" }\n\
+         p_front = { column = \"P2\" }\naccel = { column = \"A\" }\n",
+    );
+    assert_eq!(
+        estimate(&dir.join("named.csv"), &["--map", &map]),
+        want,
+        "mapped, `,` guessed"
+    );
+
+    // A row with a field too many (a decimal comma unquoted under `,`), in
+    // the project's CSV and in a recorder's text.
+    let text = std::fs::read_to_string(&plain).unwrap();
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    lines[40] = lines[40].replacen('.', ",", 1);
+    let extra = write(&dir, "extra.csv", &(lines.join("\n") + "\n"));
+    refused(
+        &["estimate", &extra, "--supply-bar", "4"],
+        "extra.csv:41",
+        &["expected 4 fields, found 5"],
+    );
+    let semi: Vec<String> = lines.iter().map(|l| l.replace(',', ";")).collect();
+    let mut semi = semi.join("\n") + "\n";
+    semi = semi.replacen("\n0.000100000;", "\n0.000100000;1;", 1);
+    let extra = write(&dir, "extra_semi.csv", &semi);
+    refused(
+        &["estimate", &extra, "--supply-bar", "4"],
+        "extra_semi.csv:12",
+        &["expected 4 fields, found 5"],
+    );
+
+    // A decimal comma the first rows did not show is named with its fix.
+    let mut late = String::from("t_s;p_rear_pa;p_front_pa;accel_mps2\n");
+    for (i, l) in text.lines().skip(1).take(200).enumerate() {
+        let l = l.replace(',', ";");
+        late.push_str(&if i == 150 { l.replacen('.', ",", 2) } else { l });
+        late.push('\n');
+    }
+    let late = write(&dir, "late.csv", &late);
+    refused(
+        &["estimate", &late, "--supply-bar", "4"],
+        "late.csv",
+        &["line 152", "decimal = \",\""],
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Issue 48, item 6: the same channel names in two TDMS groups took the
+/// alphabetically first group. Refused, naming both groups and the map key
+/// that chooses; with `group` given, the native numbers.
+#[test]
+fn tdms_channels_in_two_groups_need_a_group() {
+    if !writers() {
+        return;
+    }
+    let dir = tmp_dir("tdms-groups");
+    let plain = plain_trace(&dir);
+    py(
+        "import sys, pandas as pd\n\
+         from nptdms import ChannelObject, TdmsWriter\n\
+         df = pd.read_csv(sys.argv[1])\n\
+         with TdmsWriter(sys.argv[2]) as w:\n\
+         \x20   w.write_segment([ChannelObject(g, s, df[s].to_numpy() * k, properties={'wf_increment': 1e-5})\n\
+         \x20       for g, k in [('bench', 1.0), ('a_spare', 0.5)] for s in ['p_rear_pa', 'p_front_pa', 'accel_mps2']])\n",
+        &[plain.to_str().unwrap(), dir.join("two.tdms").to_str().unwrap()],
+    );
+    let f = dir.join("two.tdms");
+    refused(
+        &["estimate", f.to_str().unwrap(), "--supply-bar", "4"],
+        "two.tdms",
+        &["`a_spare`", "`bench`", "group = "],
+    );
+    let map = write(&dir, "group.toml", "group = \"bench\"\n");
+    assert_eq!(estimate(&f, &["--map", &map]), estimate(&plain, &[]));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Issue 48, item 15: a float32 time column (pyarrow, scipy) was "not
+/// uniform": its stamps are good to f32's step, and read so they give the
+/// native numbers; a recording long enough that f32 cannot tell its
+/// samples apart is refused, naming float32 as the cause.
+#[test]
+fn a_float32_time_column_reads_or_names_float32() {
+    if !writers() {
+        return;
+    }
+    let dir = tmp_dir("float32");
+    let plain = plain_trace(&dir);
+    py(
+        "import sys, numpy as np, pandas as pd, pyarrow as pa, pyarrow.parquet as pq, scipy.io\n\
+         df = pd.read_csv(sys.argv[1]); d = sys.argv[2]\n\
+         sig = {s: df[s].to_numpy() for s in ['p_rear_pa', 'p_front_pa', 'accel_mps2']}\n\
+         t32 = df.t_s.to_numpy().astype(np.float32)\n\
+         pq.write_table(pa.table({'t_s': pa.array(t32), **sig}), d + '/f32.parquet')\n\
+         scipy.io.savemat(d + '/f32.mat', {'t_s': t32, **sig})\n\
+         late = (3600 + df.t_s.to_numpy()).astype(np.float32)\n\
+         pq.write_table(pa.table({'t_s': pa.array(late), **sig}), d + '/late.parquet')\n",
+        &[plain.to_str().unwrap(), dir.to_str().unwrap()],
+    );
+    let want = estimate(&plain, &[]);
+    assert_eq!(estimate(&dir.join("f32.parquet"), &[]), want, "float32 stamps, Parquet");
+    assert_eq!(estimate(&dir.join("f32.mat"), &[]), want, "float32 stamps, MAT");
+    let f = dir.join("late.parquet");
+    refused(
+        &["estimate", f.to_str().unwrap(), "--supply-bar", "4"],
+        "late.parquet",
+        &["float32", "float64"],
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Issue 48, item 15: messages that named the wrong thing now name the cause.
+#[test]
+fn import_messages_name_the_cause() {
+    let dir = tmp_dir("messages");
+    let plain = plain_trace(&dir);
+    let p = plain.to_str().unwrap();
+    fn est<'a>(p: &'a str, map: &'a str) -> [&'a str; 6] {
+        ["estimate", p, "--supply-bar", "4", "--map", map]
+    }
+    // An error inside `[import]` is itself, not "unknown field `import`".
+    let m = write(&dir, "wrapped.toml", "[import]\nsample_rate_hz = \"fast\"\n");
+    let e = refused(&est(p, &m), "wrapped.toml", &["sample_rate_hz", "expected f64"]);
+    assert!(!e.contains("unknown field `import`"), "{e}");
+    let m = write(&dir, "typo.toml", "[import]\ndelimeter = \";\"\n");
+    refused(&est(p, &m), "typo.toml", &["unknown field `delimeter`"]);
+    // skip_lines past the end says so, with or without a header.
+    for (name, body) in [
+        ("skip.toml", "[import]\nskip_lines = 100000\n"),
+        ("skip_nohead.toml", "[import]\nskip_lines = 100000\nheader = false\n"),
+    ] {
+        let m = write(&dir, name, body);
+        let e = refused(&est(p, &m), "plain4.csv", &["skip_lines = 100000", "past the end"]);
+        assert!(!e.contains("empty file"), "{e}");
+    }
+    // Duplicate column names a signal is read from.
+    let text = std::fs::read_to_string(&plain).unwrap();
+    let dup: String = text
+        .lines()
+        .enumerate()
+        .map(|(i, l)| {
+            let extra = if i == 0 { "p_front_pa" } else { "0" };
+            format!("{};{extra}\n", l.replace(',', ";"))
+        })
+        .collect();
+    let d = write(&dir, "dup.csv", &dup);
+    refused(
+        &["estimate", &d, "--supply-bar", "4"],
+        "dup.csv",
+        &["`p_front_pa` 2 times", "columns 3, 5"],
+    );
+    // Gauge data mapped as absolute reads below vacuum: refused.
+    let m = write(
+        &dir,
+        "abs.toml",
+        "p_rear = { absolute = true }\np_front = { absolute = true }\n",
+    );
+    refused(&est(p, &m), "plain4.csv", &["below vacuum", "absolute = true"]);
+    // Time that goes backwards says so at its row, also as the first interval.
+    let mut rows: Vec<&str> = text.lines().collect();
+    rows.swap(1, 2);
+    let b = write(&dir, "back.csv", &(rows.join("\n") + "\n"));
+    let e = refused(
+        &["estimate", &b, "--supply-bar", "4"],
+        "back.csv:3",
+        &["time goes backwards"],
+    );
+    assert!(!e.contains("NaN"), "{e}");
+    let b = write(&dir, "back2.csv", &format!("{}\n{}\n{}\n", rows[0], rows[1], rows[2]));
+    refused(
+        &["estimate", &b, "--supply-bar", "4"],
+        "back2.csv:3",
+        &["time goes backwards"],
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Issue 48, item 15: a MAT struct was skipped without a word; the signals
+/// not found name it.
+#[test]
+fn a_mat_struct_is_named_not_skipped_silently() {
+    if !writers() {
+        return;
+    }
+    let dir = tmp_dir("mat-struct");
+    let plain = plain_trace(&dir);
+    py(
+        "import sys, pandas as pd, scipy.io\n\
+         df = pd.read_csv(sys.argv[1])\n\
+         scipy.io.savemat(sys.argv[2], {'rec': {s: df[s].to_numpy() for s in df.columns}})\n",
+        &[plain.to_str().unwrap(), dir.join("struct.mat").to_str().unwrap()],
+    );
+    let f = dir.join("struct.mat");
+    refused(
+        &["estimate", f.to_str().unwrap(), "--supply-bar", "4"],
+        "struct.mat",
+        &["`rec`", "struct"],
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

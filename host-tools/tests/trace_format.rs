@@ -93,7 +93,7 @@ fn malformed_files_get_errors_that_say_where_and_what() {
         "backwards.csv",
         "t_s,p_rear_pa,p_front_pa,accel_mps2\n0,1,2,3\n0.1,1,2,3\n0.0,1,2,3\n",
     );
-    assert!(e.contains(":4:") && e.contains("not uniform"), "{e}");
+    assert!(e.contains(":4:") && e.contains("time goes backwards"), "{e}");
     let e = error_of(
         "binary.csv",
         "t_s,p_rear_pa,p_front_pa,accel_mps2\n0,1,2,3\n\u{0}\u{0}\u{ff}\n",

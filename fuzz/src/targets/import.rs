@@ -33,6 +33,9 @@ pub const TARGET: Target = Target {
         b"\x00\x00\x00\x00",
         b"\x0e\x00\x00\x00",
         b"\x09\x00\x00\x00",
+        b"\"",
+        b"\"\"",
+        b"meta.a",
     ],
     seeds,
 };
@@ -219,6 +222,50 @@ fn parquet(channels: &[(&str, Vec<f64>)], t: &[f64]) -> Vec<u8> {
     out
 }
 
+/// A Parquet file as pyarrow writes a table with a struct column between
+/// the signals (`t_s, p_rear_pa, p_front_pa, meta{a, b}, accel_mps2,
+/// accel_b_mps2`), `meta.b` nullable with every third value null: the
+/// layout that once shifted later columns under other names.
+fn nested_parquet(channels: &[(&str, Vec<f64>)], t: &[f64]) -> Vec<u8> {
+    use parquet::basic::Compression;
+    use parquet::data_type::DoubleType;
+    use parquet::file::properties::WriterProperties;
+    use parquet::file::writer::SerializedFileWriter;
+    use std::sync::Arc;
+    let schema = "message seed {\n  REQUIRED DOUBLE t_s;\n  REQUIRED DOUBLE p_rear_pa;\n  REQUIRED DOUBLE p_front_pa;\n  \
+                  REQUIRED group meta {\n    REQUIRED DOUBLE a;\n    OPTIONAL DOUBLE b;\n  }\n  \
+                  REQUIRED DOUBLE accel_mps2;\n  REQUIRED DOUBLE accel_b_mps2;\n}";
+    let schema = Arc::new(parquet::schema::parser::parse_message_type(schema).expect("a valid schema"));
+    let props = Arc::new(WriterProperties::builder().set_compression(Compression::SNAPPY).build());
+    let n = t.len();
+    let meta_a: Vec<f64> = (0..n).map(|i| i as f64).collect();
+    let defs: Vec<i16> = (0..n).map(|i| i16::from(i % 3 != 0)).collect();
+    let meta_b: Vec<f64> = (0..n).filter(|i| i % 3 != 0).map(|i| i as f64 * 0.5).collect();
+    let accel_b: Vec<f64> = channels[2].1.iter().map(|a| -3.0 * a).collect();
+    let leaves: [(&[f64], Option<&[i16]>); 7] = [
+        (t, None),
+        (&channels[0].1, None),
+        (&channels[1].1, None),
+        (&meta_a, None),
+        (&meta_b, Some(&defs)),
+        (&channels[2].1, None),
+        (&accel_b, None),
+    ];
+    let mut out = Vec::new();
+    let mut w = SerializedFileWriter::new(&mut out, schema, props).expect("a writer");
+    let mut g = w.next_row_group().expect("a row group");
+    let mut k = 0;
+    while let Some(mut col) = g.next_column().expect("a column") {
+        let (v, d) = leaves[k];
+        col.typed::<DoubleType>().write_batch(v, d, None).expect("written");
+        col.close().expect("closed");
+        k += 1;
+    }
+    g.close().expect("closed");
+    w.close().expect("closed");
+    out
+}
+
 fn seeds() -> Vec<Vec<u8>> {
     let n = 24;
     let p: Vec<f64> = (0..n).map(|i| 1e5 * (i as f64 * 0.3).sin()).collect();
@@ -238,6 +285,12 @@ fn seeds() -> Vec<Vec<u8>> {
     for i in 0..n {
         text.push_str(&format!("{};{};{};{}\n", i as f64 * 0.01, p[i] / 1e5, p[i] / 1e5, a[i] / 9.8).replace('.', ","));
     }
+    // pandas' `to_csv(decimal=",")` under `,`: every number quoted, one with an escaped quote.
+    let mut quoted = String::from("ms,rear,\"front \"\"B\"\"\",a\n");
+    for i in 0..n {
+        let f = |x: f64| format!("\"{x}\"").replace('.', ",");
+        quoted.push_str(&format!("{},{},{},{}\n", f(i as f64 * 0.01), f(p[i] / 1e5), f(p[i] / 1e5), f(a[i] / 9.8)));
+    }
     let frames: Vec<[i16; 3]> = (0..n)
         .map(|i| {
             [
@@ -256,5 +309,7 @@ fn seeds() -> Vec<Vec<u8>> {
         with(2, mat(&mat_vars)),
         with(3, wav(&frames)),
         with(4, parquet(&chans, &mat_vars[0].1)),
+        with(0, quoted.into_bytes()),
+        with(4, nested_parquet(&chans, &mat_vars[0].1)),
     ]
 }

@@ -118,6 +118,7 @@ fn error_code(e: &TraceError) -> u32 {
         TraceError::TooShort { .. } => 9,
         TraceError::Sidecar { .. } => 10,
         TraceError::Import { .. } => 11,
+        TraceError::TimeBackwards { .. } => 12,
     }
 }
 

@@ -466,12 +466,10 @@ pub fn stream_estimation(
     Ok(summary)
 }
 
-/// A `--map` file holds the table either at its top level or under `[import]`.
+/// A `--map` file holding its table under `[import]` (else at its top level).
 #[derive(serde::Deserialize)]
-#[serde(untagged)]
-enum MapFile {
-    Wrapped { import: import::ImportMap },
-    Bare(import::ImportMap),
+struct Wrapped {
+    import: import::ImportMap,
 }
 
 /// Why a configuration or a recorder's mapping was refused.
@@ -493,10 +491,13 @@ pub fn config_with_map(config: Option<&Path>, map: Option<&Path>) -> Result<SimC
         None => SimConfig::default(),
     };
     if let Some(p) = map {
-        let map = match hammer_trace::config::load_toml::<MapFile>(p) {
-            Ok(MapFile::Wrapped { import } | MapFile::Bare(import)) => import,
-            // Untagged errors say nothing: read it as the bare table for the message.
-            Err(_) => hammer_trace::config::load_toml::<import::ImportMap>(p)?,
+        // Which of the two forms decides how it is read, so an error inside
+        // `[import]` is reported as itself, not as "unknown field `import`".
+        let wrapped = hammer_trace::config::load_toml::<toml::Table>(p)?.contains_key("import");
+        let map = if wrapped {
+            hammer_trace::config::load_toml::<Wrapped>(p)?.import
+        } else {
+            hammer_trace::config::load_toml::<import::ImportMap>(p)?
         };
         map.validate().map_err(|error| MapError::Map {
             path: p.display().to_string(),

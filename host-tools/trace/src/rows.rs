@@ -57,6 +57,13 @@ pub trait RowSource {
     fn time_resolution_s(&self) -> f64 {
         0.0
     }
+    /// A sample period stated besides the time stamps (a map's rate, a
+    /// format's header), with what states both: the stamps are read, and a
+    /// period that contradicts them is refused rather than either one
+    /// silently winning.
+    fn stated_period_s(&self) -> Option<(f64, String)> {
+        None
+    }
 }
 
 impl<R: BufRead> RowSource for RowReader<R> {
@@ -372,6 +379,9 @@ impl<S: RowSource> Uniform<S> {
             }
         }
         if !(dt_s > 0.0 && dt_s.is_finite()) {
+            if let Some(w) = ahead.iter().zip(ahead.iter().skip(1)).find(|(a, b)| b.0.t_s < a.0.t_s) {
+                return Err(backwards(rows.label(), w.1 .1, w.1 .0.t_s, w.0 .0.t_s));
+            }
             let (r1, line, _) = &ahead[1];
             return Err(TraceError::NotUniform {
                 path: rows.label().to_string(),
@@ -386,6 +396,18 @@ impl<S: RowSource> Uniform<S> {
         } else {
             UNIFORM_TOLERANCE * dt_s
         };
+        if let Some((stated, what)) = rows.stated_period_s() {
+            if !((dt_s / stated - 1.0).abs() <= UNIFORM_TOLERANCE) {
+                return Err(TraceError::Import {
+                    path: rows.label().to_string(),
+                    message: format!(
+                        "{what} disagree: the time stamps run at {} Hz, the rate says {} Hz; drop the wrong one (the time stamps are read when both agree)",
+                        fmt_hz(1.0 / dt_s),
+                        fmt_hz(1.0 / stated)
+                    ),
+                });
+            }
+        }
         Ok(Self {
             allowed_s,
             rows,
@@ -448,6 +470,9 @@ impl<S: RowSource> Uniform<S> {
             return Ok(Some(Item::Sample(row)));
         };
         let d = row.t_s - last;
+        if d < 0.0 {
+            return Err(backwards(self.rows.label(), line, row.t_s, last));
+        }
         let k = (d / self.dt_s).round();
         // A step that overflows, or a "gap" longer than the estimator can count
         // (hours at full rate), is not a gap in one recording: refuse it here.
@@ -471,6 +496,24 @@ impl<S: RowSource> Uniform<S> {
     /// Line number of the latest sample.
     pub fn line(&self) -> usize {
         self.line
+    }
+}
+
+fn backwards(label: &str, line: usize, t_s: f64, previous_s: f64) -> TraceError {
+    TraceError::TimeBackwards {
+        path: label.to_string(),
+        line,
+        t_s,
+        previous_s,
+    }
+}
+
+/// A rate for a message: whole hertz when it is one, else six significant digits.
+fn fmt_hz(hz: f64) -> String {
+    if (hz - hz.round()).abs() < 1e-6 * hz {
+        format!("{}", hz.round())
+    } else {
+        format!("{hz:.6}")
     }
 }
 

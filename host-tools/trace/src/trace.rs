@@ -81,6 +81,13 @@ pub enum TraceError {
         got_s: f64,
         expected_s: f64,
     },
+    #[error("{path}:{line}: time goes backwards at this row ({t_s} s after {previous_s} s)")]
+    TimeBackwards {
+        path: String,
+        line: usize,
+        t_s: f64,
+        previous_s: f64,
+    },
     #[error("{path}:{line}: line longer than {max} bytes")]
     LineTooLong { path: String, line: usize, max: usize },
     #[error("{path}:{line}: not UTF-8 text")]

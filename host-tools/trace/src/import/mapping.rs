@@ -22,7 +22,8 @@ pub struct ImportMap {
     /// among `, ; TAB |` when absent.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub delimiter: Option<String>,
-    /// `","` for a decimal comma (`1,25`); `"."` (the default) otherwise.
+    /// `","` for a decimal comma (`1,25`), `"."` for a point; when absent,
+    /// found from the first rows (commas in the numbers and no point: a comma).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub decimal: Option<String>,
     /// Lines before the header row (a recorder's preamble). When absent the
@@ -32,10 +33,12 @@ pub struct ImportMap {
     /// False when the text has no header row (columns then go by position).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub header: Option<bool>,
-    /// Samples per second, for a file without a time column (WAV gives its own).
+    /// Samples per second, for a file without a time column (WAV gives its
+    /// own); with a time column, checked against it, never in its place.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub sample_rate_hz: Option<f64>,
-    /// TDMS: the group that holds the channels (any group when absent).
+    /// TDMS: the group that holds the channels (when absent, any group; a
+    /// channel name found in two groups is then refused).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub group: Option<String>,
     /// What an absolute pressure reads at atmosphere, Pa (standard atmosphere by default).
@@ -145,6 +148,21 @@ impl Resolved {
         let v = raw * self.factor;
         let v = if self.absolute { v - atmosphere_pa } else { v };
         self.sign * v
+    }
+
+    /// An absolute pressure at or below 0 Pa absolute: impossible in a
+    /// chamber, so the column holds gauge pressure mapped as absolute.
+    #[inline]
+    pub fn below_vacuum(&self, raw: f64) -> bool {
+        self.absolute && raw * self.factor <= 0.0
+    }
+
+    /// What [`Resolved::below_vacuum`] means, for `column`'s `raw` value.
+    pub fn vacuum_message(&self, column: &str, raw: f64) -> String {
+        format!(
+            "`{column}` ({}) reads {raw} {} absolute, at or below vacuum: the column holds gauge pressure; remove `absolute = true` under [import.{}]",
+            self.signal, self.unit, self.signal
+        )
     }
 }
 

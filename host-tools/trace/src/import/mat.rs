@@ -34,8 +34,10 @@ pub fn is_mat(head: &[u8]) -> bool {
     head.starts_with(b"MATLAB ")
 }
 
-/// Every numeric variable of a MAT v5 file, by name; a scalar is a channel of one value.
-pub fn read(bytes: &[u8]) -> Result<Vec<Channel>, String> {
+/// Every numeric variable of a MAT v5 file, by name (a scalar is a channel
+/// of one value), and the variables not read, each with its class (a
+/// struct, a cell array, text), so that a signal looked for in vain names them.
+pub fn read(bytes: &[u8]) -> Result<(Vec<Channel>, Vec<String>), String> {
     if bytes.len() < HEADER_BYTES || !is_mat(bytes) {
         return Err("not a MAT file (no `MATLAB` header)".into());
     }
@@ -57,9 +59,35 @@ pub fn read(bytes: &[u8]) -> Result<Vec<Channel>, String> {
             "MAT header: version {version:#06x}, expected 0x0100 (MAT v5); a v7.3 file is HDF5: save it as v7"
         ));
     }
-    let mut channels = Vec::new();
-    elements(&bytes[HEADER_BYTES..], big, HEADER_BYTES, &mut channels, true)?;
-    Ok(channels)
+    let mut out = Vars::default();
+    elements(&bytes[HEADER_BYTES..], big, HEADER_BYTES, &mut out, true)?;
+    Ok((out.channels, out.skipped))
+}
+
+#[derive(Default)]
+struct Vars {
+    channels: Vec<Channel>,
+    skipped: Vec<String>,
+}
+
+/// A variable: a numeric vector, or another class (named for the message).
+enum Var {
+    Numeric(Channel),
+    Other { name: String, class: &'static str },
+}
+
+/// mxSINGLE_CLASS: 32-bit floats, whatever type the data element uses.
+const SINGLE_CLASS: u8 = 7;
+
+fn class_name(class: u8) -> &'static str {
+    match class {
+        1 => "a cell array",
+        2 => "a struct: save its fields as variables of their own",
+        3 => "an object",
+        4 => "text",
+        5 => "a sparse matrix",
+        _ => "not numeric",
+    }
 }
 
 fn u16_at(b: &[u8], big: bool) -> u16 {
@@ -107,15 +135,14 @@ fn element(b: &[u8], big: bool, at: usize) -> Result<(u32, &[u8], usize), String
     Ok((ty, &b[8..8 + n], 8 + padded.min(b.len() - 8)))
 }
 
-fn elements(mut b: &[u8], big: bool, mut at: usize, out: &mut Vec<Channel>, top: bool) -> Result<(), String> {
+fn elements(mut b: &[u8], big: bool, mut at: usize, out: &mut Vars, top: bool) -> Result<(), String> {
     while !b.is_empty() {
         let (ty, data, taken) = element(b, big, at)?;
         match ty {
-            MI_MATRIX => {
-                if let Some(c) = matrix(data, big, at + 8)? {
-                    out.push(c);
-                }
-            }
+            MI_MATRIX => match matrix(data, big, at + 8)? {
+                Var::Numeric(c) => out.channels.push(c),
+                Var::Other { name, class } => out.skipped.push(format!("`{name}` ({class})")),
+            },
             MI_COMPRESSED if top => {
                 let limit = INFLATE_ALLOWANCE + 16 * data.len() as u64;
                 let mut inflated = Vec::new();
@@ -139,17 +166,15 @@ fn elements(mut b: &[u8], big: bool, mut at: usize, out: &mut Vec<Channel>, top:
 }
 
 /// A numeric matrix as a channel (column-major values, any shape with one
-/// non-singleton dimension); other classes (cell, struct, char) are skipped.
-fn matrix(b: &[u8], big: bool, at: usize) -> Result<Option<Channel>, String> {
+/// non-singleton dimension); other classes (cell, struct, char) are named,
+/// not read.
+fn matrix(b: &[u8], big: bool, at: usize) -> Result<Var, String> {
     let (ty, flags, n1) = element(b, big, at)?;
     if ty != MI_UINT32 || flags.len() < 8 {
         return Err(format!("byte {at}: a matrix without its array flags"));
     }
     let class = (u32_at(&flags[0..4], big) & 0xff) as u8;
     let complex = u32_at(&flags[0..4], big) & 0x0800 != 0;
-    if !NUMERIC_CLASSES.contains(&class) {
-        return Ok(None);
-    }
     let rest = &b[n1..];
     let (ty, dims, n2) = element(rest, big, at + n1)?;
     if ty != MI_INT32 || dims.len() < 8 || dims.len() % 4 != 0 {
@@ -163,6 +188,12 @@ fn matrix(b: &[u8], big: bool, at: usize) -> Result<Option<Channel>, String> {
         return Err(format!("byte {at}: a matrix without its name"));
     }
     let name = String::from_utf8_lossy(name).into_owned();
+    if !NUMERIC_CLASSES.contains(&class) {
+        return Ok(Var::Other {
+            name,
+            class: class_name(class),
+        });
+    }
     let rest = &rest[n3..];
     let (ty, real, _) = element(rest, big, at + n1 + n2 + n3)?;
     if complex {
@@ -180,7 +211,9 @@ fn matrix(b: &[u8], big: bool, at: usize) -> Result<Option<Channel>, String> {
             "variable `{name}`: a {dims:?} matrix; a signal is a vector (one variable per channel)"
         ));
     }
-    Ok(Some(Channel::new(name, values)))
+    let mut c = Channel::new(name, values);
+    c.float32 = class == SINGLE_CLASS;
+    Ok(Var::Numeric(c))
 }
 
 fn numbers(ty: u32, b: &[u8], big: bool) -> Option<Vec<f64>> {

@@ -116,6 +116,9 @@ impl<T: RowSource + ?Sized> RowSource for Box<T> {
     fn time_resolution_s(&self) -> f64 {
         (**self).time_resolution_s()
     }
+    fn stated_period_s(&self) -> Option<(f64, String)> {
+        (**self).stated_period_s()
+    }
 }
 
 /// Bytes looked at to tell the format.
@@ -152,8 +155,13 @@ pub fn detect(head: &[u8]) -> Format {
     }
 }
 
-/// A header row holding the project's four columns, comma-separated.
+/// A header row holding the project's four columns, comma-separated, and
+/// no quotes: a file with quoted fields (pandas' `to_csv(decimal=",")`)
+/// is read as delimited text, which honours them.
 fn is_native(head: &[u8]) -> bool {
+    if head.contains(&b'"') {
+        return false;
+    }
     let line = head.split(|&b| b == b'\n').next().unwrap_or(&[]);
     let Ok(text) = std::str::from_utf8(line) else {
         // The head may end inside a character: only a complete first line counts.
@@ -233,7 +241,7 @@ pub fn open_from(
                 format,
                 signals,
                 delimiter: Some(d.delimiter().to_string()),
-                decimal: Some(if m.decimal_comma() { "," } else { "." }.into()),
+                decimal: Some(if d.decimal_comma() { "," } else { "." }.into()),
                 header_line: (d.header_line > 0).then_some(d.header_line),
                 mapping,
             };
@@ -247,24 +255,31 @@ pub fn open_from(
         _ => {
             let mut bytes = Vec::new();
             input.read_to_end(&mut bytes).map_err(|e| io(label, e))?;
-            let (channels, rate, embedded) = match format {
-                Format::Tdms => (tdms::read(&bytes, m.group.as_deref()), None, None),
-                Format::Mat => {
-                    let ch = mat::read(&bytes);
-                    let rate = ch.as_ref().ok().and_then(|ch| mat_rate(ch));
-                    (ch, rate, None)
-                }
+            let (channels, rate, embedded, skipped) = match format {
+                Format::Tdms => (tdms::read(&bytes, m.group.as_deref()), None, None, Vec::new()),
+                Format::Mat => match mat::read(&bytes) {
+                    Ok((ch, skipped)) => {
+                        let rate = mat_rate(&ch);
+                        (Ok(ch), rate, None, skipped)
+                    }
+                    Err(e) => (Err(e), None, None, Vec::new()),
+                },
                 Format::Wav => match wav::read(&bytes, m) {
-                    Ok((ch, fs)) => (Ok(ch), Some((0.0, 1.0 / fs, format!("the WAV header's {fs} Hz"))), None),
-                    Err(e) => (Err(e), None, None),
+                    Ok((ch, fs)) => (
+                        Ok(ch),
+                        Some((0.0, 1.0 / fs, format!("the WAV header's {fs} Hz"))),
+                        None,
+                        Vec::new(),
+                    ),
+                    Err(e) => (Err(e), None, None, Vec::new()),
                 },
                 _ => match parquet::read(bytes) {
-                    Ok((ch, sc)) => (Ok(ch), None, sc),
-                    Err(e) => (Err(e), None, None),
+                    Ok(r) => (Ok(r.channels), None, r.sidecar, r.skipped),
+                    Err(e) => (Err(e), None, None, Vec::new()),
                 },
             };
             let channels = channels.map_err(|e| import_err(label, format!("{}: {e}", format.name())))?;
-            let cols = columns::Columns::new(label, channels, m, rate)?;
+            let cols = columns::Columns::new(label, channels, m, rate, &skipped)?;
             let mut signals = Vec::new();
             signals.push(match cols.time() {
                 columns::TimeBase::Column(_, r) => source_of(r, column_text(&r.column)),
@@ -388,7 +403,7 @@ pub fn trace_from_channels(
     map: Option<&ImportMap>,
 ) -> Result<Trace, TraceError> {
     let default = ImportMap::default();
-    let source = columns::Columns::new(label, channels, map.unwrap_or(&default), None)?;
+    let source = columns::Columns::new(label, channels, map.unwrap_or(&default), None, &[])?;
     collect(Uniform::new(source)?, Vec::new())
 }
 

@@ -40,6 +40,8 @@ struct Object {
     values: Vec<f64>,
     /// The raw data is not a number (timestamps, booleans): kept out of the channels.
     numeric: bool,
+    /// Stored as 32-bit floats (see `Channel::float32`).
+    float32: bool,
 }
 
 #[derive(Debug, Clone, PartialEq)]
@@ -237,6 +239,7 @@ pub fn read(bytes: &[u8], group: Option<&str>) -> Result<Vec<Channel>, String> {
                             .ok_or_else(|| format!("segment {segment}: `{path}` has unknown data type {data_type:#x}"))?;
                         obj.index = Some(Index { data_type, values });
                         obj.numeric = numeric;
+                        obj.float32 = matches!(data_type, 9 | 0x19);
                     }
                 }
                 let np = c.u32()?;
@@ -351,6 +354,7 @@ pub fn read(bytes: &[u8], group: Option<&str>) -> Result<Vec<Channel>, String> {
             _ => None,
         };
         let mut c = Channel::new(format!("{}/{}", parts[0], parts[1]), o.values);
+        c.float32 = o.float32;
         c.increment_s = num("wf_increment");
         c.start_s = num("wf_start_offset");
         out.push(c);

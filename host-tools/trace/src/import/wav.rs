@@ -43,7 +43,7 @@ pub fn read(bytes: &[u8], map: &ImportMap) -> Result<(Vec<Channel>, f64), String
         .collect();
     for key in ["p_rear", "p_front", "accel"] {
         let r = map.resolve(key).map_err(|e| e.to_string())?;
-        let Some(i) = find(&channels, &r.column) else {
+        let Some(i) = find(&channels, &r.column, key)? else {
             return Err(format!(
                 "no channel {} for {key}: a WAV file has channels 1 ..= {n}; map each ([import.{key}] column = 1, scale = ...)",
                 r.column
