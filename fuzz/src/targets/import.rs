@@ -232,7 +232,8 @@ fn nested_parquet(channels: &[(&str, Vec<f64>)], t: &[f64]) -> Vec<u8> {
     use parquet::file::properties::WriterProperties;
     use parquet::file::writer::SerializedFileWriter;
     use std::sync::Arc;
-    let schema = "message seed {\n  REQUIRED DOUBLE t_s;\n  REQUIRED DOUBLE p_rear_pa;\n  REQUIRED DOUBLE p_front_pa;\n  \
+    let schema =
+        "message seed {\n  REQUIRED DOUBLE t_s;\n  REQUIRED DOUBLE p_rear_pa;\n  REQUIRED DOUBLE p_front_pa;\n  \
                   REQUIRED group meta {\n    REQUIRED DOUBLE a;\n    OPTIONAL DOUBLE b;\n  }\n  \
                   REQUIRED DOUBLE accel_mps2;\n  REQUIRED DOUBLE accel_b_mps2;\n}";
     let schema = Arc::new(parquet::schema::parser::parse_message_type(schema).expect("a valid schema"));
@@ -289,7 +290,13 @@ fn seeds() -> Vec<Vec<u8>> {
     let mut quoted = String::from("ms,rear,\"front \"\"B\"\"\",a\n");
     for i in 0..n {
         let f = |x: f64| format!("\"{x}\"").replace('.', ",");
-        quoted.push_str(&format!("{},{},{},{}\n", f(i as f64 * 0.01), f(p[i] / 1e5), f(p[i] / 1e5), f(a[i] / 9.8)));
+        quoted.push_str(&format!(
+            "{},{},{},{}\n",
+            f(i as f64 * 0.01),
+            f(p[i] / 1e5),
+            f(p[i] / 1e5),
+            f(a[i] / 9.8)
+        ));
     }
     let frames: Vec<[i16; 3]> = (0..n)
         .map(|i| {
