@@ -85,6 +85,8 @@ impl Config {
             piston_mass_kg: crate::math::widen(d.piston_mass_kg),
             bore_diameter_m: crate::math::widen(d.bore_diameter_m),
             rod_diameter_m: crate::math::widen(d.rod_diameter_m),
+            // Not on the wire (yet): the travel of `self`'s hammer stays.
+            travel_m: self.geometry.travel_m,
         };
         c.inclination_deg = d.inclination_deg;
         c.rear = rear;

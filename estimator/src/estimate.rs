@@ -357,7 +357,8 @@ pub fn estimate(
     // Plausibility and warnings.
     let peak_force = d.a1 * acc.peak_p1.max(0.0) + d.a2 * acc.peak_p2.max(0.0);
     let u_f = out.u_friction_n;
-    if !(x_stroke > 0.002 && x_stroke < 1.0)
+    if !(x_stroke > 0.002)
+        || beyond_the_hammer(c, d, acc.peak_p1, x_stroke, v_imp, out.u_v_impact_mps)
         || !(v_imp > 0.0)
         || friction < -u_f - 1.0
         || friction > 0.5 * peak_force + 1.0
@@ -376,6 +377,36 @@ pub fn estimate(
         out.flags.insert(Flags::PHASE_MISMATCH);
     }
     out
+}
+
+/// A stroke's length beyond which the estimate is no longer the hammer's,
+/// as a fraction of its travel: the distance is a double integral of the
+/// measured forces, off by a few per cent of itself through the gains and
+/// offsets; a wrong time base (a sample rate read wrong, 50 kS/s for
+/// 100 kS/s) scales it by the square of the error, far beyond this.
+pub const STROKE_MARGIN: f32 = 0.15;
+
+/// Whether a cycle's stroke or impact energy is more than this hammer can
+/// give: a stroke longer than the piston's travel (with
+/// [`STROKE_MARGIN`]), or an energy (less its expanded uncertainty `k·u`)
+/// above the most the air can do over the travel. That most is the rear
+/// chamber at the larger of the supply and the cycle's peak (an air
+/// cushion can exceed the supply), read high by its calibration's expanded
+/// gain and offset, on the full bore; the front chamber at vacuum at
+/// most helping; gravity along the axis. Such a cycle is read on a wrong
+/// time base or a wrong hammer, never valid.
+fn beyond_the_hammer(c: &Config, d: &Derived, peak_p1: f32, x_stroke: f32, v_imp: f32, u_v: f32) -> bool {
+    let travel = math::narrow(c.geometry.travel_m);
+    if !(x_stroke <= travel * (1.0 + STROKE_MARGIN)) {
+        return true;
+    }
+    let k = c.coverage_factor;
+    let p1 = c.supply_pressure_pa.max(peak_p1).max(0.0);
+    let p1_high = p1 * (1.0 + k * c.rear_spec.gain_rel) + k * c.rear_spec.offset;
+    let force = p1_high * d.a1 + crate::chambers::P_ATM_PA * d.a2 + d.fg.max(0.0);
+    let energy = 0.5 * d.m * v_imp * v_imp;
+    let u_energy = d.m * math::abs(v_imp) * u_v;
+    !(energy - u_energy <= force * travel * (1.0 + STROKE_MARGIN))
 }
 
 /// The last upward zero crossing of v(t) = v_b + V(t) + f(t), searched on

@@ -41,7 +41,7 @@ pub struct CommissionArgs {
     /// Gauge supply pressure of an operating point, bar (repeatable). On a
     /// device with a terminal you are asked to set each in turn; without
     /// one, give one per run (each run adds its point to the folder).
-    #[arg(long = "supply-bar", value_name = "BAR", required = true)]
+    #[arg(long = "supply-bar", value_name = "BAR", required = true, value_parser = crate::cli::supply_bar)]
     pub supply_bar: Vec<f64>,
     /// Raw cycles to capture at each operating point. The drift alarm
     /// reads every later window against this record's median and spread:

@@ -101,10 +101,11 @@ pub fn check_gauge(path: &Path, min_rear_pa: f64, min_front_pa: f64, duration_s:
 
 /// The config-file key each estimator field is built from in
 /// [`estimator_config`]; the estimator's own names mean nothing to a user.
-const ESTIMATOR_FIELD_KEYS: [(&str, &str); 23] = [
+const ESTIMATOR_FIELD_KEYS: [(&str, &str); 24] = [
     ("geometry.piston_mass_kg", "hammer.piston_mass_kg"),
     ("geometry.bore_diameter_m", "hammer.bore_diameter_m"),
     ("geometry.rod_diameter_m", "hammer.rod_diameter_m"),
+    ("geometry.travel_m", "hammer.impact_position_m"),
     ("inclination_deg", "hammer.inclination_deg"),
     ("rear_spec.gain_rel", "estimator.pressure_gain_uncertainty"),
     ("front_spec.gain_rel", "estimator.pressure_gain_uncertainty"),
@@ -628,6 +629,29 @@ pub fn no_cycle_message(path: &Path, summary: &StreamSummary, reports: &[CycleRe
         (summary.samples + summary.missing_samples) as f64 / summary.sample_rate_hz,
         no_impact_note(reports, &summary.config)
     ))
+}
+
+/// `hammer estimate`'s refusal of a trace in which cycles closed but none
+/// is valid (their records are still given first): how many, what flagged
+/// them, and the wrong hammer when the force balance points to it; `None`
+/// when a cycle is valid or none closed ([`no_cycle_message`] says that).
+/// A run that gives no number to use is not a success.
+pub fn no_valid_message(path: &Path, reports: &[CycleReport], config: &Config) -> Option<String> {
+    let mut cycles = reports.iter().filter(|r| r.is_cycle()).peekable();
+    cycles.peek()?;
+    let (n, flags) = cycles.try_fold((0usize, hammer_estimator::Flags::default()), |(n, f), r| {
+        (!r.is_valid()).then_some((n + 1, f | r.flags))
+    })?;
+    let mut m = format!(
+        "{}: no valid cycle among {n} cycle(s), flagged {}",
+        path.display(),
+        flags.names().collect::<Vec<_>>().join(",")
+    );
+    if let Some(hint) = geometry_hint(reports, config) {
+        m.push_str("; ");
+        m.push_str(&hint);
+    }
+    Some(m)
 }
 
 #[cfg(test)]
