@@ -222,11 +222,10 @@ fn check(field: &'static str, value: f32, min: f32, max: f32) -> Result<(), Conf
 /// the segments.
 type Limits = [(&'static str, f32, f32)];
 
-const GEOMETRY: [(&str, f32, f32); 4] = [
+const GEOMETRY: [(&str, f32, f32); 3] = [
     ("sample_rate_hz", 1_000.0, 1_000_000.0),
     ("geometry.piston_mass_kg", 0.01, 1000.0),
     ("geometry.bore_diameter_m", 0.001, 1.0),
-    ("geometry.travel_m", 0.001, 10.0),
 ];
 
 const CHANNELS: [(&str, f32, f32); 17] = [
@@ -285,15 +284,7 @@ impl Config {
     pub fn validate(&self) -> Result<(), ConfigError> {
         let g = &self.geometry;
         let bore = math::narrow(g.bore_diameter_m);
-        check_all(
-            &GEOMETRY,
-            &[
-                self.sample_rate_hz,
-                math::narrow(g.piston_mass_kg),
-                bore,
-                math::narrow(g.travel_m),
-            ],
-        )?;
+        check_all(&GEOMETRY, &[self.sample_rate_hz, math::narrow(g.piston_mass_kg), bore])?;
         check(
             "geometry.rod_diameter_m",
             math::narrow(g.rod_diameter_m),

@@ -26,9 +26,11 @@ pub struct Geometry {
     pub rod_diameter_m: f64,
     /// The most the piston can travel between the rear cover and the
     /// impact (a simulator's `hammer.impact_position_m`): no stroke is
-    /// longer, and no impact carries more energy than the supply's force
-    /// over it (the plausibility of a cycle, `estimate`).
-    pub travel_m: f64,
+    /// longer, and no impact carries more energy than the air's force over
+    /// it (the plausibility of a cycle, `estimate`). In `f32`: only the
+    /// estimator reads it (the simulator integrates its own positions), and
+    /// on the board a double costs flash.
+    pub travel_m: f32,
 }
 
 impl Geometry {
@@ -37,7 +39,7 @@ impl Geometry {
         piston_mass_kg: PAPER_PISTON_MASS_KG,
         bore_diameter_m: PAPER_BORE_DIAMETER_M,
         rod_diameter_m: PAPER_ROD_DIAMETER_M,
-        travel_m: PAPER_TRAVEL_M,
+        travel_m: PAPER_TRAVEL_M as f32,
     };
 
     /// Rear (full-bore) effective area A1.

@@ -153,10 +153,13 @@ impl Side {
 
     fn push(&mut self, prev: Option<f64>, x: f64) {
         let v = self.value;
+        // Inside the extreme and nearer it than the value next to it so far
+        // (false for NaN: a sample that is no number is no level).
+        let inside = (x - v) * self.inward > 0.0;
         match self.next {
             Some((n, ref mut k)) if x == n => *k += 1,
-            Some((n, _)) if (x - v) * self.inward > 0.0 && (n - x) * self.inward > 0.0 => self.next = Some((x, 1)),
-            None if x != v => self.next = Some((x, 1)),
+            Some((n, _)) if inside && (n - x) * self.inward > 0.0 => self.next = Some((x, 1)),
+            None if inside => self.next = Some((x, 1)),
             _ => {}
         }
         if x == v {
