@@ -163,7 +163,7 @@ fn a_hammer_that_stops_is_counted_as_a_stall_not_reported_as_a_cycle() {
 /// A cycle longer or stronger than the hammer can make is `implausible`,
 /// never valid (issue 48, item 3): the same sound codes read on a wrong time
 /// base (a map's 50 kS/s, a WAV header's 48 kHz, for 100 kS/s data) give
-/// strokes about four times the piston's 52 mm travel and every cycle is
+/// strokes over three times the piston's 52 mm travel and every cycle is
 /// flagged; read right, at 4 and 7 bar, every cycle is valid and its stroke
 /// within the travel.
 #[test]
