@@ -101,11 +101,10 @@ pub fn check_gauge(path: &Path, min_rear_pa: f64, min_front_pa: f64, duration_s:
 
 /// The config-file key each estimator field is built from in
 /// [`estimator_config`]; the estimator's own names mean nothing to a user.
-const ESTIMATOR_FIELD_KEYS: [(&str, &str); 24] = [
+const ESTIMATOR_FIELD_KEYS: [(&str, &str); 23] = [
     ("geometry.piston_mass_kg", "hammer.piston_mass_kg"),
     ("geometry.bore_diameter_m", "hammer.bore_diameter_m"),
     ("geometry.rod_diameter_m", "hammer.rod_diameter_m"),
-    ("geometry.travel_m", "hammer.impact_position_m"),
     ("inclination_deg", "hammer.inclination_deg"),
     ("rear_spec.gain_rel", "estimator.pressure_gain_uncertainty"),
     ("front_spec.gain_rel", "estimator.pressure_gain_uncertainty"),
