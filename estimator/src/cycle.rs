@@ -91,6 +91,10 @@ pub struct Derived {
     /// Σ q^j and Σ q^2j over one checkpoint's samples (j = 1..=k).
     pub e_k: f32,
     pub ee_k: f32,
+    /// What helps the rear chamber drive a stroke at most, beside it: the
+    /// front chamber at vacuum on its area, and gravity along the axis
+    /// (`estimate::beyond_the_hammer`).
+    pub assist_n: f32,
 }
 
 impl Derived {
@@ -104,18 +108,20 @@ impl Derived {
         };
         let k = c.checkpoint_samples();
         let (e_k, ee_k) = pass::geometric(q, k);
+        let (a2, fg) = (c.front_area_m2(), c.gravity_n());
         Self {
             dt,
             m,
             a1: c.rear_area_m2(),
-            a2: c.front_area_m2(),
-            fg: c.gravity_n(),
+            a2,
+            fg,
             half_dt_over_m: 0.5 * dt / m,
             half_dt: 0.5 * dt,
             q,
             k,
             e_k,
             ee_k,
+            assist_n: crate::chambers::P_ATM_PA * a2 + fg,
         }
     }
 }

@@ -5,7 +5,6 @@
 //! [`Config::with_device`]. Both ways live here and nowhere else.
 
 use crate::config::{ChannelCal, ChannelSpec, Config};
-use crate::geometry::Geometry;
 use hammer_types::{ChannelCalibration, DeviceConfig};
 
 fn cal(c: &ChannelCal, s: &ChannelSpec) -> ChannelCalibration {
@@ -81,11 +80,10 @@ impl Config {
         let (accel, accel_spec) = uncal(&d.accel);
         let mut c = *self;
         c.sample_rate_hz = d.sample_rate_hz;
-        c.geometry = Geometry {
-            piston_mass_kg: crate::math::widen(d.piston_mass_kg),
-            bore_diameter_m: crate::math::widen(d.bore_diameter_m),
-            rod_diameter_m: crate::math::widen(d.rod_diameter_m),
-        };
+        // The travel is not on the wire (yet): `self`'s stays.
+        c.geometry.piston_mass_kg = crate::math::widen(d.piston_mass_kg);
+        c.geometry.bore_diameter_m = crate::math::widen(d.bore_diameter_m);
+        c.geometry.rod_diameter_m = crate::math::widen(d.rod_diameter_m);
         c.inclination_deg = d.inclination_deg;
         c.rear = rear;
         c.front = front;

@@ -357,7 +357,8 @@ pub fn estimate(
     // Plausibility and warnings.
     let peak_force = d.a1 * acc.peak_p1.max(0.0) + d.a2 * acc.peak_p2.max(0.0);
     let u_f = out.u_friction_n;
-    if !(x_stroke > 0.002 && x_stroke < 1.0)
+    if !(x_stroke > 0.002)
+        || beyond_the_hammer(c, d, acc.peak_p1, x_stroke, v_imp)
         || !(v_imp > 0.0)
         || friction < -u_f - 1.0
         || friction > 0.5 * peak_force + 1.0
@@ -376,6 +377,31 @@ pub fn estimate(
         out.flags.insert(Flags::PHASE_MISMATCH);
     }
     out
+}
+
+/// How far past the hammer's own bounds a cycle may read before it is not
+/// this hammer's, as a fraction of them: the stroke is a double integral
+/// of the measured forces, and the bound on the energy a sum of the
+/// pressures' extremes, each off by a few per cent at most through the
+/// sensors' gains and offsets (0.8 % and 1 kPa standard on the paper's);
+/// a wrong time base (a sample rate read wrong, 50 kS/s for 100 kS/s)
+/// scales the stroke by the square of its error, far beyond this. (An
+/// eighth: a constant the board's FPU loads without a literal.)
+pub const PLAUSIBLE_MARGIN: f32 = 0.125;
+
+/// Whether a cycle's stroke or impact energy is more than this hammer can
+/// give: a stroke longer than the piston's travel, or an energy above the
+/// most the air can do over the travel, each with [`PLAUSIBLE_MARGIN`].
+/// That most is the rear chamber at the cycle's peak pressure (what the
+/// supply gave it: no higher in the stroke, from the supply's own pressure
+/// or an air cushion's) on the bore, plus [`Derived::assist_n`] (the front
+/// chamber at vacuum, gravity). Such a cycle is read on a wrong time base
+/// or a wrong hammer, never valid; a travel that is no number flags every
+/// cycle. (Few instructions: the reference board's flash is at its aim.)
+#[inline(always)]
+fn beyond_the_hammer(c: &Config, d: &Derived, peak_p1: f32, x_stroke: f32, v_imp: f32) -> bool {
+    let reach = c.geometry.travel_m * (1.0 + PLAUSIBLE_MARGIN);
+    !(x_stroke <= reach && 0.5 * d.m * v_imp * v_imp <= (peak_p1 * d.a1 + d.assist_n) * reach)
 }
 
 /// The last upward zero crossing of v(t) = v_b + V(t) + f(t), searched on
@@ -435,4 +461,34 @@ fn interp_w(acc: &CycleAcc, d: &Derived, t: f32) -> f32 {
         prev_w = cp.w;
     }
     acc.cur.w
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The paper's hammer at a 4 bar peak can give at most ~35 J over its
+    /// 52 mm (rear chamber at the peak on the bore, front at vacuum,
+    /// margin): its 3.8 J cycles over 43 mm pass; a stroke beyond the
+    /// travel, an energy beyond that bound, or a travel that is no number
+    /// does not.
+    #[test]
+    fn strokes_and_energies_beyond_the_hammer_are_caught() {
+        let mut c = Config::default();
+        let d = Derived::new(&c);
+        let v_for = |j: f32| libm::sqrtf(2.0 * j / d.m);
+        assert!(!beyond_the_hammer(&c, &d, 4e5, 0.043, v_for(3.8)));
+        assert!(!beyond_the_hammer(&c, &d, 4e5, 0.058, v_for(3.8)));
+        assert!(beyond_the_hammer(&c, &d, 4e5, 0.060, v_for(3.8)));
+        assert!(!beyond_the_hammer(&c, &d, 4e5, 0.043, v_for(33.0)));
+        assert!(beyond_the_hammer(&c, &d, 4e5, 0.043, v_for(36.0)));
+        // A higher peak can give more.
+        assert!(!beyond_the_hammer(&c, &d, 6e5, 0.043, v_for(36.0)));
+        assert!(beyond_the_hammer(&c, &d, 4e5, f32::NAN, v_for(3.8)));
+        // A longer hammer makes longer strokes.
+        c.geometry.travel_m = 0.1;
+        assert!(!beyond_the_hammer(&c, &d, 4e5, 0.065, v_for(3.8)));
+        c.geometry.travel_m = f32::NAN;
+        assert!(beyond_the_hammer(&c, &d, 4e5, 0.043, v_for(3.8)));
+    }
 }

@@ -1,5 +1,6 @@
-//! The hammer's piston geometry: the one place where mass and effective areas
-//! are defined, shared by the estimator, the simulator and the firmware.
+//! The hammer's piston geometry: the one place where mass, effective areas
+//! and travel are defined, shared by the estimator, the simulator and the
+//! firmware.
 
 /// Piston mass of the paper's small pneumatic hammer.
 pub const PAPER_PISTON_MASS_KG: f64 = 1.12;
@@ -7,6 +8,10 @@ pub const PAPER_PISTON_MASS_KG: f64 = 1.12;
 pub const PAPER_BORE_DIAMETER_M: f64 = 0.041;
 /// Piston rod diameter: the front chamber acts on the annulus bore − rod.
 pub const PAPER_ROD_DIAMETER_M: f64 = 0.028;
+/// How far the piston can move: its rear face runs from the rear cover
+/// (x = 0) to the impact position, the paper's 10 mm rest + 42 mm stroke
+/// ([`crate::chambers::PAPER_IMPACT_POSITION_M`], the one value).
+pub const PAPER_TRAVEL_M: f64 = crate::chambers::PAPER_IMPACT_POSITION_M;
 /// Standard gravity, for the inclination term.
 pub const STANDARD_GRAVITY_MPS2: f64 = 9.806_65;
 
@@ -19,6 +24,13 @@ pub struct Geometry {
     pub piston_mass_kg: f64,
     pub bore_diameter_m: f64,
     pub rod_diameter_m: f64,
+    /// The most the piston can travel between the rear cover and the
+    /// impact (a simulator's `hammer.impact_position_m`): no stroke is
+    /// longer, and no impact carries more energy than the air's force over
+    /// it (the plausibility of a cycle, `estimate`). In `f32`: only the
+    /// estimator reads it (the simulator integrates its own positions), and
+    /// on the board a double costs flash.
+    pub travel_m: f32,
 }
 
 impl Geometry {
@@ -27,6 +39,7 @@ impl Geometry {
         piston_mass_kg: PAPER_PISTON_MASS_KG,
         bore_diameter_m: PAPER_BORE_DIAMETER_M,
         rod_diameter_m: PAPER_ROD_DIAMETER_M,
+        travel_m: PAPER_TRAVEL_M as f32,
     };
 
     /// Rear (full-bore) effective area A1.
@@ -47,6 +60,8 @@ impl Geometry {
             && self.rod_diameter_m.is_finite()
             && self.rod_diameter_m >= 0.0
             && self.bore_diameter_m > self.rod_diameter_m
+            && self.travel_m.is_finite()
+            && self.travel_m > 0.0
     }
 }
 
@@ -93,6 +108,9 @@ mod tests {
         assert!(!g.is_valid());
         g = Geometry::PAPER;
         g.piston_mass_kg = f64::NAN;
+        assert!(!g.is_valid());
+        g = Geometry::PAPER;
+        g.travel_m = 0.0;
         assert!(!g.is_valid());
     }
 }

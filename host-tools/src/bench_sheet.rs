@@ -36,7 +36,7 @@ pub struct BenchSheetArgs {
     pub traces: Vec<PathBuf>,
     /// Gauge supply pressure of each trace, bar, in the order of the traces
     /// (default: each trace's sidecar, else the mapping's supply_pressure_bar).
-    #[arg(long, value_delimiter = ',')]
+    #[arg(long, value_delimiter = ',', value_parser = crate::cli::supply_bar)]
     pub supply_bar: Vec<f64>,
     #[command(flatten)]
     pub mapping: MapArgs,

@@ -11,6 +11,29 @@ use hammer_sim::{SimConfig, EFFECT_NAMES};
 use hammer_trace::config::{load_toml, ConfigError};
 use hammer_trace::trace::{write_csv, write_sidecar};
 
+/// The highest gauge supply pressure a command takes, bar. Pneumatic
+/// hammers run on compressed-air networks of 4–10 bar (the paper runs
+/// 4–7) and no pneumatic tool is rated near 25 bar; a larger number is a
+/// typing or unit mistake (psi: 4 bar is 58 psi; kPa: 400).
+pub const SUPPLY_BAR_MAX: f64 = 25.0;
+
+/// The parser of every `--supply-bar` (and of the other flags that give a
+/// supply pressure): one place refuses what no hammer runs at, a value
+/// that is not a number, negative (gauge pressure below vacuum is not a
+/// supply) or beyond [`SUPPLY_BAR_MAX`], before any file is opened.
+pub fn supply_bar(text: &str) -> Result<f64, String> {
+    let v: f64 = text
+        .trim()
+        .parse()
+        .map_err(|_| format!("`{text}` is not a number of bar"))?;
+    if !v.is_finite() || !(0.0..=SUPPLY_BAR_MAX).contains(&v) {
+        return Err(format!(
+            "{text} is not a gauge supply pressure: allowed 0 ..= {SUPPLY_BAR_MAX} bar (pneumatic hammers run at 4–10 bar; give bar, not psi or kPa)"
+        ));
+    }
+    Ok(v)
+}
+
 #[derive(Parser, Debug)]
 #[command(
     name = "hammer",
@@ -104,13 +127,13 @@ pub struct CaptureArgs {
     pub port: String,
     /// Capture a demo board instead of a device: the firmware (QEMU or native)
     /// fed with a simulated hammer at this gauge supply pressure, bar.
-    #[arg(long, value_name = "SUPPLY_BAR", conflicts_with = "port")]
+    #[arg(long, value_name = "SUPPLY_BAR", conflicts_with = "port", value_parser = supply_bar)]
     pub demo: Option<f64>,
     /// Impact cycles to record (the device holds one full cycle at 100 kS/s).
     #[arg(long, default_value_t = 1)]
     pub cycles: u8,
     /// Gauge supply pressure to write in the sidecar, bar (unknown if omitted).
-    #[arg(long)]
+    #[arg(long, value_parser = supply_bar)]
     pub supply_bar: Option<f64>,
     /// Trace to write (CSV); its sidecar goes beside it with extension .json.
     /// A name ending in `.parquet` writes one Parquet file instead: the
@@ -150,7 +173,7 @@ pub struct EstimateArgs {
     pub trace: PathBuf,
     /// Gauge supply pressure, bar: the operating point of the drift baseline
     /// (default: the sidecar's; unknown means binning by peak rear pressure).
-    #[arg(long)]
+    #[arg(long, value_parser = supply_bar)]
     pub supply_bar: Option<f64>,
     /// TOML file: [hammer] geometry, [sensors.*] calibration ranges, [estimator] thresholds and accuracy,
     /// [import] what a recorder's file means.
@@ -178,7 +201,7 @@ fn effect_help() -> String {
 #[command(allow_negative_numbers = true)]
 pub struct SimulateArgs {
     /// Gauge supply pressure at the valve inlet, bar (the paper runs 4–7). Overrides the config.
-    #[arg(long)]
+    #[arg(long, value_parser = supply_bar)]
     pub supply_bar: Option<f64>,
     /// Simulated time, s (default 0.5, the paper's run length).
     #[arg(long)]
@@ -214,7 +237,7 @@ pub struct FiguresArgs {
     #[arg(long, default_value = "docs/figures")]
     pub out: PathBuf,
     /// Gauge supply pressure, bar.
-    #[arg(long, default_value_t = 4.0)]
+    #[arg(long, default_value_t = 4.0, value_parser = supply_bar)]
     pub supply_bar: f64,
 }
 
@@ -511,8 +534,8 @@ fn estimate_cmd(args: &EstimateArgs) -> Result<()> {
     if let Some(message) = no_cycle {
         return Err(anyhow::anyhow!(message));
     }
-    if let Some(hint) = crate::report::geometry_hint(&reports, &summary.config) {
-        eprintln!("note: no valid cycle: {hint}");
+    if let Some(message) = hammer_sim::estimation::no_valid_message(&args.trace, &reports, &summary.config) {
+        return Err(anyhow::anyhow!(message));
     }
     Ok(())
 }

@@ -45,7 +45,7 @@ pub struct CommissionArgs {
     /// one, give one per run (each run adds its point to the folder). Each
     /// point has its own folder, `<bar>bar/` to a tenth of a bar: two
     /// pressures that name one are refused.
-    #[arg(long = "supply-bar", value_name = "BAR", required = true)]
+    #[arg(long = "supply-bar", value_name = "BAR", required = true, value_parser = crate::cli::supply_bar)]
     pub supply_bar: Vec<f64>,
     /// Raw cycles to capture at each operating point. The drift alarm
     /// reads every later window against this record's median and spread:

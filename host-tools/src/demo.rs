@@ -25,7 +25,7 @@ use hammer_sim::SimConfig;
 #[derive(Args, Debug, Clone)]
 pub struct DemoArgs {
     /// Gauge supply pressure, bar.
-    #[arg(long, default_value_t = 4.0)]
+    #[arg(long, default_value_t = 4.0, value_parser = crate::cli::supply_bar)]
     pub supply_bar: f64,
     /// Extra simulator effect: NAME or NAME:key=value,... (repeatable). The
     /// paper's pressure-dependent friction is always on.

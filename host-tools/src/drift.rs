@@ -77,7 +77,7 @@ pub struct DriftArgs {
     /// The record's operating point (gauge supply, bar) to read the
     /// captures against when the board's configuration holds no supply
     /// pressure (a record of one point needs none).
-    #[arg(long, value_name = "BAR", requires = "reference")]
+    #[arg(long, value_name = "BAR", requires = "reference", value_parser = crate::cli::supply_bar)]
     pub point_bar: Option<f64>,
 }
 

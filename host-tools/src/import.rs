@@ -24,7 +24,7 @@ pub struct ImportArgs {
     #[command(flatten)]
     pub mapping: MapArgs,
     /// Gauge supply pressure of the recording, bar (for the sidecar).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::cli::supply_bar)]
     pub supply_bar: Option<f64>,
 }
 

@@ -29,7 +29,7 @@ pub struct SoakArgs {
     #[arg(long, default_value_t = 1.0)]
     pub minutes: f64,
     /// Gauge supply pressure, bar.
-    #[arg(long, default_value_t = 5.0)]
+    #[arg(long, default_value_t = 5.0, value_parser = crate::cli::supply_bar)]
     pub supply_bar: f64,
     /// Friction rise per minute, relative (as `hammer demo --wear-rate`).
     #[arg(long, default_value_t = 0.0)]

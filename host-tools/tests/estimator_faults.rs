@@ -159,3 +159,51 @@ fn a_hammer_that_stops_is_counted_as_a_stall_not_reported_as_a_cycle() {
         assert_eq!(w[1].seq, w[0].seq + 1);
     }
 }
+
+/// A cycle longer or stronger than the hammer can make is `implausible`,
+/// never valid (issue 48, item 3): the same sound codes read on a wrong time
+/// base (a map's 50 kS/s, a WAV header's 48 kHz, for 100 kS/s data) give
+/// strokes over three times the piston's 52 mm travel and every cycle is
+/// flagged; read right, at 4 and 7 bar, every cycle is valid and its stroke
+/// within the travel.
+#[test]
+fn a_stroke_beyond_the_travel_is_implausible_and_a_sound_one_is_valid() {
+    for bar in [4.0, 7.0] {
+        let mut cfg = SimConfig::nominal(bar);
+        cfg.solver.duration_s = 0.6;
+        cfg.effects.apply_spec("coulomb_friction").unwrap();
+        let sim = simulate(&cfg).unwrap();
+        let est = cfg.estimator_config(Some(bar)).unwrap();
+        let travel = est.geometry.travel_m;
+        let cycles: Vec<_> = run(&sim.measured.codes, est)
+            .into_iter()
+            .filter(|r| r.is_cycle())
+            .collect();
+        assert!(cycles.len() >= 8, "{bar} bar");
+        assert!(
+            cycles.iter().all(|r| r.is_valid() && r.stroke_m < travel),
+            "{bar} bar: {:?}",
+            cycles
+                .iter()
+                .map(|r| (r.stroke_m, r.flags.names().collect::<Vec<_>>()))
+                .collect::<Vec<_>>()
+        );
+        for wrong_hz in [50e3, 48e3] {
+            let mut wrong = est;
+            wrong.sample_rate_hz = wrong_hz;
+            let cycles: Vec<_> = run(&sim.measured.codes, wrong)
+                .into_iter()
+                .filter(|r| r.is_cycle())
+                .collect();
+            assert!(!cycles.is_empty(), "{bar} bar at {wrong_hz} Hz");
+            for r in &cycles {
+                assert!(
+                    r.flags.contains(Flags::IMPLAUSIBLE) && !r.is_valid(),
+                    "{bar} bar at {wrong_hz} Hz: stroke {} m, {} J",
+                    r.stroke_m,
+                    r.impact_energy_j
+                );
+            }
+        }
+    }
+}

@@ -375,6 +375,74 @@ fn a_dip_a_recorder_clipped_leaves_the_friction_fit() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// The same clipped dip recorded quantised, as a 0–10 bar recorder of 10,
+/// 12, 14 and 16 bits writes it (244 Pa steps at 12 bits, under the 500 Pa
+/// noise): 0 gauge is still found a rail (it piles up samples no level
+/// beside it holds), so friction at 4 bar reads its truth within 0.15 N and
+/// no zero shift is flagged, with no range configured (issue 48, item 1).
+/// Before, the equal neighbours a quantised channel has everywhere hid the
+/// rail: at 10 to 14 bits friction read 1.2 N high with a false zero shift.
+#[test]
+fn a_quantised_clipped_floor_is_a_rail_at_every_depth() {
+    use hammer_trace::import::inspect;
+    for bits in [10u32, 12, 14, 16] {
+        let mut cfg = hammer_sim::SimConfig::nominal(4.0);
+        cfg.solver.duration_s = 0.6;
+        cfg.seed = 1;
+        // The rear outlet opens early: a deep dip below atmosphere.
+        cfg.hammer.rear_outlet_opens_m = 0.022;
+        for ch in [&mut cfg.sensors.rear, &mut cfg.sensors.front] {
+            ch.range_min = 0.0;
+            ch.range_max = 10e5;
+            ch.adc_bits = bits;
+        }
+        let sim = hammer_sim::simulate(&cfg).unwrap();
+        let m = &sim.measured;
+        let n = m.p_rear_pa.len();
+        let trace = hammer_trace::trace::Trace {
+            dt_s: cfg.solver.output_step_s,
+            t_s: (0..n).map(|i| i as f64 * cfg.solver.output_step_s).collect(),
+            p_rear_pa: m.p_rear_pa.clone(),
+            p_front_pa: m.p_front_pa.clone(),
+            accel_mps2: m.accel_mps2.clone(),
+            extra: Default::default(),
+            gaps: vec![],
+        };
+        let at_zero = trace.p_rear_pa.iter().filter(|&&p| p == 0.0).count();
+        assert!(at_zero * 10 >= n, "{bits} bits: {at_zero} of {n} rear samples at 0");
+        // `hammer import` reports the rail.
+        let rear = &inspect::stats(&trace).channels[0];
+        assert!(
+            rear.rails.iter().any(|r| r.value == 0.0 && r.samples == at_zero),
+            "{bits} bits: {rear:?}"
+        );
+        // No range configured: the default config, the recorder's unknown.
+        let (reports, _) =
+            hammer_sim::estimation::estimate_trace(&trace, &hammer_sim::SimConfig::default(), Some(4.0), "quantised")
+                .unwrap();
+        // After the start-up (the truth's first two cycles).
+        let t0 = sim.run.cycles[1].t_impact_s;
+        let cycles: Vec<_> = reports
+            .iter()
+            .filter(|r| r.is_cycle() && r.t_impact_s() > t0 + 1e-3)
+            .collect();
+        assert!(cycles.len() >= 5 && cycles.iter().all(|r| r.is_valid()), "{bits} bits");
+        assert!(
+            cycles
+                .iter()
+                .all(|r| !r.flags.contains(hammer_estimator::Flags::ACCEL_ZERO_SHIFT)),
+            "{bits} bits: a clipped stretch read as a zero shift"
+        );
+        let truth: Vec<f64> = sim.run.cycles.iter().skip(2).map(|c| c.friction_cycle_n).collect();
+        let truth = truth.iter().sum::<f64>() / truth.len() as f64;
+        let mean = cycles.iter().map(|r| r.friction_n as f64).sum::<f64>() / cycles.len() as f64;
+        assert!(
+            (mean - truth).abs() <= 0.15,
+            "{bits} bits: friction {mean:.3} N against the truth {truth:.3} N"
+        );
+    }
+}
+
 /// Runs a Python snippet (the reference writers) with `args` as `sys.argv[1:]`.
 fn py(script: &str, args: &[&str]) {
     let out = Command::new("python3")

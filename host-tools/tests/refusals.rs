@@ -230,6 +230,199 @@ fn every_rate_from_the_floor_up_reads_right() {
     }
 }
 
+/// The paper's hammer at 4 bar with friction, as issue 48 sets it up: the
+/// simulated trace, and its four signal columns alone (no sidecar).
+fn plain4(dir: &Path) -> PathBuf {
+    let sim = dir.join("s4.csv");
+    let (code, _, err) = hammer(&[
+        "simulate",
+        "--supply-bar",
+        "4",
+        "--duration",
+        "0.5",
+        "--seed",
+        "1",
+        "--effect",
+        "coulomb_friction",
+        "--out",
+        sim.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let plain = dir.join("plain4.csv");
+    rewrite(&sim, &plain, |_, f| Some(f.join(",")));
+    plain
+}
+
+/// 16-bit PCM WAV of three channels whose header says `rate_hz`.
+fn wav(samples: &[[i16; 3]], rate_hz: u32) -> Vec<u8> {
+    let data = (samples.len() * 6) as u32;
+    let mut w = b"RIFF".to_vec();
+    w.extend_from_slice(&(36 + data).to_le_bytes());
+    w.extend_from_slice(b"WAVEfmt ");
+    w.extend_from_slice(&16u32.to_le_bytes());
+    w.extend_from_slice(&1u16.to_le_bytes());
+    w.extend_from_slice(&3u16.to_le_bytes());
+    w.extend_from_slice(&rate_hz.to_le_bytes());
+    w.extend_from_slice(&(rate_hz * 6).to_le_bytes());
+    w.extend_from_slice(&6u16.to_le_bytes());
+    w.extend_from_slice(&16u16.to_le_bytes());
+    w.extend_from_slice(b"data");
+    w.extend_from_slice(&data.to_le_bytes());
+    for s in samples {
+        for v in s {
+            w.extend_from_slice(&v.to_le_bytes());
+        }
+    }
+    w
+}
+
+/// A wrong time base gives strokes and energies no hammer of this travel
+/// makes: a map's 50 kS/s over a file with no time column, and a WAV whose
+/// header says 48 kHz for 100 kS/s data, gave 8 valid cycles of 15–16.5 J
+/// with 0.174 m strokes on the 52 mm travel (issue 48, item 3). Now every
+/// cycle is flagged `implausible` and, no cycle being valid, `estimate`
+/// exits 2 naming the file (item 12).
+#[test]
+fn a_wrong_time_base_gives_no_valid_cycle() {
+    let dir = tmp_dir("time-base");
+    let plain = plain4(&dir);
+    let text = std::fs::read_to_string(&plain).unwrap();
+    let rows: Vec<[f64; 3]> = text
+        .lines()
+        .skip(1)
+        .map(|l| {
+            let f: Vec<f64> = l.split(',').map(|v| v.parse().unwrap()).collect();
+            [f[1], f[2], f[3]]
+        })
+        .collect();
+    let untimed = dir.join("untimed.csv");
+    let mut body = String::from("p_rear_pa,p_front_pa,accel_mps2\n");
+    for r in &rows {
+        body.push_str(&format!("{},{},{}\n", r[0], r[1], r[2]));
+    }
+    std::fs::write(&untimed, body).unwrap();
+    let rate = dir.join("rate.toml");
+    std::fs::write(&rate, "sample_rate_hz = 50000\n").unwrap();
+    let at48 = dir.join("at48.wav");
+    let pcm = |v: f64, full: f64| (v / full * 32767.0).round().clamp(-32768.0, 32767.0) as i16;
+    let samples: Vec<[i16; 3]> = rows
+        .iter()
+        .map(|r| [pcm(r[0], 10e5), pcm(r[1], 10e5), pcm(r[2], 2000.0)])
+        .collect();
+    std::fs::write(&at48, wav(&samples, 48_000)).unwrap();
+    let wav_map = dir.join("wav.toml");
+    std::fs::write(
+        &wav_map,
+        "p_rear = { column = 1, unit = \"bar\", scale = 10 }\n\
+         p_front = { column = 2, unit = \"bar\", scale = 10 }\n\
+         accel = { column = 3, unit = \"m/s2\", scale = 2000 }\n",
+    )
+    .unwrap();
+    // Read right (no time column needs the rate; the WAV at its true rate), valid.
+    let right = dir.join("right.toml");
+    std::fs::write(&right, "sample_rate_hz = 100000\n").unwrap();
+    let at100 = dir.join("at100.wav");
+    std::fs::write(&at100, wav(&samples, 100_000)).unwrap();
+    for (trace, map) in [(&untimed, &right), (&at100, &wav_map)] {
+        let (code, out, err) = hammer(&[
+            "estimate",
+            trace.to_str().unwrap(),
+            "--supply-bar",
+            "4",
+            "--map",
+            map.to_str().unwrap(),
+        ]);
+        assert_eq!(code, 0, "{}: {err}", trace.display());
+        assert!(out.contains("summary: 8 of 8 cycles valid"), "{out}");
+    }
+    for (trace, map) in [(&untimed, &rate), (&at48, &wav_map)] {
+        let (code, out, err) = hammer(&[
+            "estimate",
+            trace.to_str().unwrap(),
+            "--supply-bar",
+            "4",
+            "--map",
+            map.to_str().unwrap(),
+            "--format",
+            "jsonl",
+        ]);
+        let cycles: Vec<&str> = out.lines().filter(|l| !l.contains("no_impact")).collect();
+        assert!(cycles.len() >= 8, "{out}");
+        assert!(
+            cycles
+                .iter()
+                .all(|l| l.contains("\"valid\":false") && l.contains("implausible")),
+            "{}: {out}",
+            trace.display()
+        );
+        assert_eq!(code, 2, "{err}");
+        assert!(
+            err.contains(&format!("{}: no valid cycle among", trace.display())) && err.contains("implausible"),
+            "{err}"
+        );
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Every command that takes a supply pressure refuses one no hammer runs
+/// at, before reading anything, naming the flag (issue 48, item 13).
+#[test]
+fn absurd_supply_pressures_are_refused_at_the_flag() {
+    let dir = tmp_dir("supply");
+    let plain = plain4(&dir);
+    let p = plain.to_str().unwrap();
+    let out = dir.join("out.csv");
+    let o = out.to_str().unwrap();
+    for bar in ["NaN", "inf", "-3", "1e300", "26", "4bar"] {
+        let eq = format!("--supply-bar={bar}");
+        for args in [
+            vec!["import", p, "--out", o, eq.as_str()],
+            vec!["estimate", p, eq.as_str()],
+            vec!["report", p, "--out", o, eq.as_str()],
+            vec!["bench-sheet", p, "--out", o, eq.as_str()],
+            vec!["diagnose", "--measured", p, eq.as_str()],
+            vec!["simulate", eq.as_str()],
+        ] {
+            let (code, _, err) = hammer(&args);
+            assert_eq!(code, 2, "{args:?}: {err}");
+            assert!(err.contains("--supply-bar") && err.contains("bar"), "{args:?}: {err}");
+        }
+    }
+    assert!(!out.exists());
+    // The bound itself and an ordinary value pass.
+    let (code, _, err) = hammer(&["estimate", p, "--supply-bar", "4"]);
+    assert_eq!(code, 0, "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// No valid cycle is a failure like no cycle at all: exit 2, the records
+/// still printed, the file named (issue 48, item 12).
+#[test]
+fn no_valid_cycle_exits_2_naming_the_file() {
+    let dir = tmp_dir("no-valid");
+    let plain = plain4(&dir);
+    // Read as a hammer whose piston travels 32 mm (the config's impact
+    // position): the 43 mm strokes are more than it can make.
+    let bad = plain.clone();
+    let cfg = dir.join("short.toml");
+    std::fs::write(&cfg, "[hammer]\nimpact_position_m = 0.032\n").unwrap();
+    let (code, out, err) = hammer(&[
+        "estimate",
+        bad.to_str().unwrap(),
+        "--supply-bar",
+        "4",
+        "--config",
+        cfg.to_str().unwrap(),
+    ]);
+    assert!(out.contains("summary: no valid cycle among"), "{out}");
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains(&format!("{}: no valid cycle among", bad.display())) && err.contains("implausible"),
+        "{err}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// Issue 48 item 5: a 2 kg hammer's traces read against the built-in
 /// model (the paper's 1.12 kg piston) were diagnosed as a gain error and
 /// friction, while `estimate` took the sidecar's hammer: the diagnosis now

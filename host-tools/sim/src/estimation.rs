@@ -631,6 +631,29 @@ pub fn no_cycle_message(path: &Path, summary: &StreamSummary, reports: &[CycleRe
     ))
 }
 
+/// `hammer estimate`'s refusal of a trace in which cycles closed but none
+/// is valid (their records are still given first): how many, what flagged
+/// them, and the wrong hammer when the force balance points to it; `None`
+/// when a cycle is valid or none closed ([`no_cycle_message`] says that).
+/// A run that gives no number to use is not a success.
+pub fn no_valid_message(path: &Path, reports: &[CycleReport], config: &Config) -> Option<String> {
+    let mut cycles = reports.iter().filter(|r| r.is_cycle()).peekable();
+    cycles.peek()?;
+    let (n, flags) = cycles.try_fold((0usize, hammer_estimator::Flags::default()), |(n, f), r| {
+        (!r.is_valid()).then_some((n + 1, f | r.flags))
+    })?;
+    let mut m = format!(
+        "{}: no valid cycle among {n} cycle(s), flagged {}",
+        path.display(),
+        flags.names().collect::<Vec<_>>().join(",")
+    );
+    if let Some(hint) = geometry_hint(reports, config) {
+        m.push_str("; ");
+        m.push_str(&hint);
+    }
+    Some(m)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

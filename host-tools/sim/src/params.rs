@@ -87,6 +87,7 @@ impl HammerParams {
             piston_mass_kg: self.piston_mass_kg,
             bore_diameter_m: self.bore_diameter_m,
             rod_diameter_m: self.rod_diameter_m,
+            travel_m: self.impact_position_m as f32,
         }
     }
 

@@ -22,7 +22,7 @@ pub struct DiagnoseArgs {
     #[arg(long, value_name = "TRACE", required = true)]
     pub measured: Vec<PathBuf>,
     /// Gauge supply pressure of the preceding `--measured`, bar.
-    #[arg(long, value_name = "BAR")]
+    #[arg(long, value_name = "BAR", value_parser = crate::cli::supply_bar)]
     pub supply_bar: Vec<f64>,
     /// A record of the same hammer when it was known sound: a trace
     /// (repeatable; its supply pressure like `--measured`'s) or the folder

@@ -51,7 +51,7 @@ pub struct ReportArgs {
     pub out: PathBuf,
     /// Gauge supply pressure, bar: the operating point of the drift baseline
     /// (default: the sidecar's; unknown means binning by peak rear pressure).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::cli::supply_bar)]
     pub supply_bar: Option<f64>,
     /// TOML file: [hammer] geometry, [sensors.*] calibration ranges, [estimator] thresholds
     /// and accuracy (default: the paper's hammer on the reference bench; a simulator's

@@ -10,8 +10,18 @@ use crate::trace::Trace;
 pub const RAIL_MIN_RUNS: usize = 3;
 pub const RAIL_MIN_RUN: usize = 3;
 /// Equal neighbours away from the rail, as a fraction of the pairs, above
-/// which a channel is quantised (or flat) and a repeated extreme says nothing.
+/// which a channel is quantised (or flat): a repeated extreme then says
+/// nothing by itself, and the rail must pile up samples ([`RAIL_PILE_UP`]).
 pub const RAIL_MAX_EQUAL_ELSEWHERE: f64 = 0.01;
+/// On a quantised channel, how many times the samples of the level next to
+/// it a clipped extreme holds at least. A recorder's clip puts on its bound
+/// every sample the signal spent beyond it, so the bound holds many times
+/// its neighbour level (12 to 185 times for a vented chamber's dip clipped
+/// at 0 gauge by a 0–10 bar recorder of 10 to 16 bits under 500 Pa of
+/// noise); a signal's own extreme is a thin tail under noise (fewer than
+/// its neighbour), and noise-free about as many (1.4 times at a smooth
+/// minimum, 3 at the flattest quartic one).
+pub const RAIL_PILE_UP: f64 = 4.0;
 /// A vented chamber's lowest pressure sits near atmosphere gauge 0; when both
 /// chambers' lowest read above this, the pressures are absolute.
 pub const ABSOLUTE_MIN_GAUGE_PA: f64 = 50e3;
@@ -82,9 +92,11 @@ pub fn stats(t: &Trace) -> Stats {
 
 /// Whether `v` (an extreme of `x`) is a value a recorder clipped to: it
 /// is the channel's extreme over the file, occurs in at least
-/// [`RAIL_MIN_RUNS`] runs of [`RAIL_MIN_RUN`] samples, and equal neighbours
-/// are rare elsewhere (the channel is neither quantised nor flat, so a
-/// repeated value means something). A vented chamber that rests at exactly
+/// [`RAIL_MIN_RUNS`] runs of [`RAIL_MIN_RUN`] samples, and either equal
+/// neighbours are rare elsewhere (the channel is neither quantised nor
+/// flat, so a repeated value means something) or, on a quantised channel,
+/// the extreme piles up [`RAIL_PILE_UP`] times the samples of the value
+/// next to it (the mass beyond the bound, put on it). A vented chamber that rests at exactly
 /// 0 gauge in noise-free data is not a rail as long as it dips below
 /// atmosphere somewhere else in the file (as a running hammer's does): 0 is
 /// then not the channel's extreme. [`RailScan`] applies the rule.
@@ -118,10 +130,15 @@ struct Side {
     /// Neighbour pairs with either sample at the value, and with both.
     touching: usize,
     equal: usize,
+    /// +1 at the bottom, −1 at the top: the inside is `value + inward·d`.
+    inward: f64,
+    /// The value next to the extreme inside it, and its samples.
+    next: Option<(f64, usize)>,
 }
 
 impl Side {
-    fn new(value: f64) -> Self {
+    /// A new extreme `value`; the one it replaces (if any) is now next to it.
+    fn new(value: f64, inward: f64, was: Option<Side>) -> Self {
         Side {
             value,
             samples: 0,
@@ -129,11 +146,22 @@ impl Side {
             run: 0,
             touching: 0,
             equal: 0,
+            inward,
+            next: was.map(|s| (s.value, s.samples)),
         }
     }
 
     fn push(&mut self, prev: Option<f64>, x: f64) {
         let v = self.value;
+        // Inside the extreme and nearer it than the value next to it so far
+        // (false for NaN: a sample that is no number is no level).
+        let inside = (x - v) * self.inward > 0.0;
+        match self.next {
+            Some((n, ref mut k)) if x == n => *k += 1,
+            Some((n, _)) if inside && (n - x) * self.inward > 0.0 => self.next = Some((x, 1)),
+            None if inside => self.next = Some((x, 1)),
+            _ => {}
+        }
         if x == v {
             self.samples += 1;
             self.run = if prev == Some(v) { self.run + 1 } else { 1 };
@@ -162,10 +190,10 @@ impl RailScan {
             }
         }
         if self.lo.is_none_or(|s| x < s.value) {
-            self.lo = Some(Side::new(x));
+            self.lo = Some(Side::new(x, 1.0, self.lo));
         }
         if self.hi.is_none_or(|s| x > s.value) {
-            self.hi = Some(Side::new(x));
+            self.hi = Some(Side::new(x, -1.0, self.hi));
         }
         for side in [&mut self.lo, &mut self.hi].into_iter().flatten() {
             side.push(self.prev, x);
@@ -180,11 +208,14 @@ impl RailScan {
             let pairs_elsewhere = self.pairs - s.touching;
             let equal_elsewhere = self.equal - s.equal;
             let quantised = equal_elsewhere as f64 > RAIL_MAX_EQUAL_ELSEWHERE * pairs_elsewhere as f64;
-            (self.n >= 8 && s.runs >= RAIL_MIN_RUNS && pairs_elsewhere > 0 && !quantised).then_some(Rail {
-                value: s.value,
-                samples: s.samples,
-                runs: s.runs,
-            })
+            let piled_up = s.next.is_some_and(|(_, k)| s.samples as f64 > RAIL_PILE_UP * k as f64);
+            (self.n >= 8 && s.runs >= RAIL_MIN_RUNS && pairs_elsewhere > 0 && (!quantised || piled_up)).then_some(
+                Rail {
+                    value: s.value,
+                    samples: s.samples,
+                    runs: s.runs,
+                },
+            )
         };
         let (lo, hi) = (rail(&self.lo), rail(&self.hi));
         // A channel flat at one value has one extreme, not two rails.
@@ -225,7 +256,63 @@ mod tests {
         // The same clipped at 0 by a recorder: then 0 is a rail.
         let at_zero: Vec<f64> = settled.iter().map(|v| v.max(0.0)).collect();
         assert!(clipped_at(&at_zero, 0.0).is_some());
-        let quantised: Vec<f64> = clipped.iter().map(|v| (v * 20.0).round() / 20.0).collect();
-        assert_eq!(clipped_at(&quantised, -0.5), None);
+        // Quantised, a sine's own extreme holds about as many samples as
+        // the level beside it, and is not a rail; clipped, the bound piles
+        // up the samples beyond it, and is.
+        let quantise = |x: &[f64]| x.iter().map(|v| (v * 20.0).round() / 20.0).collect::<Vec<_>>();
+        let sine: Vec<f64> = (0..n).map(|i| (i as f64 * 0.01).sin()).collect();
+        let q = quantise(&sine);
+        let lowest = q.iter().copied().fold(f64::INFINITY, f64::min);
+        assert_eq!(clipped_at(&q, lowest), None);
+        assert_eq!(clipped_at(&q, 1.0), None);
+        let r = clipped_at(&quantise(&clipped), -0.5).expect("a quantised clipped sine has a rail");
+        assert!(r.samples > n / 10, "{r:?}");
+    }
+
+    /// A 0–10 bar recorder's 12-bit steps (244 Pa) under 500 Pa of noise:
+    /// neighbours are often equal everywhere, and a dip clipped at 0 gauge
+    /// is still a rail; the same chamber recorded with a range that holds
+    /// its dip has none (its lowest values are the noise's thin tail).
+    #[test]
+    fn a_clipped_floor_under_quantisation_and_noise_is_a_rail() {
+        let step = 1e6 / 4095.0;
+        let mut rng = 12345u64;
+        let mut noise = || {
+            // Sum of 12 uniforms: near-normal, σ = 1.
+            (0..12)
+                .map(|_| {
+                    rng = rng.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                    (rng >> 11) as f64 / (1u64 << 53) as f64
+                })
+                .sum::<f64>()
+                - 6.0
+        };
+        // Cycles of a rise to 4 bar, a fall through 0 into a 0.3 bar dip,
+        // and a rest at 0 gauge.
+        let truth: Vec<f64> = (0..20_000)
+            .map(|i| {
+                let k = (i % 2000) as f64 / 2000.0;
+                if k < 0.5 {
+                    4e5 * (std::f64::consts::PI * k / 0.5).sin()
+                } else if k < 0.65 {
+                    -0.3e5 * (std::f64::consts::PI * (k - 0.5) / 0.15).sin()
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        let noisy: Vec<f64> = truth.iter().map(|p| p + 500.0 * noise()).collect();
+        let recorded = |lo: f64| -> Vec<f64> {
+            noisy
+                .iter()
+                .map(|p| ((p.max(lo) - lo) / step).round() * step + lo)
+                .collect()
+        };
+        let clipped = recorded(0.0);
+        let r = clipped_at(&clipped, 0.0).expect("the clipped floor is a rail");
+        assert!(r.samples > clipped.len() / 10, "{r:?}");
+        let whole = recorded(-1e5);
+        let lowest = whole.iter().copied().fold(f64::INFINITY, f64::min);
+        assert_eq!(clipped_at(&whole, lowest), None);
     }
 }
