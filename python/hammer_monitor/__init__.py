@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import json
 import os
+import warnings
 from typing import Mapping, Sequence, Union
 
 import numpy as np
@@ -22,7 +23,7 @@ import pyarrow as pa
 
 from . import _native
 
-__all__ = ["read_trace", "estimate", "simulate", "diagnose", "estimate_columns"]
+__all__ = ["read_trace", "estimate", "simulate", "diagnose", "estimate_columns", "NoValidCycle"]
 
 PathLike = Union[str, "os.PathLike[str]"]
 
@@ -40,7 +41,17 @@ def estimate_columns() -> list[str]:
     return list(_native.estimate_columns())
 
 
-def _records_table(lines: Sequence[str]) -> pa.Table:
+class NoValidCycle(UserWarning):
+    """Cycles closed but none is valid: the CLI refuses such a trace (exit 2)
+    with this message; ``estimate`` warns with it and returns the flagged
+    records, whose ``flags`` say why. ``warnings.simplefilter("error",
+    NoValidCycle)`` makes it a refusal here too."""
+
+
+def _records_table(result: tuple[Sequence[str], str | None]) -> pa.Table:
+    lines, no_valid = result
+    if no_valid is not None:
+        warnings.warn(no_valid, NoValidCycle, stacklevel=3)
     rows = [json.loads(line) for line in lines]
     names = estimate_columns()
     return pa.table({name: pa.array([r.get(name) for r in rows]) for name in names})
@@ -95,7 +106,9 @@ def estimate(
     friction in N (``friction_n``, with ``friction_sd_n``), impact energy in J,
     frequency in Hz, ... ; ``valid`` is a bool and ``flags`` the list of the
     record's flag names. A trace in which no impact cycle closes raises
-    ValueError with the CLI's message, which names what its no-impact records blame.
+    ValueError with the CLI's message, which names what its no-impact records blame;
+    one whose cycles are all flagged warns with the CLI's message
+    (:class:`NoValidCycle`) and returns them.
     """
     arrays = (t_s, p_rear_pa, p_front_pa, accel_mps2)
     if trace is None:

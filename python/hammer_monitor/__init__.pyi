@@ -12,6 +12,9 @@ ArrayLike = Union[npt.ArrayLike, Sequence[float]]
 EffectParams = Union[Mapping[str, float], bool, None]
 Effects = Union[Mapping[str, EffectParams], Sequence[str], str, None]
 
+class NoValidCycle(UserWarning):
+    """Cycles closed but none is valid: `estimate` warns with the CLI's refusal and returns the flagged records."""
+
 def estimate_columns() -> list[str]:
     """The columns of `hammer estimate --format csv`, in order."""
 

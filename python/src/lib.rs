@@ -23,7 +23,9 @@ use hammer_diagnose::engine::{diagnose_against, Options, PointWaves};
 use hammer_diagnose::gap::CycleSignals;
 use hammer_diagnose::input::{read_request, Request};
 use hammer_estimator::CycleReport;
-use hammer_sim::estimation::{config_with_map, estimate_trace, no_cycle_message, stream_estimation, StreamSummary};
+use hammer_sim::estimation::{
+    config_with_map, estimate_trace, no_cycle_message, no_valid_message, stream_estimation, StreamSummary,
+};
 use hammer_sim::params::RunOverrides;
 use hammer_sim::SimConfig;
 use hammer_trace::import::columns::Channel;
@@ -51,16 +53,23 @@ fn estimate_columns() -> Vec<String> {
         .collect()
 }
 
-/// The records as `hammer estimate --format jsonl` prints them, or its
+/// The records as `hammer estimate --format jsonl` prints them, with the
+/// CLI's refusal when no cycle of them is valid (the Python layer warns
+/// with it and still returns the flagged records, which say why), or its
 /// refusal of a trace in which no impact cycle closed.
-fn records(path: &Path, summary: &StreamSummary, reports: &[CycleReport]) -> Result<Vec<String>, String> {
+fn records(
+    path: &Path,
+    summary: &StreamSummary,
+    reports: &[CycleReport],
+) -> Result<(Vec<String>, Option<String>), String> {
     if let Some(message) = no_cycle_message(path, summary, reports) {
         return Err(message);
     }
-    Ok(reports
+    let lines = reports
         .iter()
         .map(|r| hammer_fleet::records::json_record(r).to_string())
-        .collect())
+        .collect();
+    Ok((lines, no_valid_message(path, reports, &summary.config)))
 }
 
 /// Reads a trace file (every format the CLI reads) into named f64 columns.
@@ -86,7 +95,7 @@ fn estimate_file(
     config: Option<PathBuf>,
     map: Option<PathBuf>,
     supply_bar: Option<f64>,
-) -> PyResult<Vec<String>> {
+) -> PyResult<(Vec<String>, Option<String>)> {
     let file = configuration(config.as_deref(), map.as_deref())?;
     run_interruptible(py, move || {
         let mut reports = Vec::new();
@@ -108,7 +117,7 @@ fn estimate_arrays(
     accel_mps2: &Bound<'_, PyBytes>,
     config: Option<PathBuf>,
     supply_bar: Option<f64>,
-) -> PyResult<Vec<String>> {
+) -> PyResult<(Vec<String>, Option<String>)> {
     let file = configuration(config.as_deref(), None)?;
     let channels = [
         ("t_s", t_s),

@@ -120,3 +120,22 @@ def test_a_stale_commissioning_record_is_the_clis_message(hammer, tmp_path):
         hm.diagnose([now], reference=[ref])
     assert "stale" in str(e.value)
     assert str(e.value) == hammer.error("diagnose", "--measured", now, "--reference", ref, "--out", tmp_path / "d")
+
+
+def test_no_valid_cycle_warns_with_the_clis_message(hammer, simulated, tmp_path):
+    """The CLI refuses a trace whose cycles are all flagged (exit 2); the
+    package warns with the same message and still returns the records."""
+    bare = tmp_path / "bare.csv"
+    bare.write_bytes(simulated.read_bytes())  # no sidecar: the config's hammer reads it
+    short = tmp_path / "short.toml"
+    # A piston that travels 32 mm: the hammer's 43 mm strokes are beyond it.
+    short.write_text("[hammer]\nimpact_position_m = 0.032\n")
+    expected = hammer.error("estimate", bare, "--config", short, "--supply-bar", 5)
+    with pytest.warns(hm.NoValidCycle) as w:
+        table = hm.estimate(bare, short, supply_bar=5.0)
+    assert [str(x.message) for x in w if x.category is hm.NoValidCycle] == [expected]
+    assert table.num_rows > 0 and not any(table.column("valid").to_pylist())
+    trace = hm.read_trace(bare)
+    arrays = {k: trace.column(k).to_numpy() for k in ("t_s", "p_rear_pa", "p_front_pa", "accel_mps2")}
+    with pytest.warns(hm.NoValidCycle, match="arrays: no valid cycle among"):
+        hm.estimate(config=short, supply_bar=5.0, **arrays)
