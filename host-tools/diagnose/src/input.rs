@@ -68,7 +68,8 @@ pub fn read_input(
                 path.display()
             )
         })?;
-    hammer_trace::config::check_range("--supply-bar", supply_bar, 0.5, 20.0)?;
+    let (lo, hi) = hammer_sim::params::SUPPLY_BAR_RANGE;
+    hammer_trace::config::check_range("--supply-bar", supply_bar, lo, hi)?;
     let input = MeasuredInput {
         label: path.display().to_string(),
         supply_bar,
@@ -78,21 +79,32 @@ pub fn read_input(
     Ok((input, sidecar))
 }
 
+/// What the force balance takes as known of a hammer, by its `[hammer]`
+/// keys: the piston's mass, bore and rod (the estimator's geometry) and the
+/// impact position (its travel). The diagnosis recalibrates the nominal
+/// values it is unsure of and reads the form's error in the rest; these it
+/// cannot.
+const KNOWN: [&str; 4] = [
+    "piston_mass_kg",
+    "bore_diameter_m",
+    "rod_diameter_m",
+    "impact_position_m",
+];
+
 /// Refuses a trace whose sidecar states another hammer than the model's
-/// (`config`: the `--config` file, `None` for the built-in default), in
-/// what the diagnosis takes as known: every `[hammer]` value but the
-/// nominal ones it recalibrates ([`crate::model::NUISANCE`]). Read against
-/// the wrong piston mass or bore, the force balance's gap would be named
-/// as effects (a 2 kg hammer came out as a gain error and friction).
+/// (`config`: the `--config` file, `None` for the built-in default) in
+/// what the force balance takes as known ([`KNOWN`]). Read against the
+/// wrong piston mass or bore, the force balance's gap would be named as
+/// effects (a 2 kg hammer came out as a gain error and friction).
 pub fn same_hammer(trace: &Path, sidecar: Option<&Sidecar>, model: &SimConfig, config: Option<&Path>) -> Result<()> {
     let Some(stated) = sidecar.and_then(|s| s.simulation.as_ref()).map(|s| &s.config.hammer) else {
         return Ok(());
     };
-    let fitted: Vec<&str> = crate::model::NUISANCE
-        .iter()
-        .filter_map(|(name, _)| name.strip_prefix("hammer."))
+    let d: Vec<String> = stated
+        .differences(&model.hammer, &[])
+        .into_iter()
+        .filter(|d| KNOWN.iter().any(|k| d.starts_with(&format!("{k} = "))))
         .collect();
-    let d = stated.differences(&model.hammer, &fitted);
     if d.is_empty() {
         return Ok(());
     }
@@ -249,5 +261,21 @@ mod tests {
         same_hammer(trace, Some(&sidecar_of(&model)), &model, None).unwrap();
         same_hammer(trace, None, &model, None).unwrap();
         same_hammer(trace, Some(&sidecar_of(&heavy)), &heavy, Some(Path::new("heavy.toml"))).unwrap();
+        let mut short = model.clone();
+        short.hammer.impact_position_m -= 0.005;
+        let e = same_hammer(trace, Some(&sidecar_of(&short)), &model, None)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("impact_position_m = "), "{e}");
+    }
+
+    /// Every key the check compares is one of the hammer's: a renamed field
+    /// must not drop out of the comparison unseen.
+    #[test]
+    fn the_known_fields_are_the_hammers() {
+        let keys = serde_json::to_value(SimConfig::default().hammer).unwrap();
+        for k in KNOWN {
+            assert!(keys.get(k).is_some(), "{k}");
+        }
     }
 }
