@@ -95,6 +95,24 @@ pub enum Command {
     /// or two) from a perturbed generator; prints the confusion matrix,
     /// parameter errors and the held-out shrink.
     DiagnoseBench(crate::diagnose::command::BenchArgs),
+    /// Export the simulator as an FMI 2.0 co-simulation FMU for x86_64
+    /// Linux (parameters: every value of the config and every effect with
+    /// its switch), with its model map beside it (docs/your-model.md).
+    Fmu(FmuArgs),
+}
+
+#[derive(Args, Debug)]
+pub struct FmuArgs {
+    /// The FMU to write; the model map goes beside it (`X.fmu` → `X.map.toml`).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// TOML file whose values become the FMU's start values.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// The FMU's shared library (default: $HAMMER_FMU_LIB, else
+    /// libhammer_fmu.so beside this program; `cargo build --release -p hammer-fmu`).
+    #[arg(long)]
+    pub lib: Option<PathBuf>,
 }
 
 #[derive(Args, Debug)]
@@ -340,6 +358,7 @@ pub fn run(cli: Cli) -> Result<()> {
             }
             Ok(())
         }
+        Command::Fmu(args) => fmu_cmd(&args),
         Command::Figures(args) => {
             let files = crate::plot::effect_figures(&args.out, args.supply_bar)?;
             for f in files {
@@ -406,6 +425,27 @@ fn capture_cmd(args: &CaptureArgs) -> Result<()> {
         codes.len(),
         args.out.display(),
         hammer_trace::trace::sidecar_path(&args.out).display()
+    );
+    Ok(())
+}
+
+fn fmu_cmd(args: &FmuArgs) -> Result<()> {
+    let cfg: SimConfig = match &args.config {
+        Some(p) => load_toml(p)?,
+        None => SimConfig::default(),
+    };
+    if let Some(p) = &args.config {
+        cfg.validate().with_context(|| p.display().to_string())?;
+    }
+    let lib = hammer_fmu::find_library(args.lib.as_deref()).map_err(anyhow::Error::msg)?;
+    let w = hammer_fmu::write_fmu(&cfg, &lib, &args.out).map_err(anyhow::Error::msg)?;
+    outln!(
+        "wrote {} (FMI 2.0 co-simulation, linux64; {} parameters, {} outputs; GUID {}) and {}",
+        w.fmu.display(),
+        w.parameters,
+        w.outputs,
+        w.guid,
+        w.map.display()
     );
     Ok(())
 }
