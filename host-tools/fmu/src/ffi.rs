@@ -476,3 +476,87 @@ unsupported! {
     fmi2GetContinuousStates(x: *mut f64, n: usize),
     fmi2GetNominalsOfContinuousStates(x: *mut f64, n: usize),
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::sync::Mutex;
+
+    static LOG: Mutex<Vec<(fmi2Status, String)>> = Mutex::new(Vec::new());
+
+    /// A logger that takes no further arguments: called through the
+    /// variadic type with none, as the FMU does (Rust cannot define a
+    /// C-variadic function on stable).
+    unsafe extern "C" fn logger(_: *mut c_void, _: fmi2String, status: fmi2Status, _: fmi2String, m: fmi2String) {
+        let text = unsafe { CStr::from_ptr(m) }.to_string_lossy().into_owned();
+        LOG.lock().unwrap().push((status, text));
+    }
+
+    fn last_log() -> (fmi2Status, String) {
+        LOG.lock().unwrap().last().cloned().unwrap()
+    }
+
+    /// A resources folder with the default configuration: (its URI, the GUID).
+    fn resources() -> (CString, CString) {
+        let dir = std::env::temp_dir().join(format!("hammer-fmu-ffi-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let json = crate::description::config_json(&hammer_sim::SimConfig::default()).unwrap();
+        std::fs::write(dir.join(crate::description::CONFIG_RESOURCE), &json).unwrap();
+        let uri = format!("file://{}", dir.display());
+        (
+            CString::new(uri).unwrap(),
+            CString::new(crate::description::guid(&json)).unwrap(),
+        )
+    }
+
+    /// Null pointers, a wrong GUID, model exchange and a panic come back
+    /// as statuses (and logger messages), never as a crash or an unwind.
+    #[test]
+    fn the_boundary_turns_bad_calls_and_panics_into_statuses() {
+        let (uri, guid) = resources();
+        let callbacks = CallbackFunctions {
+            // SAFETY: the same fixed arguments; the FMU passes no variadic ones.
+            logger: Some(unsafe {
+                std::mem::transmute::<
+                    unsafe extern "C" fn(*mut c_void, fmi2String, fmi2Status, fmi2String, fmi2String),
+                    unsafe extern "C" fn(*mut c_void, fmi2String, fmi2Status, fmi2String, fmi2String, ...),
+                >(logger)
+            }),
+            allocate_memory: std::ptr::null(),
+            free_memory: std::ptr::null(),
+            step_finished: std::ptr::null(),
+            environment: std::ptr::null_mut(),
+        };
+        unsafe {
+            let name = c"test".as_ptr();
+            let me = fmi2Instantiate(name, 0, guid.as_ptr(), uri.as_ptr(), &callbacks, 0, 0);
+            assert!(me.is_null());
+            assert!(last_log().1.contains("co-simulation only"), "{:?}", last_log());
+            let wrong = fmi2Instantiate(name, 1, c"{0}".as_ptr(), uri.as_ptr(), &callbacks, 0, 0);
+            assert!(wrong.is_null() && last_log().1.contains("GUID"));
+            assert!(fmi2Instantiate(name, 1, guid.as_ptr(), std::ptr::null(), &callbacks, 0, 0).is_null());
+
+            assert_eq!(fmi2DoStep(std::ptr::null_mut(), 0.0, 1e-5, 0), ERROR);
+            let c = fmi2Instantiate(name, 1, guid.as_ptr(), uri.as_ptr(), &callbacks, 0, 0);
+            assert!(!c.is_null());
+            assert_eq!(fmi2GetReal(c, std::ptr::null(), 1, std::ptr::null_mut()), ERROR);
+            assert!(last_log().1.contains("null array"));
+            assert_eq!(fmi2GetDerivatives(c, std::ptr::null_mut(), 0), ERROR);
+            assert_eq!(fmi2DoStep(c, 0.0, 1e-5, 0), ERROR, "before initialisation");
+
+            let status = with(c, "fmi2Test", |_| panic!("a bug"));
+            assert_eq!(status, FATAL);
+            assert_eq!(last_log(), (FATAL, "fmi2Test: internal error: a bug".to_string()));
+            assert_eq!(fmi2EnterInitializationMode(c), ERROR, "failed until reset");
+            assert_eq!(fmi2Reset(c), OK);
+            assert_eq!(fmi2SetupExperiment(c, 0, 0.0, 0.0, 1, 0.01), OK);
+            assert_eq!(fmi2EnterInitializationMode(c), OK);
+            assert_eq!(fmi2ExitInitializationMode(c), OK);
+            assert_eq!(fmi2DoStep(c, 0.0, 1e-3, 0), OK);
+            let mut t = 0.0;
+            assert_eq!(fmi2GetRealStatus(c, LAST_SUCCESSFUL_TIME, &mut t), OK);
+            assert_eq!(t, 1e-3);
+            fmi2FreeInstance(c);
+        }
+    }
+}
