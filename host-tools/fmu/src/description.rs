@@ -8,10 +8,14 @@ use std::fmt::Write as _;
 
 use hammer_sim::SimConfig;
 
+use crate::instance::Model;
 use crate::table::{Kind, Table, Val};
+use crate::variants::VariantsConfig;
 
-/// The configuration file inside the FMU, under `resources/`.
+/// The configuration file inside the FMU, under `resources/`: the
+/// built-in model's, or the second family's.
 pub const CONFIG_RESOURCE: &str = "config.json";
+pub const VARIANTS_RESOURCE: &str = "variants.json";
 
 /// The FMU's GUID: FNV-1a over the configuration file and the crate's
 /// version, shaped as a GUID.
@@ -35,6 +39,17 @@ pub fn guid(config_json: &str) -> String {
 /// The configuration text `hammer fmu` puts in the package.
 pub fn config_json(cfg: &SimConfig) -> Result<String, String> {
     serde_json::to_string_pretty(cfg).map_err(|e| e.to_string())
+}
+
+/// The resource file of `model` and its text.
+pub fn resource(model: &Model) -> Result<(&'static str, String), String> {
+    match model {
+        Model::Hammer(cfg) => Ok((CONFIG_RESOURCE, config_json(cfg)?)),
+        Model::Variants(cfg) => Ok((
+            VARIANTS_RESOURCE,
+            serde_json::to_string_pretty(cfg).map_err(|e| e.to_string())?,
+        )),
+    }
 }
 
 /// A `file:` URI's path (`file:///a%20b`, `file:/a`, `file://localhost/a`).
@@ -63,15 +78,28 @@ fn uri_path(uri: &str) -> Result<String, String> {
     String::from_utf8(out).map_err(|_| format!("resource location {uri} is not UTF-8"))
 }
 
-/// The configuration in the resources folder at `location` (a URI), and its text.
-pub fn read_resources(location: &str) -> Result<(SimConfig, String), String> {
+/// The model in the resources folder at `location` (a URI), and its
+/// configuration's text.
+pub fn read_resources(location: &str) -> Result<(Model, String), String> {
     let dir = std::path::PathBuf::from(uri_path(location)?);
-    let path = dir.join(CONFIG_RESOURCE);
+    let variants = dir.join(VARIANTS_RESOURCE);
+    let path = if variants.is_file() {
+        variants
+    } else {
+        dir.join(CONFIG_RESOURCE)
+    };
     let json = std::fs::read_to_string(&path).map_err(|e| format!("{}: {e}", path.display()))?;
-    let cfg: SimConfig =
-        serde_json::from_str(&json).map_err(|e| format!("{}: not this FMU's configuration: {e}", path.display()))?;
-    cfg.validate().map_err(|e| format!("{}: {e}", path.display()))?;
-    Ok((cfg, json))
+    let bad = |e: String| format!("{}: not this FMU's configuration: {e}", path.display());
+    let model = if path.ends_with(VARIANTS_RESOURCE) {
+        let cfg: VariantsConfig = serde_json::from_str(&json).map_err(|e| bad(e.to_string()))?;
+        cfg.validate().map_err(bad)?;
+        Model::Variants(cfg)
+    } else {
+        let cfg: SimConfig = serde_json::from_str(&json).map_err(|e| bad(e.to_string()))?;
+        cfg.validate().map_err(|e| bad(e.to_string()))?;
+        Model::Hammer(cfg)
+    };
+    Ok((model, json))
 }
 
 fn escape(s: &str) -> String {
@@ -91,12 +119,20 @@ fn start_text(v: Val) -> String {
 }
 
 /// modelDescription.xml of `table` (`model_identifier` names the binary).
-pub fn model_description(table: &Table, model_identifier: &str, guid: &str, stop_time_s: f64, step_s: f64) -> String {
+pub fn model_description(
+    table: &Table,
+    model_identifier: &str,
+    description: &str,
+    guid: &str,
+    stop_time_s: f64,
+    step_s: f64,
+) -> String {
     let mut x = String::new();
     let _ = writeln!(x, r#"<?xml version="1.0" encoding="UTF-8"?>"#);
     let _ = writeln!(
         x,
-        r#"<fmiModelDescription fmiVersion="2.0" modelName="{model_identifier}" guid="{guid}" description="The paper's small pneumatic impact hammer (hammer-monitor's simulator): piston, two chambers, pilot valve, supply; sensor chain with a seed" generationTool="hammer-monitor {}" variableNamingConvention="structured" numberOfEventIndicators="0">"#,
+        r#"<fmiModelDescription fmiVersion="2.0" modelName="{model_identifier}" guid="{guid}" description="{}" generationTool="hammer-monitor {}" variableNamingConvention="structured" numberOfEventIndicators="0">"#,
+        escape(description),
         env!("CARGO_PKG_VERSION")
     );
     let _ = writeln!(

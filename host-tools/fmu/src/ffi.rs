@@ -172,13 +172,13 @@ pub unsafe extern "C" fn fmi2Instantiate(
             return Err("this FMU is for co-simulation only (fmi2CoSimulation)".into());
         }
         let location = unsafe { text(resource_location) }.ok_or("no resource location")?;
-        let (config, json) = crate::description::read_resources(&location)?;
+        let (model, json) = crate::description::read_resources(&location)?;
         let expected = crate::description::guid(&json);
         match unsafe { text(guid) } {
             Some(g) if g == expected => {}
             g => return Err(format!("GUID {g:?} does not match this FMU's {expected}")),
         }
-        Instance::new(&config)
+        Instance::new(model)
     }));
     match made {
         Ok(Ok(instance)) => Box::into_raw(Box::new(Component {

@@ -22,7 +22,29 @@ use hammer_sim::simulate::ENDLESS_S;
 use hammer_sim::stepper::Stepper;
 use hammer_sim::SimConfig;
 
-use crate::table::{Binding, Kind, Table, Val, OUTPUTS};
+use crate::table::{Binding, Kind, Table, Val};
+use crate::variants::VariantsConfig;
+
+/// A run under way, of either family.
+pub trait Runner {
+    /// Advances to the communication point `t_s` (see the module's doc).
+    fn advance_to(&mut self, t_s: f64) -> Result<(), String>;
+    /// The output named `name` at the communication point.
+    fn output(&self, name: &str) -> Val;
+    /// The communication point reached.
+    fn time_s(&self) -> f64;
+    /// The output grid's step, s.
+    fn dt_s(&self) -> f64;
+    /// The run's end, s.
+    fn t_end_s(&self) -> f64;
+}
+
+/// The model an FMU holds: the built-in simulator or the second family.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Model {
+    Hammer(SimConfig),
+    Variants(VariantsConfig),
+}
 
 /// Where an instance is in FMI 2.0's co-simulation state machine.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -71,6 +93,24 @@ struct Run {
     last_period_s: f64,
 }
 
+impl Runner for Run {
+    fn advance_to(&mut self, t_s: f64) -> Result<(), String> {
+        Run::advance_to(self, t_s)
+    }
+    fn output(&self, name: &str) -> Val {
+        Run::output(self, name)
+    }
+    fn time_s(&self) -> f64 {
+        self.time_s
+    }
+    fn dt_s(&self) -> f64 {
+        self.dt_s
+    }
+    fn t_end_s(&self) -> f64 {
+        self.t_end_s
+    }
+}
+
 impl Run {
     fn new(cfg: &SimConfig) -> Self {
         let probe = Probe {
@@ -111,8 +151,8 @@ impl Run {
         Ok(())
     }
 
-    /// Output `i` of [`OUTPUTS`].
-    fn output(&self, i: usize) -> Val {
+    /// The output named `name` ([`crate::table::OUTPUTS`]).
+    fn output(&self, name: &str) -> Val {
         let Some((s, m)) = &self.probe.last else {
             return Val::Real(0.0);
         };
@@ -120,7 +160,7 @@ impl Run {
         let md = self.stepper.model();
         // p·V = m·R·T with the state's absolute pressure.
         let temperature = |p: usize, mass: usize, volume_m3: f64| y[p] * volume_m3 / (y[mass] * R_AIR);
-        let x = match OUTPUTS[i].name {
+        let x = match name {
             "p_rear_true_pa" => s.p_rear_pa,
             "p_front_true_pa" => s.p_front_pa,
             "accel_true_mps2" => s.accel_mps2,
@@ -145,21 +185,26 @@ impl Run {
 
 /// One instance: the table, the values set, the phase and the run.
 pub struct Instance {
+    model: Model,
     table: Table,
     values: Vec<Val>,
     phase: Phase,
     stop_time_s: Option<f64>,
-    run: Option<Run>,
+    run: Option<Box<dyn Runner>>,
 }
 
 /// A refused call: the message for the logger.
 pub type Refusal = String;
 
 impl Instance {
-    pub fn new(base: &SimConfig) -> Result<Self, Refusal> {
-        let table = Table::new(base)?;
+    pub fn new(model: Model) -> Result<Self, Refusal> {
+        let table = match &model {
+            Model::Hammer(cfg) => Table::new(cfg)?,
+            Model::Variants(cfg) => crate::variants::table(cfg)?,
+        };
         let values = table.starts();
         Ok(Self {
+            model,
             table,
             values,
             phase: Phase::Instantiated,
@@ -198,16 +243,18 @@ impl Instance {
         Ok(())
     }
 
-    /// The run's configuration: the parameters set, validated; the duration
-    /// is the stop time, or open-ended.
-    fn run_config(&self) -> Result<SimConfig, Refusal> {
-        let mut cfg = self.table.config(&self.values)?;
-        cfg.solver.duration_s = self.stop_time_s.unwrap_or(ENDLESS_S);
-        Ok(cfg)
-    }
-
-    fn start_run(&self) -> Result<Run, Refusal> {
-        let mut run = Run::new(&self.run_config()?);
+    /// A run of the parameters set (validated), to the stop time or
+    /// open-ended, at its start.
+    fn start_run(&self) -> Result<Box<dyn Runner>, Refusal> {
+        let duration_s = self.stop_time_s.unwrap_or(ENDLESS_S);
+        let mut run: Box<dyn Runner> = match &self.model {
+            Model::Hammer(_) => {
+                let mut cfg = self.table.config(&self.values)?;
+                cfg.solver.duration_s = duration_s;
+                Box::new(Run::new(&cfg))
+            }
+            Model::Variants(_) => Box::new(crate::variants::start(&self.table, &self.values, duration_s)?),
+        };
         run.advance_to(0.0)?;
         Ok(run)
     }
@@ -224,16 +271,16 @@ impl Instance {
         let Some(run) = self.run.as_mut() else {
             return Err("no run".into());
         };
-        let slack = 1e-6 * run.dt_s;
-        if (t_s - run.time_s).abs() > slack || !(h_s >= 0.0) {
+        let slack = 1e-6 * run.dt_s();
+        if (t_s - run.time_s()).abs() > slack || !(h_s >= 0.0) {
             return Err(format!(
                 "doStep from t = {t_s} s by {h_s} s: the FMU is at t = {} s",
-                run.time_s
+                run.time_s()
             ));
         }
         let to = t_s + h_s;
-        if to > run.t_end_s + slack {
-            return Err(format!("doStep to t = {to} s: past the stop time {} s", run.t_end_s));
+        if to > run.t_end_s() + slack {
+            return Err(format!("doStep to t = {to} s: past the stop time {} s", run.t_end_s()));
         }
         let r = run.advance_to(to);
         if r.is_err() {
@@ -243,7 +290,7 @@ impl Instance {
     }
 
     pub fn time_s(&self) -> f64 {
-        self.run.as_ref().map_or(0.0, |r| r.time_s)
+        self.run.as_ref().map_or(0.0, |r| r.time_s())
     }
 
     pub fn terminate(&mut self) -> Result<(), Refusal> {
@@ -268,6 +315,11 @@ impl Instance {
         }
     }
 
+    /// The value reference of the variable named `name`.
+    pub fn vr(&self, name: &str) -> Option<u32> {
+        self.table.vars.iter().position(|v| v.name == name).map(|i| i as u32)
+    }
+
     fn variable(&self, vr: u32, kind: Kind) -> Result<usize, Refusal> {
         let i = vr as usize;
         match self.table.vars.get(i) {
@@ -280,9 +332,10 @@ impl Instance {
     /// The value of `vr`; an output before the run is the initial state's.
     pub fn get(&self, vr: u32, kind: Kind) -> Result<Val, Refusal> {
         let i = self.variable(vr, kind)?;
+        let name = &self.table.vars[i].name;
         match (&self.table.vars[i].binding, &self.run) {
-            (Binding::Output(k), Some(run)) => Ok(run.output(*k)),
-            (Binding::Output(k), None) if self.phase == Phase::Initialising => Ok(self.start_run()?.output(*k)),
+            (Binding::Output(_), Some(run)) => Ok(run.output(name)),
+            (Binding::Output(_), None) if self.phase == Phase::Initialising => Ok(self.start_run()?.output(name)),
             (Binding::Output(_), None) => Ok(self.table.vars[i].start),
             _ => Ok(self.values[i]),
         }
@@ -351,7 +404,7 @@ mod tests {
         let mut base = SimConfig::nominal(5.0);
         base.seed = 3;
         base.effects.apply_spec("accel_zero_shift").unwrap();
-        let mut inst = Instance::new(&base).unwrap();
+        let mut inst = Instance::new(Model::Hammer(base.clone())).unwrap();
         let a = run(&mut inst, 0.05, base.solver.output_step_s);
         let mut cfg = base.clone();
         cfg.solver.duration_s = 0.05;

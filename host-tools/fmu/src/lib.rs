@@ -7,6 +7,7 @@
 //!   configuration, every catalogue effect's switch and parameters, the outputs;
 //! - [`instance`]: one instance's values, state machine and the run it steps
 //!   ([`hammer_sim::stepper::Stepper`] and the sensor chain);
+//! - [`variants`]: the second family (`hammer-variants`) behind the same instance;
 //! - [`ffi`]: the C boundary, every FMI 2.0 function (panics caught, pointers checked);
 //! - [`description`]: modelDescription.xml, the GUID, the configuration resource;
 //! - [`package`]: the `.fmu` zip and the model map beside it.
@@ -16,5 +17,8 @@ pub mod ffi;
 pub mod instance;
 pub mod package;
 pub mod table;
+pub mod variants;
 
+pub use instance::Model;
 pub use package::{find_library, map_path, write_fmu, Written};
+pub use variants::VariantsConfig;

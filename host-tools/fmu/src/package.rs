@@ -7,13 +7,10 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use hammer_sim::effects::REGISTRY;
-use hammer_sim::SimConfig;
 
-use crate::description::{config_json, guid, model_description, CONFIG_RESOURCE};
+use crate::description::{guid, model_description, resource};
+use crate::instance::Model;
 use crate::table::{Binding, Table, Val};
-
-/// The model identifier of the built-in model's FMU (its binary's name).
-pub const MODEL_IDENTIFIER: &str = "hammer";
 
 /// The shared library cargo builds from this crate.
 pub const LIBRARY_FILE: &str = "libhammer_fmu.so";
@@ -33,6 +30,48 @@ pub const NUISANCE: [(&str, f64); 9] = [
     ("hammer.front_dead_volume_m3", 0.2),
     ("contact.restitution", 0.2),
 ];
+
+/// The second family's counterparts of [`NUISANCE`] (its valve's
+/// conductance and pilots, its ports' conductance, its dead volumes, its
+/// contact damping), with the same uncertainty.
+pub const VARIANT_NUISANCE: [(&str, f64); 8] = [
+    ("params.valve_conductance", 0.2),
+    ("params.valve_critical_ratio", 0.2),
+    ("params.pilot_rear_m2", 0.2),
+    ("params.pilot_front_m2", 0.2),
+    ("params.port_conductance", 0.2),
+    ("params.rear_dead_m3", 0.2),
+    ("params.front_dead_m3", 0.2),
+    ("params.contact_damping_ratio", 0.2),
+];
+
+/// What a model's FMU is called and says of itself.
+struct Identity {
+    model_identifier: &'static str,
+    description: &'static str,
+    stop_time_s: f64,
+    step_s: f64,
+    nuisance: &'static [(&'static str, f64)],
+}
+
+fn identity(model: &Model) -> Identity {
+    match model {
+        Model::Hammer(cfg) => Identity {
+            model_identifier: "hammer",
+            description: "The paper's small pneumatic impact hammer (hammer-monitor's simulator): piston, two chambers, pilot valve, supply; sensor chain with a seed",
+            stop_time_s: cfg.solver.duration_s,
+            step_s: cfg.solver.output_step_s,
+            nuisance: &NUISANCE,
+        },
+        Model::Variants(cfg) => Identity {
+            model_identifier: "hammer_variants",
+            description: "The paper's hammer in hammer-monitor's second model family (hammer-variants): other valve, port, chamber, supply, anvil and sensor laws, fixed-step RK4",
+            stop_time_s: cfg.duration_s,
+            step_s: hammer_variants::generate::STEP_S * hammer_variants::generate::OUTPUT_EVERY as f64,
+            nuisance: &VARIANT_NUISANCE,
+        },
+    }
+}
 
 /// What `hammer fmu` wrote.
 #[derive(Debug)]
@@ -90,31 +129,41 @@ pub fn map_path(fmu: &Path) -> PathBuf {
     fmu.with_extension("map.toml")
 }
 
-/// Writes the FMU of `cfg` to `out` with the shared library at `library`,
-/// and its model map beside it.
-pub fn write_fmu(cfg: &SimConfig, library: &Path, out: &Path) -> Result<Written, String> {
-    cfg.validate().map_err(|e| e.to_string())?;
+/// Writes the FMU of `model` to `out` with the shared library at
+/// `library`, and its model map beside it.
+pub fn write_fmu(model: &Model, library: &Path, out: &Path) -> Result<Written, String> {
+    let table = match model {
+        Model::Hammer(cfg) => {
+            cfg.validate().map_err(|e| e.to_string())?;
+            Table::new(cfg)?
+        }
+        Model::Variants(cfg) => {
+            cfg.validate()?;
+            crate::variants::table(cfg)?
+        }
+    };
     let so = std::fs::read(library).map_err(|e| format!("{}: {e}", library.display()))?;
-    let json = config_json(cfg)?;
+    let (resource_file, json) = resource(model)?;
     let id = guid(&json);
-    let table = Table::new(cfg)?;
+    let who = identity(model);
     let xml = model_description(
         &table,
-        MODEL_IDENTIFIER,
+        who.model_identifier,
+        who.description,
         &id,
-        cfg.solver.duration_s,
-        cfg.solver.output_step_s,
+        who.stop_time_s,
+        who.step_s,
     );
     let files: Vec<(String, Vec<u8>)> = vec![
         ("modelDescription.xml".into(), xml.into_bytes()),
-        (format!("binaries/linux64/{MODEL_IDENTIFIER}.so"), so),
-        (format!("resources/{CONFIG_RESOURCE}"), json.into_bytes()),
+        (format!("binaries/linux64/{}.so", who.model_identifier), so),
+        (format!("resources/{resource_file}"), json.into_bytes()),
         ("documentation/index.html".into(), documentation(&table).into_bytes()),
     ];
     let zip = zip_stored(&files);
     std::fs::write(out, zip).map_err(|e| format!("{}: {e}", out.display()))?;
     let map = map_path(out);
-    std::fs::write(&map, model_map(&table, out)).map_err(|e| format!("{}: {e}", map.display()))?;
+    std::fs::write(&map, model_map(&table, out, who.nuisance)).map_err(|e| format!("{}: {e}", map.display()))?;
     let outputs = table.vars.iter().filter(|v| v.is_output()).count();
     Ok(Written {
         fmu: out.to_path_buf(),
@@ -126,7 +175,7 @@ pub fn write_fmu(cfg: &SimConfig, library: &Path, out: &Path) -> Result<Written,
 }
 
 /// The model map of the built-in model's FMU.
-fn model_map(table: &Table, fmu: &Path) -> String {
+fn model_map(table: &Table, fmu: &Path, nuisance: &[(&str, f64)]) -> String {
     let name = fmu
         .file_name()
         .map_or(String::new(), |n| n.to_string_lossy().into_owned());
@@ -154,7 +203,7 @@ fn model_map(table: &Table, fmu: &Path) -> String {
             _ => None,
         })
     };
-    for (p, u) in NUISANCE {
+    for &(p, u) in nuisance {
         let nominal = start(p).unwrap_or(f64::NAN);
         let _ = writeln!(
             m,

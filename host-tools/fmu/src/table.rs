@@ -60,6 +60,7 @@ impl Variable {
 
 /// One output: name (the trace's column name where the trace has one),
 /// kind, unit, description.
+#[derive(Debug, Clone, Copy)]
 pub struct Output {
     pub name: &'static str,
     pub kind: Kind,
@@ -76,57 +77,71 @@ const fn out(name: &'static str, unit: &'static str, description: &'static str) 
     }
 }
 
-/// The outputs, in value-reference order after the parameters; the index
-/// is what [`crate::instance`] fills.
-pub const OUTPUTS: [Output; 16] = [
-    out("p_rear_true_pa", "Pa", "rear chamber pressure, gauge, noiseless"),
-    out("p_front_true_pa", "Pa", "front chamber pressure, gauge, noiseless"),
-    out("accel_true_mps2", "m/s2", "piston acceleration, noiseless"),
-    out(
-        "p_rear_pa",
-        "Pa",
-        "rear chamber pressure, gauge, through the sensor chain (seeded)",
-    ),
-    out(
-        "p_front_pa",
-        "Pa",
-        "front chamber pressure, gauge, through the sensor chain (seeded)",
-    ),
-    out(
-        "accel_mps2",
-        "m/s2",
-        "piston acceleration through the sensor chain (seeded)",
-    ),
-    out("x_m", "m", "piston position"),
-    out("v_mps", "m/s", "piston velocity (forward +)"),
-    out("valve_m", "m", "valve spool position (0 feeds the front)"),
-    out("rear_mass_kg", "kg", "air mass in the rear chamber"),
-    out("rear_temperature_k", "K", "air temperature in the rear chamber"),
-    out("front_mass_kg", "kg", "air mass in the front chamber"),
-    out("front_temperature_k", "K", "air temperature in the front chamber"),
-    Output {
-        name: "impact_count",
-        kind: Kind::Integer,
-        unit: None,
-        description: "impacts so far",
-    },
-    out(
-        "last_impact_velocity_mps",
-        "m/s",
-        "piston velocity at the last impact (0 before the first)",
-    ),
-    out(
-        "last_period_s",
-        "s",
-        "time between the last two impacts (0 before the second)",
-    ),
-];
+/// The built-in model's outputs, in value-reference order after the parameters.
+pub const OUTPUTS: [Output; 16] = outputs(out("valve_m", "m", "valve spool position (0 feeds the front)"));
+
+/// Both families' outputs: they differ in the valve's (the second family's
+/// spool position is a fraction of its travel).
+pub const fn outputs(valve: Output) -> [Output; 16] {
+    [
+        out("p_rear_true_pa", "Pa", "rear chamber pressure, gauge, noiseless"),
+        out("p_front_true_pa", "Pa", "front chamber pressure, gauge, noiseless"),
+        out("accel_true_mps2", "m/s2", "piston acceleration, noiseless"),
+        out(
+            "p_rear_pa",
+            "Pa",
+            "rear chamber pressure, gauge, through the sensor chain (seeded)",
+        ),
+        out(
+            "p_front_pa",
+            "Pa",
+            "front chamber pressure, gauge, through the sensor chain (seeded)",
+        ),
+        out(
+            "accel_mps2",
+            "m/s2",
+            "piston acceleration through the sensor chain (seeded)",
+        ),
+        out("x_m", "m", "piston position"),
+        out("v_mps", "m/s", "piston velocity (forward +)"),
+        valve,
+        out("rear_mass_kg", "kg", "air mass in the rear chamber"),
+        out("rear_temperature_k", "K", "air temperature in the rear chamber"),
+        out("front_mass_kg", "kg", "air mass in the front chamber"),
+        out("front_temperature_k", "K", "air temperature in the front chamber"),
+        Output {
+            name: "impact_count",
+            kind: Kind::Integer,
+            unit: None,
+            description: "impacts so far",
+        },
+        out(
+            "last_impact_velocity_mps",
+            "m/s",
+            "piston velocity at the last impact (0 before the first)",
+        ),
+        out(
+            "last_period_s",
+            "s",
+            "time between the last two impacts (0 before the second)",
+        ),
+    ]
+}
 
 /// Configuration subtrees that are not parameters: the estimator's reading
 /// (it does not change the model's outputs), the import map (not a model
 /// value), the effects (taken from the registry) and the run's duration
 /// (the experiment's stop time sets it).
 const NOT_PARAMETERS: [&str; 4] = ["estimator", "import", "effects", "solver.duration_s"];
+
+/// A family's configuration as the table sees it.
+pub struct Family<'a> {
+    /// The configuration serialised.
+    pub json: Value,
+    /// Subtrees (dotted) that are not parameters.
+    pub skip: &'a [&'a str],
+    pub outputs: &'static [Output],
+}
 
 /// The unit a configuration key's suffix names (`docs`: units in names).
 pub fn unit_of_key(path: &[String]) -> Option<&'static str> {
@@ -168,15 +183,32 @@ pub struct Table {
     pub vars: Vec<Variable>,
     /// The base configuration as JSON: what values are written into.
     base: Value,
+    pub outputs: &'static [Output],
 }
 
 impl Table {
+    /// The built-in model's table.
     pub fn new(base: &SimConfig) -> Result<Self, String> {
         let json = serde_json::to_value(base).map_err(|e| e.to_string())?;
+        Self::of(Family {
+            json,
+            skip: &NOT_PARAMETERS,
+            outputs: &OUTPUTS,
+        })
+    }
+
+    /// The table of any family whose configuration holds `effects` as the
+    /// simulator's does.
+    pub fn of(family: Family) -> Result<Self, String> {
+        let json = family.json;
+        let effects: hammer_sim::Effects = match json.get("effects") {
+            Some(e) => serde_json::from_value(e.clone()).map_err(|e| e.to_string())?,
+            None => Default::default(),
+        };
         let mut vars = Vec::new();
-        leaves(&json, &mut Vec::new(), &mut vars);
+        leaves(&json, &mut Vec::new(), family.skip, &mut vars);
         for (k, e) in REGISTRY.iter().enumerate() {
-            let on = e.is_on(&base.effects);
+            let on = e.is_on(&effects);
             vars.push(Variable {
                 name: format!("effects.{}.on", e.name()),
                 kind: Kind::Boolean,
@@ -202,7 +234,7 @@ impl Table {
                 });
             }
         }
-        for (i, o) in OUTPUTS.iter().enumerate() {
+        for (i, o) in family.outputs.iter().enumerate() {
             vars.push(Variable {
                 name: o.name.to_string(),
                 kind: o.kind,
@@ -215,7 +247,11 @@ impl Table {
                 },
             });
         }
-        Ok(Self { vars, base: json })
+        Ok(Self {
+            vars,
+            base: json,
+            outputs: family.outputs,
+        })
     }
 
     /// The start values, by value reference.
@@ -223,14 +259,17 @@ impl Table {
         self.vars.iter().map(|v| v.start).collect()
     }
 
-    /// The value reference of output `i` of [`OUTPUTS`].
-    pub fn output_vr(&self, i: usize) -> usize {
-        self.vars.len() - OUTPUTS.len() + i
+    /// The built-in model's configuration `values` give (by value
+    /// reference), validated: an error says which value was refused, in
+    /// the configuration's terms.
+    pub fn config(&self, values: &[Val]) -> Result<SimConfig, String> {
+        let cfg: SimConfig = serde_json::from_value(self.json(values)?).map_err(|e| format!("refused: {e}"))?;
+        cfg.validate().map_err(|e| e.to_string())?;
+        Ok(cfg)
     }
 
-    /// The configuration `values` give (by value reference), validated:
-    /// an error says which value was refused, in the configuration's terms.
-    pub fn config(&self, values: &[Val]) -> Result<SimConfig, String> {
+    /// The configuration `values` give, as JSON (for the family to read).
+    pub fn json(&self, values: &[Val]) -> Result<Value, String> {
         let mut json = self.base.clone();
         let mut effects = Map::new();
         for (v, val) in self.vars.iter().zip(values) {
@@ -262,23 +301,21 @@ impl Table {
             }
         }
         json["effects"] = Value::Object(effects);
-        let cfg: SimConfig = serde_json::from_value(json).map_err(|e| format!("refused: {e}"))?;
-        cfg.validate().map_err(|e| e.to_string())?;
-        Ok(cfg)
+        Ok(json)
     }
 }
 
 /// Every numeric or Boolean leaf of `v` under `path`, as a parameter.
-fn leaves(v: &Value, path: &mut Vec<String>, out: &mut Vec<Variable>) {
+fn leaves(v: &Value, path: &mut Vec<String>, skip: &[&str], out: &mut Vec<Variable>) {
     let dotted = path.join(".");
-    if NOT_PARAMETERS.contains(&dotted.as_str()) {
+    if skip.contains(&dotted.as_str()) || dotted == "effects" {
         return;
     }
     let (kind, start) = match v {
         Value::Object(m) => {
             for (k, x) in m {
                 path.push(k.clone());
-                leaves(x, path, out);
+                leaves(x, path, skip, out);
                 path.pop();
             }
             return;
