@@ -72,6 +72,121 @@ fn f(v: &Value) -> f64 {
     v.as_f64().unwrap()
 }
 
+/// FMPy's report on `fmu` for `cases` (tests/fmu/check.py), the case
+/// "reset" rerun after a reset.
+fn fmpy_check(fmu: &Path, cases: &Value) -> Value {
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fmu/check.py");
+    let run = Command::new("python3")
+        .arg(&script)
+        .arg(fmu)
+        .arg(cases.to_string())
+        .arg("reset")
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success(), "{stderr}");
+    serde_json::from_slice(&run.stdout).unwrap_or_else(|e| panic!("{e}: {stderr}"))
+}
+
+/// The cases both families run: 4 and 7 bar, friction on at 4 bar through
+/// its switch and parameters, and a run to repeat after a reset.
+fn cases() -> Value {
+    let mut friction_start = serde_json::json!({"supply.pressure_bar": 4.0, "effects.coulomb_friction.on": true});
+    for (k, v) in FRICTION {
+        friction_start[format!("effects.coulomb_friction.{k}")] = v.into();
+    }
+    let mut reset_case = friction_start.clone();
+    reset_case["supply.pressure_bar"] = 7.0.into();
+    reset_case["seed"] = 5.into();
+    serde_json::json!({
+        "4": {"stop": 0.5, "start": {"supply.pressure_bar": 4.0}},
+        "7": {"stop": 0.5, "start": {"supply.pressure_bar": 7.0}},
+        "4_friction": {"stop": 0.5, "start": friction_start},
+        "reset": {"stop": 0.2, "start": reset_case},
+    })
+}
+
+/// (impact number, velocity, period) at each new impact of an FMPy run.
+fn fmu_impacts(report: &Value, case: &str) -> Vec<(u64, f64, f64)> {
+    let run = &report["runs"][case];
+    assert_eq!(
+        run["samples"].as_u64(),
+        Some(50_001),
+        "{case}: a sample every 10 µs over 0.5 s"
+    );
+    run["impacts"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|r| (r[0].as_u64().unwrap(), f(&r[1]), f(&r[2])))
+        .collect()
+}
+
+/// The validator's verdict and the reset's, the same for both families.
+fn check_validation_and_reset(report: &Value) {
+    assert_eq!(report["problems"], serde_json::json!([]), "FMPy's validator");
+    assert!(
+        report["reset"]["bytes"].as_u64().unwrap() > 100_000,
+        "{}",
+        report["reset"]
+    );
+    assert_eq!(
+        report["reset"]["identical"], true,
+        "a reset and rerun repeats every output"
+    );
+}
+
+/// The second family's FMU runs as the family runs itself
+/// (`hammer_variants::generate`, its own truth): per-cycle impact velocity
+/// and period, the friction effect through FMPy, the reset.
+#[test]
+fn fmpy_runs_the_variants_fmu_as_the_family_runs_itself() {
+    if !fmpy() {
+        return;
+    }
+    let dir = tmp_dir("variants");
+    let fmu = dir.join("variants.fmu");
+    let (code, out, err) = hammer(&["fmu", "--family", "variants", "--out", fmu.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.contains("variants.map.toml"), "{out}");
+    let report = fmpy_check(&fmu, &cases());
+    check_validation_and_reset(&report);
+    let cfg = hammer_fmu::VariantsConfig::default();
+    let mut energies = Vec::new();
+    for (case, bar, friction) in [("4", 4.0, false), ("7", 7.0, false), ("4_friction", 4.0, true)] {
+        let mut effects = hammer_sim::Effects::default();
+        if friction {
+            let spec = FRICTION.map(|(k, v)| format!("{k}={v}")).join(",");
+            effects.apply_spec(&format!("coulomb_friction:{spec}")).unwrap();
+        }
+        let own = hammer_variants::generate(&cfg.params, cfg.structure, &effects, bar, 0.5, cfg.seed);
+        let cycles = &own.truth.cycles;
+        let impacts = fmu_impacts(&report, case);
+        // The family's cycles close at every impact after the first.
+        assert_eq!(cycles.len() + 1, impacts.len(), "{case}");
+        let mut worst = 0.0f64;
+        for (c, (_, v, period)) in cycles.iter().zip(&impacts[1..]) {
+            for (got, want) in [(*v, c.impact_velocity_mps), (*period, c.period_s)] {
+                worst = worst.max((got - want).abs() / want.abs());
+            }
+        }
+        eprintln!(
+            "variants {case} bar: {} cycles, worst relative difference {worst:e}",
+            cycles.len()
+        );
+        assert!(worst <= 1e-4, "{case}: {worst:e} beyond 0.01 %");
+        let steady = &impacts[3..];
+        let m = cfg.params.piston_mass_kg;
+        energies.push(steady.iter().map(|(_, v, _)| 0.5 * m * v * v).sum::<f64>() / steady.len() as f64);
+    }
+    eprintln!(
+        "variants: steady impact energy at 4 bar {:.4} J, with friction {:.4} J",
+        energies[0], energies[2]
+    );
+    assert!(energies[2] < 0.97 * energies[0], "{energies:?}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 #[test]
 fn fmpy_runs_the_fmu_as_hammer_simulate_runs_the_model() {
     if !fmpy() {
@@ -85,32 +200,8 @@ fn fmpy_runs_the_fmu_as_hammer_simulate_runs_the_model() {
     let map: toml::Table = toml::from_str(&std::fs::read_to_string(dir.join("hammer.map.toml")).unwrap()).unwrap();
     assert_eq!(map["supply"]["parameter"].as_str(), Some("supply.pressure_bar"));
 
-    let mut friction_start = serde_json::json!({"supply.pressure_bar": 4.0, "effects.coulomb_friction.on": true});
-    for (k, v) in FRICTION {
-        friction_start[format!("effects.coulomb_friction.{k}")] = v.into();
-    }
-    let mut reset_case = friction_start.clone();
-    reset_case["supply.pressure_bar"] = 7.0.into();
-    reset_case["seed"] = 5.into();
-    let cases = serde_json::json!({
-        "4": {"stop": 0.5, "start": {"supply.pressure_bar": 4.0}},
-        "7": {"stop": 0.5, "start": {"supply.pressure_bar": 7.0}},
-        "4_friction": {"stop": 0.5, "start": friction_start},
-        "reset": {"stop": 0.2, "start": reset_case},
-    });
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fmu/check.py");
-    let run = Command::new("python3")
-        .arg(&script)
-        .arg(&fmu)
-        .arg(cases.to_string())
-        .arg("reset")
-        .output()
-        .unwrap();
-    let stderr = String::from_utf8_lossy(&run.stderr);
-    assert!(run.status.success(), "{stderr}");
-    let report: Value = serde_json::from_slice(&run.stdout).unwrap_or_else(|e| panic!("{e}: {stderr}"));
-
-    assert_eq!(report["problems"], serde_json::json!([]), "FMPy's validator");
+    let report = fmpy_check(&fmu, &cases());
+    check_validation_and_reset(&report);
 
     let mut energies = Vec::new();
     for (case, bar, friction) in [("4", 4.0, false), ("7", 7.0, false), ("4_friction", 4.0, true)] {
