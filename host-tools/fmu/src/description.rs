@@ -147,6 +147,11 @@ pub fn model_description(
         let _ = writeln!(x, r#"    <Unit name="{}"/>"#, escape(u));
     }
     let _ = writeln!(x, "  </UnitDefinitions>");
+    // The categories the library logs under (crate::ffi).
+    let _ = writeln!(
+        x,
+        r#"  <LogCategories><Category name="logStatusError"/><Category name="logAll"/></LogCategories>"#
+    );
     let _ = writeln!(
         x,
         r#"  <DefaultExperiment startTime="0.0" stopTime="{stop_time_s:?}" stepSize="{step_s:?}"/>"#
