@@ -44,6 +44,21 @@ struct Step {
     event: Option<(f64, EventKind, usize)>,
 }
 
+/// The state components each output sample is interpolated for: what the
+/// truth sample needs, and the chambers' masses for a co-simulation's
+/// outputs (their temperatures follow from p·V = m·R·T). The others are
+/// not interpolated between steps (they cost time on every sample).
+pub const SAMPLED: [usize; 8] = [
+    model::X,
+    model::V,
+    model::P1,
+    model::P2,
+    model::XV,
+    model::PS,
+    model::M1,
+    model::M2,
+];
+
 /// One run of the model, advanced piece by piece.
 pub struct Stepper {
     model: HammerModel,
@@ -60,6 +75,8 @@ pub struct Stepper {
     n_out: usize,
     dt: f64,
     t_end: f64,
+    /// The state at the last sample handed out ([`SAMPLED`] components).
+    last_state: [f64; N],
 }
 
 impl Stepper {
@@ -89,6 +106,7 @@ impl Stepper {
             n_out: output_len(cfg),
             dt: cfg.solver.output_step_s,
             t_end: cfg.solver.duration_s,
+            last_state: y0,
         }
     }
 
@@ -106,6 +124,13 @@ impl Stepper {
         &self.events
     }
 
+    /// The state at the last output sample handed to a sink (before the
+    /// first: the initial state). Only the [`SAMPLED`] components are
+    /// meant to be read: the others may be zero.
+    pub fn last_sample_state(&self) -> &[f64; N] {
+        &self.last_state
+    }
+
     /// The model this stepper runs.
     pub fn model(&self) -> &HammerModel {
         &self.model
@@ -114,6 +139,7 @@ impl Stepper {
     fn emit<S: TruthSink>(&mut self, sink: &mut S, t: f64, y: &[f64; N]) -> Result<(), RunError<S::Error>> {
         let s: TruthSample = truth_sample(&self.model, self.next_out, t, y);
         self.cycles.sample(&s);
+        self.last_state = *y;
         self.next_out += 1;
         sink.sample(&s).map_err(RunError::Sink)
     }
@@ -137,11 +163,7 @@ impl Stepper {
                     }
                     // Only the states the output needs.
                     let mut y = [0.0; N];
-                    step.dense.at_into(
-                        t,
-                        &[model::X, model::V, model::P1, model::P2, model::XV, model::PS],
-                        &mut y,
-                    );
+                    step.dense.at_into(t, &SAMPLED, &mut y);
                     self.emit(sink, t, &y)?;
                 }
                 if self.next_out < self.n_out && self.next_out as f64 * self.dt <= t_stop {

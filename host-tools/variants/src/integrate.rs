@@ -78,6 +78,13 @@ pub struct Sample {
     pub p_rear_true_pa: f64,
     pub p_front_true_pa: f64,
     pub spool: f64,
+    /// The plant's acceleration, and both chambers' air, mass and
+    /// temperature (a co-simulation's outputs).
+    pub accel_true_mps2: f64,
+    pub m_rear_kg: f64,
+    pub m_front_kg: f64,
+    pub t_rear_k: f64,
+    pub t_front_k: f64,
 }
 
 /// The second family advanced from outside: [`Stepper::advance_to`] runs
@@ -106,6 +113,10 @@ pub struct Stepper<'p> {
     backhaul: Phase,
     in_stroke: bool,
     cycles: Vec<VariantCycle>,
+    /// Impacts so far, and the time and velocity of the last.
+    impacts: usize,
+    last_impact_tv: Option<(f64, f64)>,
+    last_period_s: f64,
 }
 
 impl<'p> Stepper<'p> {
@@ -137,7 +148,17 @@ impl<'p> Stepper<'p> {
             backhaul: Phase::default(),
             in_stroke: false,
             cycles: Vec::new(),
+            impacts: 0,
+            last_impact_tv: None,
+            last_period_s: 0.0,
         }
+    }
+
+    /// Impacts so far, the time and velocity of the last, and the time
+    /// between the last two (0 before the second). Located inside the steps
+    /// run, so up to one step past the last advance.
+    pub fn impacts(&self) -> (usize, Option<(f64, f64)>, f64) {
+        (self.impacts, self.last_impact_tv, self.last_period_s)
     }
 
     /// The states now (the plant's layout, `crate::plant`).
@@ -181,6 +202,7 @@ impl<'p> Stepper<'p> {
                 .as_ref()
                 .map_or((0.0, 0.0), |g| (g.rear, g.front));
             let (r, f, a) = self.fe.sample(gains, self.offset);
+            let (t_rear_k, t_front_k) = plant.temperatures_k(&self.y);
             sample(Sample {
                 t_s: t,
                 p_rear_pa: r,
@@ -191,6 +213,11 @@ impl<'p> Stepper<'p> {
                 p_rear_true_pa: p_rear,
                 p_front_true_pa: p_front,
                 spool: self.y[crate::plant::S],
+                accel_true_mps2: o.accel_mps2,
+                m_rear_kg: self.y[crate::plant::M1],
+                m_front_kg: self.y[crate::plant::M2],
+                t_rear_k,
+                t_front_k,
             });
         }
         if i == self.steps {
@@ -238,6 +265,11 @@ impl<'p> Stepper<'p> {
             let f = -d0 / (d1 - d0);
             let t_imp = t + f * h_s;
             let v_imp = y0[V] + f * (y[V] - y0[V]);
+            self.impacts += 1;
+            if let Some((t0, _)) = self.last_impact_tv {
+                self.last_period_s = t_imp - t0;
+            }
+            self.last_impact_tv = Some((t_imp, v_imp));
             if let (Some((t_last, w_last, q_last)), Some(x_turn)) = (self.last_impact, self.stroke_start_x) {
                 let period = t_imp - t_last;
                 self.cycles.push(VariantCycle {

@@ -105,6 +105,14 @@ impl Plant {
         (self.p.front_dead_m3 + self.a2 * (self.p.x_impact_m - x)).max(0.1 * self.p.front_dead_m3)
     }
 
+    /// Both chambers' air temperatures in state `y`, K (p·V = m·R·T).
+    pub fn temperatures_k(&self, y: &[f64; N]) -> (f64, f64) {
+        (
+            y[P1] * self.vol1(y[X]) / (y[M1] * R),
+            y[P2] * self.vol2(y[X]) / (y[M2] * R),
+        )
+    }
+
     fn line_volume(&self) -> Option<f64> {
         self.e.supply_restriction.as_ref().map(|r| r.line_volume_m3)
     }
