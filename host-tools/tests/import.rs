@@ -436,6 +436,10 @@ fn a_quantised_clipped_floor_is_a_rail_at_every_depth() {
         let truth: Vec<f64> = sim.run.cycles.iter().skip(2).map(|c| c.friction_cycle_n).collect();
         let truth = truth.iter().sum::<f64>() / truth.len() as f64;
         let mean = cycles.iter().map(|r| r.friction_n as f64).sum::<f64>() / cycles.len() as f64;
+        eprintln!(
+            "{bits} bits: {at_zero} of {n} rear samples at 0 gauge; friction {mean:.3} N, truth {truth:.3} N, {} cycles valid",
+            cycles.len()
+        );
         assert!(
             (mean - truth).abs() <= 0.15,
             "{bits} bits: friction {mean:.3} N against the truth {truth:.3} N"
