@@ -133,10 +133,13 @@ fn remap_paths() -> String {
     format!("target.{TARGET}.rustflags=[{}]", flags.join(","))
 }
 
-/// The budgets for a small part (issue 12): 64 KiB of flash and 48 KiB of
-/// static RAM, the rest of a small part's RAM left to the stack.
-const FLASH_AIM: u64 = 64 * 1024;
-const RAM_AIM: u64 = 48 * 1024;
+/// The budgets (issue 47): 128 KiB of flash and 96 KiB of static RAM on
+/// the reference board's G474RE (512 KiB, 128 KiB), the rest of its RAM
+/// left to the stack. They were 64 and 48 KiB, set as discipline for a
+/// smaller part no board of the project uses; the valve's and chambers'
+/// characteristics in every report need the room.
+const FLASH_AIM: u64 = 128 * 1024;
+const RAM_AIM: u64 = 96 * 1024;
 
 fn size() -> Result<(), String> {
     let (mut over, mut soft_double) = (vec![], vec![]);
@@ -167,7 +170,7 @@ fn size() -> Result<(), String> {
     }
     let mut errors = vec![];
     if !over.is_empty() {
-        errors.push(format!("over the small part's budget: {}", over.join(", ")));
+        errors.push(format!("over the budget: {}", over.join(", ")));
     }
     if !soft_double.is_empty() {
         errors.push(format!(
