@@ -119,7 +119,7 @@ impl Run {
             pending: VecDeque::new(),
         };
         Self {
-            stepper: Stepper::new(cfg),
+            stepper: Stepper::new(cfg).with_chamber_masses(),
             probe,
             time_s: 0.0,
             dt_s: cfg.solver.output_step_s,

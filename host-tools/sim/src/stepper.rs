@@ -37,17 +37,13 @@ struct EventFn {
     level: f64,
 }
 
-/// A step taken whose samples are not all handed out yet, or whose event
-/// is not yet applied: the interpolant over it and its earliest event.
-struct Step {
-    dense: Dense<N>,
-    event: Option<(f64, EventKind, usize)>,
-}
-
 /// The state components each output sample is interpolated for: what the
-/// truth sample needs, and the chambers' masses for a co-simulation's
-/// outputs (their temperatures follow from p·V = m·R·T). The others are
-/// not interpolated between steps (they cost time on every sample).
+/// truth sample needs. The others are not interpolated between steps (each
+/// costs time on every sample).
+const TRUTH: [usize; 6] = [model::X, model::V, model::P1, model::P2, model::XV, model::PS];
+
+/// [`TRUTH`] and the chambers' masses, for a co-simulation's outputs (their
+/// temperatures follow from p·V = m·R·T): [`Stepper::with_chamber_masses`].
 pub const SAMPLED: [usize; 8] = [
     model::X,
     model::V,
@@ -59,24 +55,96 @@ pub const SAMPLED: [usize; 8] = [
     model::M2,
 ];
 
+/// The output side of a run: the grid, the cycles' truth, the last
+/// sample's state. Apart from the integrator's fields so the hot loop reads
+/// the step's interpolant in place (a step's interpolant is 0.7 KB: moved
+/// in and out of an `Option` at every step it cost the run a tenth of its
+/// speed).
+struct Output {
+    cycles: CycleTracker,
+    next_out: usize,
+    n_out: usize,
+    dt: f64,
+    /// The state at the last sample handed out ([`SAMPLED`] components),
+    /// kept only [`Stepper::with_chamber_masses`].
+    last_state: [f64; N],
+    /// Whether each sample interpolates [`SAMPLED`] and keeps its state,
+    /// or only [`TRUTH`].
+    masses: bool,
+}
+
+impl Output {
+    #[inline(always)]
+    fn emit<S: TruthSink>(
+        &mut self,
+        model: &HammerModel,
+        sink: &mut S,
+        t: f64,
+        y: &[f64; N],
+    ) -> Result<(), RunError<S::Error>> {
+        let s: TruthSample = truth_sample(model, self.next_out, t, y);
+        self.cycles.sample(&s);
+        if self.masses {
+            self.last_state = *y;
+        }
+        self.next_out += 1;
+        sink.sample(&s).map_err(RunError::Sink)
+    }
+
+    /// The time of the next output sample (past the last one: infinity).
+    fn next_sample_s(&self) -> f64 {
+        if self.next_out < self.n_out {
+            self.next_out as f64 * self.dt
+        } else {
+            f64::INFINITY
+        }
+    }
+
+    /// Hands `sink` the samples on `dense` up to `t_stop` (the step's end)
+    /// and `t_s` (the communication point): the hot loop of every run.
+    fn emit_step<S: TruthSink>(
+        &mut self,
+        model: &HammerModel,
+        dense: &Dense<N>,
+        t_stop: f64,
+        t_s: f64,
+        sink: &mut S,
+    ) -> Result<(), RunError<S::Error>> {
+        while self.next_out < self.n_out {
+            let t = self.next_out as f64 * self.dt;
+            if t > t_stop || t > t_s {
+                break;
+            }
+            // Only the states the output needs.
+            let mut y = [0.0; N];
+            if self.masses {
+                dense.at_into(t, &SAMPLED, &mut y);
+            } else {
+                dense.at_into(t, &TRUTH, &mut y);
+            }
+            self.emit(model, sink, t, &y)?;
+        }
+        Ok(())
+    }
+}
+
 /// One run of the model, advanced piece by piece.
 pub struct Stepper {
     model: HammerModel,
     solver: Dopri5<N>,
     fns: Vec<EventFn>,
-    cycles: CycleTracker,
     events: Events,
     /// The redone step may stop a rounding error short of the crossing; the
     /// same crossing must then not count twice.
     last_event: Option<(usize, f64)>,
-    step: Option<Step>,
+    /// The interpolant of the last step taken.
+    dense: Dense<N>,
+    /// A step taken whose samples are not all handed out yet, or whose
+    /// event is not yet applied: `Some` of its earliest event.
+    pending: Option<Option<(f64, EventKind, usize)>>,
     y0: [f64; N],
-    next_out: usize,
-    n_out: usize,
-    dt: f64,
     t_end: f64,
-    /// The state at the last sample handed out ([`SAMPLED`] components).
-    last_state: [f64; N],
+    out: Output,
 }
 
 impl Stepper {
@@ -97,26 +165,34 @@ impl Stepper {
             model,
             solver,
             fns,
-            cycles,
             events: Events::default(),
             last_event: None,
-            step: None,
+            dense: Dense::constant(0.0, &y0),
+            pending: None,
             y0,
-            next_out: 0,
-            n_out: output_len(cfg),
-            dt: cfg.solver.output_step_s,
             t_end: cfg.solver.duration_s,
-            last_state: y0,
+            out: Output {
+                cycles,
+                next_out: 0,
+                n_out: output_len(cfg),
+                dt: cfg.solver.output_step_s,
+                last_state: y0,
+                masses: false,
+            },
         }
+    }
+
+    /// Interpolates the chambers' masses at each sample too, for
+    /// [`Stepper::last_sample_state`] ([`SAMPLED`]). The samples handed to
+    /// the sink are the same.
+    pub fn with_chamber_masses(mut self) -> Self {
+        self.out.masses = true;
+        self
     }
 
     /// The time of the next output sample (past the last one: infinity).
     pub fn next_sample_s(&self) -> f64 {
-        if self.next_out < self.n_out {
-            self.next_out as f64 * self.dt
-        } else {
-            f64::INFINITY
-        }
+        self.out.next_sample_s()
     }
 
     /// The impacts so far, with the state at each.
@@ -125,10 +201,10 @@ impl Stepper {
     }
 
     /// The state at the last output sample handed to a sink (before the
-    /// first: the initial state). Only the [`SAMPLED`] components are
-    /// meant to be read: the others may be zero.
+    /// first: the initial state). Only the [`SAMPLED`] components are meant
+    /// to be read, and only [`Stepper::with_chamber_masses`].
     pub fn last_sample_state(&self) -> &[f64; N] {
-        &self.last_state
+        &self.out.last_state
     }
 
     /// The model this stepper runs.
@@ -136,46 +212,29 @@ impl Stepper {
         &self.model
     }
 
-    fn emit<S: TruthSink>(&mut self, sink: &mut S, t: f64, y: &[f64; N]) -> Result<(), RunError<S::Error>> {
-        let s: TruthSample = truth_sample(&self.model, self.next_out, t, y);
-        self.cycles.sample(&s);
-        self.last_state = *y;
-        self.next_out += 1;
-        sink.sample(&s).map_err(RunError::Sink)
-    }
-
     /// Advances until every output sample at or before `t_s` (and before
     /// the run's end) has gone to `sink`, with each impact after the
     /// samples up to its time.
     pub fn advance_to<S: TruthSink>(&mut self, t_s: f64, sink: &mut S) -> Result<(), RunError<S::Error>> {
-        if self.next_out == 0 && t_s >= 0.0 {
+        if self.out.next_out == 0 && t_s >= 0.0 {
             let y0 = self.y0;
-            self.emit(sink, 0.0, &y0)?;
+            self.out.emit(&self.model, sink, 0.0, &y0)?;
         }
         loop {
-            if let Some(step) = self.step.take() {
+            if let Some(event) = self.pending {
                 // The samples of the step taken, up to the communication point.
                 let t_stop = self.solver.t;
-                while self.next_out < self.n_out {
-                    let t = self.next_out as f64 * self.dt;
-                    if t > t_stop || t > t_s {
-                        break;
-                    }
-                    // Only the states the output needs.
-                    let mut y = [0.0; N];
-                    step.dense.at_into(t, &SAMPLED, &mut y);
-                    self.emit(sink, t, &y)?;
-                }
-                if self.next_out < self.n_out && self.next_out as f64 * self.dt <= t_stop {
+                self.out.emit_step(&self.model, &self.dense, t_stop, t_s, sink)?;
+                if self.out.next_sample_s() <= t_stop {
                     // The step runs past the communication point: kept for the next call.
-                    self.step = Some(step);
                     return Ok(());
                 }
-                if let Some((_, kind, which)) = step.event {
+                self.pending = None;
+                if let Some((_, kind, which)) = event {
                     self.apply_event(kind, which, sink)?;
                 }
             }
-            if self.solver.t >= self.t_end || self.next_sample_s() > t_s {
+            if self.solver.t >= self.t_end || self.out.next_sample_s() > t_s {
                 return Ok(());
             }
             self.take_step()?;
@@ -187,22 +246,22 @@ impl Stepper {
         let checkpoint = self.solver.checkpoint();
         let t0 = self.solver.t;
         let ya = self.solver.y;
-        let mut dense = self.solver.step(&self.model, self.t_end)?;
-        let mut earliest = first_event(&self.fns, &dense, &ya, &self.solver.y, self.last_event);
+        self.dense = self.solver.step(&self.model, self.t_end)?;
+        let mut earliest = first_event(&self.fns, &self.dense, &ya, &self.solver.y, self.last_event);
         if let Some((te, _, _)) = earliest {
             // The step's later stages saw the far side of a discontinuity, so
             // its interpolant is polluted there: redo it to end at the event.
             if te - t0 >= MIN_STEP_S {
                 self.solver.rewind(&checkpoint);
-                dense = self.solver.step(&self.model, te)?;
+                self.dense = self.solver.step(&self.model, te)?;
                 if self.solver.t < te {
                     earliest = None; // error control cut the step short; look again next step
                 }
             } else {
-                dense = Dense::constant(t0, &ya);
+                self.dense = Dense::constant(t0, &ya);
             }
         }
-        self.step = Some(Step { dense, event: earliest });
+        self.pending = Some(earliest);
         Ok(())
     }
 
@@ -219,16 +278,16 @@ impl Stepper {
         match kind {
             EventKind::ContactOnset => {
                 self.model.contact_v_in.set(y[model::V]);
-                self.cycles.impact(&rec);
+                self.out.cycles.impact(&rec);
                 sink.impact(&rec).map_err(RunError::Sink)?;
                 self.events.impacts.push(rec);
             }
             EventKind::ContactEnd => {
-                self.cycles.contact_end(&rec);
+                self.out.cycles.contact_end(&rec);
                 self.events.contact_ends.push(rec);
             }
             EventKind::StrokeStart => {
-                self.cycles.stroke_start(&rec);
+                self.out.cycles.stroke_start(&rec);
                 self.events.stroke_starts.push(rec);
             }
             EventKind::ValveLeftStop => {
@@ -249,10 +308,10 @@ impl Stepper {
     /// sit a rounding error past it), the cycles and the mass balance.
     pub fn finish<S: TruthSink>(mut self, sink: &mut S) -> Result<RunSummary, RunError<S::Error>> {
         self.advance_to(f64::INFINITY, sink)?;
-        while self.next_out < self.n_out {
-            let t = self.next_out as f64 * self.dt;
+        while self.out.next_out < self.out.n_out {
+            let t = self.out.next_out as f64 * self.out.dt;
             let y = self.solver.y;
-            self.emit(sink, t, &y)?;
+            self.out.emit(&self.model, sink, t, &y)?;
         }
         let model = &self.model;
         let stored = |y: &[f64; N]| y[model::M1] + y[model::M2] + model.line_mass_kg(y);
@@ -268,7 +327,7 @@ impl Stepper {
         };
         Ok(RunSummary {
             events: self.events,
-            cycles: self.cycles.cycles,
+            cycles: self.out.cycles.cycles,
             mass_balance,
             stats: self.solver.stats,
         })
