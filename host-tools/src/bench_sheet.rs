@@ -220,7 +220,7 @@ fn one_hammer(points: &[Point], config: Option<&Path>, configured: &HammerParams
         return Ok(None);
     };
     for (p, h) in stated {
-        let d = hammer.differences(h, &[]);
+        let d = hammer.differences(h);
         if !d.is_empty() {
             bail!(
                 "{} and {}: their sidecars state different hammers ({}): a sheet is of one hammer; make one per hammer",
@@ -231,7 +231,7 @@ fn one_hammer(points: &[Point], config: Option<&Path>, configured: &HammerParams
         }
     }
     if let Some(config) = config {
-        let d = hammer.differences(configured, &[]);
+        let d = hammer.differences(configured);
         if !d.is_empty() {
             bail!(
                 "{}'s sidecar states another hammer than --config {} ({}, sidecar vs config): the points would be read with one and the model drawn with the other; leave out --config or give the traces' hammer",

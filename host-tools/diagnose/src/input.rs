@@ -101,7 +101,7 @@ pub fn same_hammer(trace: &Path, sidecar: Option<&Sidecar>, model: &SimConfig, c
         return Ok(());
     };
     let d: Vec<String> = stated
-        .differences(&model.hammer, &[])
+        .differences(&model.hammer)
         .into_iter()
         .filter(|d| KNOWN.iter().any(|k| d.starts_with(&format!("{k} = "))))
         .collect();

@@ -111,12 +111,10 @@ pub fn start(table: &Table, values: &[Val], duration_s: f64) -> Result<VariantRu
     Ok(VariantRun::new(&cfg, duration_s))
 }
 
-/// The stepper with the plant and front end it borrows, kept together.
+/// A run of the second family: its stepper (which owns the plant and the
+/// front end) and the last sample handed out.
 pub struct VariantRun {
-    /// Borrows `*plant` and `*front_end`: dropped first (see `Drop`).
-    stepper: std::mem::ManuallyDrop<Stepper<'static>>,
-    plant: *mut Plant,
-    front_end: *mut FrontEndState,
+    stepper: Stepper,
     last: Option<Sample>,
     time_s: f64,
     t_end_s: f64,
@@ -124,35 +122,18 @@ pub struct VariantRun {
 
 impl VariantRun {
     fn new(cfg: &VariantsConfig, duration_s: f64) -> Self {
-        let plant = Box::into_raw(Box::new(Plant::new(
+        let plant = Plant::new(
             cfg.params.clone(),
             cfg.structure,
             cfg.effects.clone(),
             cfg.supply.pressure_bar,
-        )));
-        let front_end = Box::into_raw(Box::new(FrontEndState::new(cfg.structure.front_end, cfg.seed)));
-        // SAFETY: both allocations live until `drop`, which drops the
-        // stepper before freeing them; nothing else reaches them.
-        let stepper = unsafe { Stepper::new(&*plant, &mut *front_end, cfg.seed, duration_s, STEP_S, OUTPUT_EVERY) };
+        );
+        let front_end = FrontEndState::new(cfg.structure.front_end, cfg.seed);
         Self {
-            stepper: std::mem::ManuallyDrop::new(stepper),
-            plant,
-            front_end,
+            stepper: Stepper::new(plant, front_end, cfg.seed, duration_s, STEP_S, OUTPUT_EVERY),
             last: None,
             time_s: 0.0,
             t_end_s: duration_s,
-        }
-    }
-}
-
-impl Drop for VariantRun {
-    fn drop(&mut self) {
-        // SAFETY: the stepper goes first and is not used again; the boxes
-        // were made in `new` and are freed once.
-        unsafe {
-            std::mem::ManuallyDrop::drop(&mut self.stepper);
-            drop(Box::from_raw(self.plant));
-            drop(Box::from_raw(self.front_end));
         }
     }
 }

@@ -64,17 +64,15 @@ impl Default for HammerParams {
 
 impl HammerParams {
     /// Where `other` is another hammer: each field whose value differs, as
-    /// `name = mine vs other`, leaving out the fields named in `skip` (those
-    /// a caller fits anyway). Read off the serialised form, so a field added
+    /// `name = mine vs other`. Read off the serialised form, so a field added
     /// to the hammer is compared without a list to keep.
-    pub fn differences(&self, other: &HammerParams, skip: &[&str]) -> Vec<String> {
+    pub fn differences(&self, other: &HammerParams) -> Vec<String> {
         let (Ok(serde_json::Value::Object(a)), Ok(serde_json::Value::Object(b))) =
             (serde_json::to_value(self), serde_json::to_value(other))
         else {
             return vec!["the hammer's parameters cannot be compared".into()];
         };
         a.iter()
-            .filter(|(k, _)| !skip.contains(&k.as_str()))
             .filter_map(|(k, v)| {
                 let w = b.get(k)?;
                 (v != w).then(|| format!("{k} = {v} vs {w}"))

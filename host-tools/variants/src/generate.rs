@@ -57,8 +57,9 @@ pub fn generate(
     seed: u64,
 ) -> Generated {
     let plant = Plant::new(params.clone(), structure, effects.clone(), supply_bar);
-    let mut fe = FrontEndState::new(structure.front_end, seed);
-    let r = run(&plant, &mut fe, seed, duration_s, STEP_S, OUTPUT_EVERY);
+    let fe = FrontEndState::new(structure.front_end, seed);
+    let sensors = fe.ch;
+    let r = run(plant, fe, seed, duration_s, STEP_S, OUTPUT_EVERY);
     let mut trace = Trace {
         dt_s: r.dt_s,
         t_s: r.t_s,
@@ -85,7 +86,7 @@ pub fn generate(
             params: params.clone(),
             supply_pressure_bar: supply_bar,
             effects: effects.clone(),
-            sensors: fe.ch,
+            sensors,
             seed,
             duration_s,
             cycles: r.cycles,

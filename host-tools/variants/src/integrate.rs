@@ -91,10 +91,11 @@ pub struct Sample {
 /// the fixed steps that start at or before a communication point and hands
 /// out the samples on the way. The steps are the run's own (1 µs), never
 /// cut at a communication point, so a run cut into pieces of any size is
-/// the same run, sample for sample, as [`run`].
-pub struct Stepper<'p> {
-    plant: &'p Plant,
-    fe: &'p mut FrontEndState,
+/// the same run, sample for sample, as [`run`]. It owns its plant and
+/// front end, so a caller (an FMU instance) keeps one value.
+pub struct Stepper {
+    plant: Plant,
+    fe: FrontEndState,
     h_s: f64,
     every: usize,
     steps: usize,
@@ -119,24 +120,17 @@ pub struct Stepper<'p> {
     last_period_s: f64,
 }
 
-impl<'p> Stepper<'p> {
+impl Stepper {
     /// `plant` at rest, to run `duration_s` at step `h_s`, sampling every `every` steps.
-    pub fn new(
-        plant: &'p Plant,
-        fe: &'p mut FrontEndState,
-        seed: u64,
-        duration_s: f64,
-        h_s: f64,
-        every: usize,
-    ) -> Self {
+    pub fn new(plant: Plant, fe: FrontEndState, seed: u64, duration_s: f64, h_s: f64, every: usize) -> Self {
         Self {
+            y: plant.initial(),
             plant,
             fe,
             h_s,
             every,
             steps: (duration_s / h_s).round() as usize,
             i: 0,
-            y: plant.initial(),
             target: 1.0,
             k: [[0.0; N]; 4],
             signs: Noise::new(seed ^ 0xA11CE),
@@ -185,7 +179,7 @@ impl<'p> Stepper<'p> {
     }
 
     fn step(&mut self, sample: &mut impl FnMut(Sample)) {
-        let (plant, h_s, i) = (self.plant, self.h_s, self.i);
+        let (plant, h_s, i) = (&self.plant, self.h_s, self.i);
         self.i += 1;
         let t = i as f64 * h_s;
         let o = plant.deriv(t, &self.y, self.target, &mut self.k[0]);
@@ -254,7 +248,7 @@ impl<'p> Stepper<'p> {
 
     /// Events of the step from `y0` at `t`, resolved to the step by linear interpolation.
     fn events(&mut self, t: f64, y0: &[f64; N]) {
-        let (plant, h_s, y) = (self.plant, self.h_s, self.y);
+        let (plant, h_s, y) = (&self.plant, self.h_s, self.y);
         let anvil = |y: &[f64; N]| match plant.s.anvil {
             AnvilLaw::Fixed => plant.p.x_impact_m,
             AnvilLaw::MovingTool => y[XT],
@@ -317,7 +311,7 @@ impl<'p> Stepper<'p> {
 }
 
 /// Runs `plant` for `duration_s` at step `h_s`, sampling every `every` steps.
-pub fn run(plant: &Plant, fe: &mut FrontEndState, seed: u64, duration_s: f64, h_s: f64, every: usize) -> Run {
+pub fn run(plant: Plant, fe: FrontEndState, seed: u64, duration_s: f64, h_s: f64, every: usize) -> Run {
     let steps = (duration_s / h_s).round() as usize;
     let mut out = Run {
         dt_s: h_s * every as f64,
@@ -373,13 +367,12 @@ mod tests {
         let mut structures = vec![Structure::BASE];
         structures.extend(Structure::singles());
         for (k, s) in structures.into_iter().enumerate() {
-            let plant = Plant::new(VariantParams::default(), s, effects.clone(), 5.0);
+            let plant = || Plant::new(VariantParams::default(), s, effects.clone(), 5.0);
             let (h_s, every, duration_s) = (1e-6, 10, 0.2);
-            let mut fe = FrontEndState::new(s.front_end, 3);
-            let whole = run(&plant, &mut fe, 3, duration_s, h_s, every);
+            let whole = run(plant(), FrontEndState::new(s.front_end, 3), 3, duration_s, h_s, every);
             for piece_s in [7e-6, 1e-5, 2.5e-3] {
-                let mut fe = FrontEndState::new(s.front_end, 3);
-                let mut stepper = Stepper::new(&plant, &mut fe, 3, duration_s, h_s, every);
+                let fe = FrontEndState::new(s.front_end, 3);
+                let mut stepper = Stepper::new(plant(), fe, 3, duration_s, h_s, every);
                 let mut samples = Vec::new();
                 let mut t = 0.0;
                 while !stepper.done() {
