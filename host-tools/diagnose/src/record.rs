@@ -32,9 +32,9 @@ pub const RECORD_VERSION: u32 = 1;
 /// pressure within this of a recorded point for that point (it replaces it).
 pub const SUPPLY_AGREE_BAR: f64 = 0.005;
 
-/// The supply pressures a record may hold, gauge bar (as `hammer commission
-/// --supply-bar` takes them).
-const SUPPLY_MAX_BAR: f64 = 20.0;
+/// The highest supply pressure a record may hold, gauge bar: the model's
+/// (a record is read against it and diagnosed with it).
+const SUPPLY_MAX_BAR: f64 = hammer_sim::params::SUPPLY_BAR_RANGE.1;
 
 /// What `commission.json` holds.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
