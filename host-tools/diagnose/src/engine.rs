@@ -18,7 +18,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use super::features::{pressure_floor, Extractor};
 pub use super::gap::PointWaves;
 use super::model::ModelRunner;
-use super::pipeline::{floor, group, held_out, nominal, rank, reference, where_};
+use super::pipeline::{floor, force_balance, group, held_out, nominal, rank, reference, where_};
 use hammer_sim::effects::EFFECT_NAMES;
 use hammer_sim::SimConfig;
 
@@ -26,7 +26,7 @@ pub use super::features::extractor_for;
 pub use super::input::{DiagnoseError, MeasuredInput, Progress};
 pub use super::options::{Floors, Options};
 pub use super::report::{
-    DeadVolume, EffectResult, FittedParam, InputInfo, ModelForm, ModelFreeStat, PointShrink, Recalibration, Remainder,
+    DeadVolume, EffectResult, FittedParam, ForceBalancePoint, ForceBalanceQuantity, InputInfo, ModelForm, ModelFreeStat, PointShrink, Recalibration, Remainder,
     Report, Shrink, Verdict, WhereCell,
 };
 
@@ -151,6 +151,7 @@ pub fn diagnose_against(
             remainder: located.remainder,
             model_form,
             model_free: fs.model_free_stats(),
+            force_balance: force_balance::table(points, &nominal.features),
             chambers,
             detection_floors,
             shrink,

@@ -37,9 +37,39 @@ pub(crate) struct FitSet<'a> {
     /// record: the chamber characteristics' change is then evidence of its
     /// own (the form error cancelled), as the force balance is always.
     pub(crate) against_reference: bool,
+    /// Each fit point's reference record variance per feature (empty
+    /// without a record): the force balance's change carries it.
+    pub(crate) reference_var: Vec<Vec<f64>>,
+}
+
+/// A feature's change at a point since the nominal model (against a record:
+/// since the record, the measurement having been moved onto the model) and
+/// its standard error: the cycles' own scatter and the record's, no model
+/// floor. The force balance needs no model, so its change is measured as
+/// it stands; a floor belongs to comparisons with a model's waveforms.
+pub(crate) fn change_of(s: &Summary, nominal: &[f64], reference_var: &[f64], j: usize) -> (f64, f64) {
+    let n = s.cycles.max(1) as f64;
+    let sd = if s.sd[j].is_finite() { s.sd[j] } else { 0.0 };
+    let var = sd * sd / n + reference_var.get(j).copied().unwrap_or(0.0);
+    (s.mean[j] - nominal[j], var.sqrt())
 }
 
 impl<'a> FitSet<'a> {
+    /// Feature `j`'s change at fit point `k` ([`change_of`]).
+    pub(crate) fn change(&self, k: usize, j: usize) -> (f64, f64) {
+        let empty = Vec::new();
+        let rv = self.reference_var.get(k).unwrap_or(&empty);
+        change_of(&self.points[k].1, &self.nominal_features[k], rv, j)
+    }
+
+    /// The fit points at the lowest and the highest supply pressure (one
+    /// point: the same index twice).
+    pub(crate) fn lowest_and_highest(&self) -> (usize, usize) {
+        let by = |a: &usize, b: &usize| self.points[*a].0.total_cmp(&self.points[*b].0);
+        let idx = 0..self.points.len();
+        (idx.clone().min_by(by).unwrap_or(0), idx.max_by(by).unwrap_or(0))
+    }
+
     /// The supply pressures of the fit points, bar.
     pub(crate) fn bars(&self) -> Vec<f64> {
         self.points.iter().map(|p| p.0).collect()
@@ -128,6 +158,7 @@ impl<'a> FitSet<'a> {
             sims: AtomicUsize::new(0),
             nuisance: Vec::new(),
             against_reference: self.against_reference,
+            reference_var: self.reference_var.clone(),
         }
     }
 

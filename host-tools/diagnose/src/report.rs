@@ -81,6 +81,11 @@ pub struct EffectResult {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub contradicted_by: Option<String>,
     pub simulations: usize,
+    /// Where `fitted` holds sizes measured by the force balance (or the
+    /// chamber characteristics) rather than fitted: the waveforms' own fit
+    /// of those parameters, beside them (`docs/diagnosis.md`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub waveform_fit: Vec<FittedParam>,
     #[serde(skip)]
     pub candidate: Candidate,
 }
@@ -98,6 +103,29 @@ pub struct Verdict {
     /// name is one of these (see [`Options::confusable_margin`]).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub confusable_with: Vec<String>,
+}
+
+/// The force balance at one operating point (`force_balance` in report.json):
+/// each quantity it measures as the change since the nominal model, or
+/// with a record since the record, with its standard uncertainty `u` (the
+/// cycles' scatter over their number, and the record's) and the expanded
+/// `U = 2u` (docs/diagnosis.md).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct ForceBalancePoint {
+    pub supply_bar: f64,
+    pub fit_point: bool,
+    pub against_record: bool,
+    pub cycles: usize,
+    pub quantities: Vec<ForceBalanceQuantity>,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct ForceBalanceQuantity {
+    /// `effect.quantity`, e.g. the friction force in N.
+    pub key: String,
+    pub value: f64,
+    pub u: f64,
+    pub expanded_u: f64,
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -316,6 +344,9 @@ pub struct Report {
     /// The force balance's model-free quantities, measured against nominal.
     #[serde(default)]
     pub model_free: Vec<ModelFreeStat>,
+    /// The force balance at every operating point ([`ForceBalancePoint`]).
+    #[serde(default)]
+    pub force_balance: Vec<ForceBalancePoint>,
     /// The chamber characteristics (valve switching, fills, closed phases),
     /// measured against nominal; with references, their change since them.
     #[serde(default)]

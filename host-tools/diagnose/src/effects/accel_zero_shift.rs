@@ -1,4 +1,4 @@
-use super::{between, rel, Diagnosed};
+use super::{between, pooled, rel, Diagnosed};
 use crate::fitset::FitSet;
 use crate::features::ZERO_SHIFT_SQ;
 use crate::fit::ParamSpec;
@@ -37,6 +37,23 @@ impl Diagnosed for AccelZeroShift {
 
     fn model_free_z(fs: &FitSet) -> Option<f64> {
         fs.off_nominal_z(ZERO_SHIFT_SQ)
+    }
+
+    /// The mean square's change, E[u²]·A²: read as a mean square, because
+    /// its noise is symmetric there and not in A (the pooled size's square
+    /// root is taken once).
+    fn force_balance_reading(change: &dyn Fn(usize) -> (f64, f64)) -> Vec<(&'static str, f64, f64)> {
+        let (z, sz) = change(ZERO_SHIFT_SQ);
+        vec![("mean_square_m2ps4", z, sz)]
+    }
+
+    /// A = √(ΔZ² / E[u²]), ΔZ² pooled over the fit points; its standard
+    /// deviation by the square root's slope.
+    fn measured_size(fs: &FitSet) -> Option<(Vec<f64>, Vec<f64>)> {
+        let (z, sz) = pooled::<Self>(fs, 0)?;
+        let a = (z / ZERO_SHIFT_SQ_FACTOR).sqrt();
+        let spec = Self::free_params(fs.distinct)[0];
+        (a.is_finite() && a > spec.lo && a <= spec.hi).then(|| (vec![a], vec![sz / (2.0 * ZERO_SHIFT_SQ_FACTOR * a)]))
     }
 
     /// An amplitude A adds E[u²]·A² to the mean square.

@@ -52,6 +52,36 @@ impl Diagnosed for CoulombFriction {
         (se > 0.0).then(|| (s + b) / se)
     }
 
+    /// A friction F offsets both phases by F (it opposes the motion in
+    /// each): F is their mean.
+    fn force_balance_reading(change: &dyn Fn(usize) -> (f64, f64)) -> Vec<(&'static str, f64, f64)> {
+        let (s, ss) = change(F_STROKE);
+        let (b, sb) = change(F_BACKHAUL);
+        vec![("friction_n", 0.5 * (s + b), 0.5 * (ss * ss + sb * sb).sqrt())]
+    }
+
+    /// The force balance's friction at the lowest and highest fitted point
+    /// (the line through them is F0 + k·p); from one point, F ∝ p. The
+    /// force balance measures the friction itself, where the waveforms'
+    /// fit reads it through the valve's and ports' laws: against a record,
+    /// on a hammer of another form, that fit put F(4 bar) 18–22 % low.
+    fn measured_size(fs: &FitSet) -> Option<(Vec<f64>, Vec<f64>)> {
+        let specs = Self::free_params(fs.distinct);
+        let (lo, hi) = fs.lowest_and_highest();
+        let (values, sds): (Vec<f64>, Vec<f64>) = [lo, hi][..specs.len()]
+            .iter()
+            .map(|&k| {
+                let (_, v, u) = Self::force_balance_reading(&|j| fs.change(k, j))[0];
+                (v, u)
+            })
+            .unzip();
+        specs
+            .iter()
+            .zip(&values)
+            .all(|(s, v)| v.is_finite() && *v > s.lo && *v <= s.hi)
+            .then_some((values, sds))
+    }
+
     /// A friction F offsets both phases by F: z = 2F / se.
     fn model_free_floor(fs: &FitSet, z_min: f64) -> Option<(&'static str, f64)> {
         let se = (fs.mean_se(F_STROKE).1.powi(2) + fs.mean_se(F_BACKHAUL).1.powi(2)).sqrt();

@@ -83,6 +83,19 @@ pub(super) fn diagnosis(name: &str) -> Option<&'static dyn DiagnosisEntry> {
     DIAGNOSIS.iter().copied().find(|d| d.name() == name)
 }
 
+/// Every effect's force-balance reading at one point ([`Diagnosed::force_balance_reading`]),
+/// keyed `effect.quantity`, in catalogue order.
+pub(crate) fn force_balance_readings(change: &dyn Fn(usize) -> (f64, f64)) -> Vec<(String, f64, f64)> {
+    DIAGNOSIS
+        .iter()
+        .flat_map(|d| {
+            d.force_balance_reading(change)
+                .into_iter()
+                .map(|(k, v, u)| (format!("{}.{k}", d.name()), v, u))
+        })
+        .collect()
+}
+
 /// The factors the sensor effects put on the rear and front pressure
 /// readings (1 without one).
 pub(crate) fn pressure_reading_factors(effects: &Effects) -> (f64, f64) {
@@ -99,6 +112,41 @@ pub(crate) fn shift_expected_features(effects: &Effects, mean: &mut [f64]) {
 
 pub(super) fn between(rng: &mut Rng, lo: f64, hi: f64) -> f64 {
     lo + (hi - lo) * rng.uniform()
+}
+
+/// The force balance's reading of quantity `q` of effect `T` at every fit
+/// point, pooled by inverse variance: its value and standard error; `None`
+/// where a point cannot read it.
+pub(super) fn pooled<T: Diagnosed>(fs: &FitSet, q: usize) -> Option<(f64, f64)> {
+    let (mut sum, mut weight) = (0.0, 0.0);
+    for k in 0..fs.points.len() {
+        let (_, v, u) = *T::force_balance_reading(&|j| fs.change(k, j)).get(q)?;
+        if !(v.is_finite() && u.is_finite()) {
+            return None;
+        }
+        // A point without scatter (one cycle) weighs as the floor's noise would.
+        let w = 1.0 / (u * u).max(1e-300);
+        sum += w * v;
+        weight += w;
+    }
+    (weight > 0.0).then(|| (sum / weight, weight.recip().sqrt()))
+}
+
+/// The force balance's reading of every quantity of `T`, pooled over the
+/// fit points ([`pooled`]), each within its free parameter's range; `None`
+/// if one falls outside it (then it is not this effect's size).
+pub(super) fn pooled_size<T: Diagnosed>(fs: &FitSet) -> Option<(Vec<f64>, Vec<f64>)> {
+    let specs = T::free_params(fs.distinct);
+    let (values, sds): (Vec<f64>, Vec<f64>) = (0..specs.len())
+        .map(|q| pooled::<T>(fs, q))
+        .collect::<Option<Vec<_>>>()?
+        .into_iter()
+        .unzip();
+    specs
+        .iter()
+        .zip(&values)
+        .all(|(s, v)| (s.lo..=s.hi).contains(v))
+        .then_some((values, sds))
 }
 
 pub(super) fn rel(a: f64, b: f64) -> f64 {
@@ -155,6 +203,16 @@ pub(super) trait Diagnosed: Effect {
         None
     }
 
+    /// What the force balance reads of it at one operating point, from
+    /// `change(j)`, feature `j`'s change there and its standard error
+    /// ([`crate::fitset::change_of`]): a (key, value, standard uncertainty)
+    /// per quantity; empty where the force balance does not see it. The
+    /// force balance measures these directly (no valve or port law), so
+    /// their size is taken from it in both modes ([`Diagnosed::measured_size`]).
+    fn force_balance_reading(_change: &dyn Fn(usize) -> (f64, f64)) -> Vec<(&'static str, f64, f64)> {
+        Vec::new()
+    }
+
     /// A measured change since the reference record that the effect cannot
     /// make, in words; `None` where there is none (or no reference). Such
     /// an effect is not named alone, however its waveforms score: the
@@ -199,6 +257,7 @@ pub(super) trait DiagnosisEntry: Sync {
     fn model_free_floor(&self, fs: &FitSet, z_min: f64) -> Option<(&'static str, f64)>;
     fn seen_in_chambers(&self) -> bool;
     fn measured_size(&self, fs: &FitSet) -> Option<(Vec<f64>, Vec<f64>)>;
+    fn force_balance_reading(&self, change: &dyn Fn(usize) -> (f64, f64)) -> Vec<(&'static str, f64, f64)>;
     fn contradicted(&self, fs: &FitSet) -> Option<String>;
     fn pressure_reading_factors(&self, effects: &Effects) -> (f64, f64);
     fn shift_expected_features(&self, effects: &Effects, mean: &mut [f64]);
@@ -236,6 +295,9 @@ impl<T: Diagnosed> DiagnosisEntry for Entry<T> {
     }
     fn measured_size(&self, fs: &FitSet) -> Option<(Vec<f64>, Vec<f64>)> {
         T::measured_size(fs)
+    }
+    fn force_balance_reading(&self, change: &dyn Fn(usize) -> (f64, f64)) -> Vec<(&'static str, f64, f64)> {
+        T::force_balance_reading(change)
     }
     fn contradicted(&self, fs: &FitSet) -> Option<String> {
         T::contradicted(fs)

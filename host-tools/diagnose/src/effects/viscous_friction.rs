@@ -1,4 +1,4 @@
-use super::{between, rel, Diagnosed};
+use super::{between, pooled_size, rel, Diagnosed};
 use crate::fitset::FitSet;
 use crate::features::VISCOUS;
 use crate::fit::ParamSpec;
@@ -26,6 +26,16 @@ impl Diagnosed for ViscousFriction {
 
     fn model_free_z(fs: &FitSet) -> Option<f64> {
         fs.off_nominal_z(VISCOUS)
+    }
+
+    fn force_balance_reading(change: &dyn Fn(usize) -> (f64, f64)) -> Vec<(&'static str, f64, f64)> {
+        let (c, sc) = change(VISCOUS);
+        vec![("c_n_s_per_m", c, sc)]
+    }
+
+    /// The force balance's coefficient, pooled over the fit points.
+    fn measured_size(fs: &FitSet) -> Option<(Vec<f64>, Vec<f64>)> {
+        pooled_size::<Self>(fs)
     }
 
     fn model_free_floor(fs: &FitSet, z_min: f64) -> Option<(&'static str, f64)> {

@@ -5,6 +5,7 @@
 //!    [`reference`] (with reference records): each point read as a change
 //!    from the same hammer's earlier record, moved onto the nominal model;
 //! 2. [`nominal`]: the nominal model at every point → the fit set;
+//!    [`force_balance`]: what the force balance measures at every point;
 //! 3. [`rank`]: every effect fitted ([`effect_fit`]) and ranked → the verdict;
 //!    [`floor`]: how large each unseen effect must be to be named here;
 //! 4. [`held_out`]: the verdict's model against the held-out data → the shrink;
@@ -15,6 +16,7 @@
 
 pub(crate) mod effect_fit;
 pub(crate) mod floor;
+pub(crate) mod force_balance;
 pub(crate) mod group;
 pub(crate) mod held_out;
 pub(crate) mod nominal;

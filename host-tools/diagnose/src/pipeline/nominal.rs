@@ -88,6 +88,7 @@ pub(crate) fn fit_set<'a>(
         sims: AtomicUsize::new(points.len()),
         nuisance: Vec::new(),
         against_reference: points.iter().any(|p| !p.reference_var.is_empty()),
+        reference_var: fit_idx.iter().map(|&i| points[i].reference_var.clone()).collect(),
     };
     if opts.nominal_uncertainty > 0.0 {
         let fit_features: Vec<&[f64]> = fit_idx.iter().map(|&i| nominal.features[i].as_slice()).collect();

@@ -9,7 +9,7 @@
 
 use std::sync::OnceLock;
 
-use super::effect_fit::{at_measured_instead, at_measured_size, fit_effects};
+use super::effect_fit::{at_measured_size, at_measured_sizes, fit_effects};
 use crate::effects::diagnosis;
 use crate::features::N_FEATURES;
 use crate::fitset::FitSet;
@@ -75,8 +75,10 @@ pub(crate) fn rank(fs: &FitSet, opts: &Options, step: &(dyn Fn(&str) + Sync)) ->
     // The fit set read against each effect's own model, run once and only
     // where a rule asks for it (two simulations each).
     let against: Vec<OnceLock<Option<FitSet>>> = effects.iter().map(|_| OnceLock::new()).collect();
-    // Whether an effect's model-free signature reads its size.
-    let sized = |e: &EffectResult| diagnosis(&e.name).is_some_and(|d| d.measured_size(fs).is_some());
+    // Whether an effect's chamber signature reads its size: such an effect
+    // may be named on it alone (a force-balance effect is named on its
+    // signature through `significant`).
+    let sized = |e: &EffectResult| diagnosis(&e.name).is_some_and(|d| d.seen_in_chambers() && d.measured_size(fs).is_some());
     let z_against = |i: usize, name: &str| {
         let given = against[i].get_or_init(|| first_model(fs, &effects[i], opts).map(|f| fs.against(f)));
         diagnosis(name)?.model_free_z(given.as_ref()?)
@@ -144,10 +146,11 @@ pub(crate) fn rank(fs: &FitSet, opts: &Options, step: &(dyn Fn(&str) + Sync)) ->
             }
         }
     };
-    // A size the signature measures, where the fit's law put it elsewhere.
+    // A size the model-free signature measures: the force balance's
+    // always, the chambers' where the fit's law put it elsewhere.
     if let Some((v, why)) = verdict
         .as_ref()
-        .and_then(|v| at_measured_instead(fs, v, &effects, opts, chi2_nominal, ln_n))
+        .and_then(|v| at_measured_sizes(fs, v, &effects, opts, chi2_nominal, ln_n))
     {
         reason = format!("{reason}; {why}");
         verdict = Some(v);
@@ -524,6 +527,7 @@ mod tests {
             model_free_z: None,
             contradicted_by: None,
             simulations: 0,
+            waveform_fit: Vec::new(),
             candidate: Candidate::default(),
         }
     }

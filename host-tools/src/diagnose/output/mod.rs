@@ -81,6 +81,7 @@ mod tests {
             model_free_z: Some(9.5),
             contradicted_by: None,
             simulations: 10,
+            waveform_fit: Vec::new(),
             candidate: Candidate::default(),
         }
     }
@@ -136,6 +137,7 @@ mod tests {
             remainder: vec![],
             model_form: vec![],
             model_free: vec![],
+            force_balance: vec![],
             chambers: vec![],
             detection_floors: vec![
                 DetectionFloor {
