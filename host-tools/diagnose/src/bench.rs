@@ -19,8 +19,10 @@ use hammer_trace::trace::Trace;
 use hammer_variants::{generate, Structure, VariantParams};
 
 mod ceiling;
+mod outcome;
 mod summary;
 pub use ceiling::{model_alone_ceiling, FormSpan, ModelAloneCeiling};
+pub use outcome::{Named, Outcome};
 pub use summary::{above_floor, render, summarize, BenchSummary};
 
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -196,6 +198,9 @@ pub struct Ranked {
     pub score: f64,
     pub explained_fraction: f64,
     pub model_free_z: Option<f64>,
+    /// A measured change rules it out.
+    #[serde(default)]
+    pub contradicted: bool,
 }
 
 impl Ranked {
@@ -205,6 +210,7 @@ impl Ranked {
             score: e.score,
             explained_fraction: e.explained_fraction,
             model_free_z: e.model_free_z,
+            contradicted: e.contradicted_by.is_some(),
         }
     }
 }
@@ -217,10 +223,16 @@ pub struct CaseResult {
     pub variants: Vec<String>,
     pub hidden: Hidden,
     pub hidden_params: serde_json::Value,
+    /// What the verdict named, raw: outright, and each close call's first
+    /// member (the ranking's choice). The confusion matrix counts it.
     pub named: Vec<String>,
-    /// What the verdict flagged the named effect confusable with.
+    /// The verdict's close calls, each a group of effect names.
     #[serde(default)]
-    pub confusable_with: Vec<String>,
+    pub alternatives: Vec<Vec<String>>,
+    /// Exact, a group holding the truth, none, or wrong ([`Outcome`]).
+    #[serde(default)]
+    pub outcome: Outcome,
+    /// The raw naming is what was hidden.
     pub correct: bool,
     /// Relative error of each named-right effect's magnitude.
     pub param_errors: BTreeMap<String, f64>,
@@ -233,6 +245,9 @@ pub struct CaseResult {
     pub score: f64,
     pub energy_error_before: f64,
     pub energy_error_after: f64,
+    /// The named effects in the nominal model, nothing recalibrated.
+    #[serde(default)]
+    pub energy_error_effects_only: f64,
     pub frequency_error_before: f64,
     pub frequency_error_after: f64,
     /// The report warned that its refitted model predicts the held-out
@@ -263,8 +278,78 @@ pub struct CaseResult {
     /// to the generator's (structural benchmark with references only).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub front_dead_volume_error: Option<f64>,
+    /// With a hidden friction named: whether the verdict's friction law
+    /// lies within U of the force balance's reading at every operating
+    /// point, the held-out one included.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub friction_within_u: Option<bool>,
+    /// With references: the same case diagnosed against the model alone,
+    /// side by side (a record must add evidence, never subtract it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub alone: Option<Alone>,
     #[serde(skip)]
     pub report: Option<super::engine::Report>,
+}
+
+/// A case's diagnosis against the model alone, beside the one against its
+/// record.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Alone {
+    pub named: Vec<String>,
+    pub alternatives: Vec<Vec<String>>,
+    pub outcome: Outcome,
+    pub param_errors: BTreeMap<String, f64>,
+    pub energy_error_after: f64,
+    pub diagnose_s: f64,
+    /// Every single effect as its ranking left it, best first.
+    #[serde(default)]
+    pub ranking: Vec<Ranked>,
+}
+
+/// A report judged against what was hidden: the naming, its outcome,
+/// whether the raw naming is right, and each right-named effect's size error.
+struct Judged {
+    named: Named,
+    outcome: Outcome,
+    correct: bool,
+    param_errors: BTreeMap<String, f64>,
+}
+
+fn judge(r: &super::engine::Report, hidden: &Hidden, truth: &Effects, points: &[f64]) -> Judged {
+    let named = Named::of(r);
+    let mut want = hidden.names();
+    want.sort();
+    let mut got = named.raw.clone();
+    got.sort();
+    let correct = want == got;
+    let mut param_errors = BTreeMap::new();
+    for name in want.iter().filter(|n| named.params.contains_key(*n)) {
+        if let Some(e) = magnitude_error(truth, name, &named.params[name], points) {
+            param_errors.insert(name.clone(), e);
+        }
+    }
+    Judged {
+        outcome: named.outcome(&hidden.names()),
+        named,
+        correct,
+        param_errors,
+    }
+}
+
+/// Whether the verdict's friction law lies within U of the force balance's
+/// friction at every point; `None` without a friction named.
+fn friction_within_u(r: &super::engine::Report, params: Option<&serde_json::Value>) -> Option<bool> {
+    let p = params?;
+    let (f0, k) = (p.get("f0_n")?.as_f64()?, p.get("k_n_per_bar")?.as_f64()?);
+    let rows: Vec<bool> = r
+        .force_balance
+        .iter()
+        .filter_map(|row| {
+            let q = row.quantities.iter().find(|q| q.key.ends_with(".friction_n"))?;
+            Some((f0 + k * row.supply_bar - q.value).abs() <= q.expanded_u)
+        })
+        .collect();
+    (!rows.is_empty()).then(|| rows.iter().all(|x| *x))
 }
 
 /// A case as the plan draws it: what is hidden, the generator, and each
@@ -381,26 +466,27 @@ pub fn run_case(opts: &BenchOptions, index: usize, diag: &Options) -> anyhow::Re
     let out = diagnose_against(&inputs, &references, &base, diag, &|_, _, _| {})?;
     let diagnose_s = t.elapsed().as_secs_f64();
     let r = &out.report;
-    let named: Vec<String> = r.verdict.effects.iter().filter(|e| *e != "none").cloned().collect();
-    let mut want = hidden.names();
-    want.sort();
-    let mut got = named.clone();
-    got.sort();
-    let correct = want == got;
-    let mut param_errors = BTreeMap::new();
-    if correct {
-        for name in &want {
-            let fitted = if named.len() == 1 {
-                r.verdict.params.clone()
-            } else {
-                r.verdict.params.get(name).cloned().unwrap_or_default()
-            };
-            if let Some(e) = magnitude_error(&gen.effects, name, &fitted, &opts.points) {
-                param_errors.insert(name.clone(), e);
-            }
-        }
-    }
-
+    let j = judge(r, &hidden, &gen.effects, &opts.points);
+    let friction = hammer_sim::effects::CoulombFriction::NAME;
+    let friction_within_u =
+        friction_within_u(r, j.named.params.get(friction)).filter(|_| hidden.names().iter().any(|n| n == friction));
+    let alone = if references.is_empty() {
+        None
+    } else {
+        let t = std::time::Instant::now();
+        let out = diagnose_against(&inputs, &[], &base, diag, &|_, _, _| {})?;
+        let diagnose_s = t.elapsed().as_secs_f64();
+        let a = judge(&out.report, &hidden, &gen.effects, &opts.points);
+        Some(Alone {
+            named: a.named.raw,
+            alternatives: a.named.groups,
+            outcome: a.outcome,
+            param_errors: a.param_errors,
+            energy_error_after: out.report.shrink.impact_energy_error_after,
+            diagnose_s,
+            ranking: out.report.effects.iter().map(Ranked::of).collect(),
+        })
+    };
     let s = &r.shrink;
     let front_dead_volume_error = match (&structural, r.dead_volumes.iter().find(|d| d.chamber == "front")) {
         (Some((_, p)), Some(d)) => Some(d.used_m3 / p.front_dead_m3 - 1.0),
@@ -413,14 +499,16 @@ pub fn run_case(opts: &BenchOptions, index: usize, diag: &Options) -> anyhow::Re
         }),
         hidden_params: serde_json::to_value(&gen.effects).unwrap_or_default(),
         hidden,
-        named,
-        confusable_with: r.verdict.confusable_with.clone(),
-        correct,
-        param_errors,
+        named: j.named.raw,
+        alternatives: j.named.groups,
+        outcome: j.outcome,
+        correct: j.correct,
+        param_errors: j.param_errors,
         true_port_delay_s,
         score: r.verdict.score,
         energy_error_before: s.impact_energy_error_before,
         energy_error_after: s.impact_energy_error_after,
+        energy_error_effects_only: s.impact_energy_error_effects_only,
         frequency_error_before: s.frequency_error_before,
         frequency_error_after: s.frequency_error_after,
         cautioned: s.caution().is_some(),
@@ -432,6 +520,8 @@ pub fn run_case(opts: &BenchOptions, index: usize, diag: &Options) -> anyhow::Re
         model_form: r.model_form.clone(),
         detection_floors: r.detection_floors.clone(),
         front_dead_volume_error,
+        friction_within_u,
+        alone,
         report: Some(out.report),
     })
 }

@@ -26,8 +26,8 @@ pub use super::features::extractor_for;
 pub use super::input::{DiagnoseError, MeasuredInput, Progress};
 pub use super::options::{Floors, Options};
 pub use super::report::{
-    DeadVolume, EffectResult, FittedParam, ForceBalancePoint, ForceBalanceQuantity, InputInfo, ModelForm, ModelFreeStat, PointShrink, Recalibration, Remainder,
-    Report, Shrink, Verdict, WhereCell,
+    Alternative, DeadVolume, EffectResult, FittedParam, ForceBalancePoint, ForceBalanceQuantity, InputInfo, ModelForm,
+    ModelFreeStat, PointShrink, Recalibration, Remainder, Report, Shrink, Verdict, WhereCell,
 };
 
 #[derive(Debug, Clone)]
@@ -134,8 +134,9 @@ pub fn diagnose_against(
     let located = where_::locate(inputs, &grouped, &nominal, &models, base, opts);
     let recalibration = held_out::recalibration(base, &models, opts.nominal_uncertainty);
     let chambers = chamber_table(&fs, &nominal.bars, &models, &baselines);
+    let (alternatives, alternative_sims) = close_call_group(&fs, points, &nominal, &ranking, &shrink, opts);
 
-    let simulations = fs.simulations() + models.simulations();
+    let simulations = fs.simulations() + models.simulations() + alternative_sims;
     Ok(Outcome {
         report: Report {
             tool: format!("hammer diagnose {}", env!("CARGO_PKG_VERSION")),
@@ -144,7 +145,7 @@ pub fn diagnose_against(
             dead_volumes,
             fit_points: fs.bars(),
             where_: located.where_,
-            verdict: ranking.verdict_report(),
+            verdict: ranking.verdict_report(alternatives),
             effects: ranking.effects,
             pairs: ranking.pairs,
             recalibration,
@@ -206,6 +207,45 @@ fn chamber_table(
             ..stat
         })
         .collect()
+}
+
+/// The close call's group, the verdict's (last) effect first, each member
+/// with its own held-out check; empty without a close call. With the
+/// simulations the runner-up's check cost.
+fn close_call_group(
+    fs: &crate::fitset::FitSet,
+    points: &[group::Point],
+    nominal: &nominal::Nominal,
+    ranking: &rank::Ranking,
+    shrink: &Shrink,
+    opts: &Options,
+) -> (Vec<Alternative>, usize) {
+    let (Some(named), Some(other)) = (&ranking.verdict, &ranking.close_call) else {
+        return (Vec::new(), 0);
+    };
+    let models = held_out::models(fs, &nominal.bars, Some(other), opts);
+    let other_shrink = held_out::shrink(points, &nominal.features, &models);
+    let member = |e: &EffectResult, s: &Shrink| {
+        let name = e.name.rsplit('+').next().unwrap_or_default().to_string();
+        let params = match e.name.contains('+') {
+            true => e.params.get(&name).cloned().unwrap_or_default(),
+            false => e.params.clone(),
+        };
+        Alternative {
+            parting_test: crate::effects::diagnosis(&name)
+                .and_then(|d| d.parting_test())
+                .map(str::to_string),
+            effect: name,
+            params,
+            score: e.score,
+            impact_energy_error_after: s.impact_energy_error_after,
+            frequency_error_after: s.frequency_error_after,
+        }
+    };
+    (
+        vec![member(named, shrink), member(other, &other_shrink)],
+        models.simulations(),
+    )
 }
 
 /// The dead volumes the records were read through against the model's

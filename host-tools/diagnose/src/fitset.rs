@@ -162,6 +162,25 @@ impl<'a> FitSet<'a> {
         }
     }
 
+    /// The fit set whole, its model-based features' weights divided by
+    /// `factors` ([`Self::inflate`]).
+    pub(crate) fn reweighed(&self, factors: &[f64]) -> FitSet<'a> {
+        let mut f = FitSet {
+            runner: self.runner,
+            points: self.points.clone(),
+            nominal_truth: self.nominal_truth.clone(),
+            nominal_features: self.nominal_features.clone(),
+            pressures: self.pressures,
+            distinct: self.distinct,
+            sims: AtomicUsize::new(0),
+            nuisance: self.nuisance.clone(),
+            against_reference: self.against_reference,
+            reference_var: self.reference_var.clone(),
+        };
+        f.inflate(factors);
+        f
+    }
+
     /// The force balance's quantities against the nominal model's.
     pub(crate) fn model_free_stats(&self) -> Vec<ModelFreeStat> {
         self.stats(&MODEL_FREE)

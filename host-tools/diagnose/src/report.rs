@@ -92,17 +92,37 @@ pub struct EffectResult {
 
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Verdict {
-    /// Effect names, or `["none"]`.
+    /// The effects named outright, or `["none"]` (empty where the only
+    /// finding is a group of `alternatives`).
     pub effects: Vec<String>,
+    /// The parameters of `effects`.
     pub params: serde_json::Value,
     /// The named model's score (the best single effect's when `none`).
     pub score: f64,
     pub reason: String,
-    /// Effects the force balance cannot see that score nearly as well as
-    /// the named one, which cannot see it either: on this measurement the
-    /// name is one of these (see [`Options::confusable_margin`]).
+    /// Each close call as a group of effects, one of which is the cause
+    /// (beside `effects`, for a pair's second): they score within
+    /// [`Options::close_call_margin`] of each other and no model-free
+    /// evidence parts them (docs/diagnosis.md). The first member is the
+    /// ranking's choice.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub confusable_with: Vec<String>,
+    pub alternatives: Vec<Vec<Alternative>>,
+}
+
+/// One member of a close call: its size, its score and its own held-out
+/// check (the same check as the verdict's, with this member in the model).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Alternative {
+    pub effect: String,
+    /// In the catalogue's terms.
+    pub params: serde_json::Value,
+    pub score: f64,
+    /// Held-out errors with this member in the model, % ([`Shrink`]).
+    pub impact_energy_error_after: f64,
+    pub frequency_error_after: f64,
+    /// What, outside the waveforms, would tell it from the others.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub parting_test: Option<String>,
 }
 
 /// The force balance at one operating point (`force_balance` in report.json):
@@ -129,6 +149,11 @@ pub struct ForceBalanceQuantity {
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize)]
+/// One point's check, every value on the hammer's own scale: the hammer's
+/// measured energy and frequency, and each model's prediction of them.
+/// Against a record a model predicts the hammer as the record plus the
+/// model's change (the nominal model: the record itself), since the
+/// measurement was read as a change from it.
 pub struct PointShrink {
     pub supply_bar: f64,
     pub held_out_point: bool,
@@ -152,7 +177,8 @@ pub struct PointShrink {
 
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Shrink {
-    /// Mean |simulated − measured| / measured over the held-out data, %.
+    /// Mean |predicted − measured| / measured over the held-out data, %,
+    /// of the hammer's measured energy in both modes ([`PointShrink`]).
     pub impact_energy_error_before: f64,
     pub impact_energy_error_after: f64,
     pub frequency_error_before: f64,

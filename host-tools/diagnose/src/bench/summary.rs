@@ -41,13 +41,16 @@ pub struct BenchSummary {
     pub frequency_error_before: f64,
     pub frequency_error_after: f64,
     pub mean_diagnose_s: f64,
-    /// Cases that named an effect that was not hidden: (flagged
-    /// confusable, all). A wrong name must come flagged.
+    /// Cases that named an effect that was not hidden (raw): (in a close
+    /// call's group, all). A wrong name should come grouped.
     #[serde(default)]
     pub wrong_names_flagged: (usize, usize),
-    /// Cases with an effect named right: (flagged confusable, all).
+    /// Cases with an effect named right (raw): (in a group, all).
     #[serde(default)]
     pub right_names_flagged: (usize, usize),
+    /// The four outcomes, and with references the cases alone beside them.
+    #[serde(default)]
+    pub outcomes: super::outcome::Tally,
     /// Single unseen effects against the floor their case reported:
     /// (named right, all) above it, and the same below it.
     #[serde(default)]
@@ -94,7 +97,7 @@ pub fn summarize(options: &BenchOptions, cases: Vec<CaseResult>, not_run: Vec<(u
             tally.0 += usize::from(c.correct);
             tally.1 += 1;
         }
-        let flagged = usize::from(!c.confusable_with.is_empty());
+        let flagged = usize::from(!c.alternatives.is_empty());
         let hidden = c.hidden.names();
         if c.named.iter().any(|n| !hidden.contains(n)) {
             wrong_flagged.0 += flagged;
@@ -177,6 +180,7 @@ pub fn summarize(options: &BenchOptions, cases: Vec<CaseResult>, not_run: Vec<(u
         floor_above,
         floor_below,
         cautioned: cases.iter().filter(|c| c.cautioned).count(),
+        outcomes: super::outcome::Tally::of(&cases),
         model_alone_ceiling: (!options.reference).then(|| super::model_alone_ceiling(&cases)),
         cases,
         not_run,
@@ -286,8 +290,9 @@ pub fn render(s: &BenchSummary) -> String {
     let (rf, rn) = s.right_names_flagged;
     let _ = writeln!(
         out,
-        "named an effect not hidden: {wn} cases, {wf} of them flagged confusable; named right: {rn} cases, {rf} flagged"
+        "named an effect not hidden: {wn} cases, {wf} of them in a close call; named right: {rn} cases, {rf} in one"
     );
+    s.outcomes.render(&mut out);
     floors(&mut out, s);
     let _ = writeln!(
         out,
@@ -297,6 +302,7 @@ pub fn render(s: &BenchSummary) -> String {
     );
     calibration_and_gaps(&mut out, s);
     misnamed(&mut out, s);
+    super::outcome::side_by_side(&mut out, &s.cases);
     out
 }
 
@@ -369,10 +375,10 @@ fn misnamed(out: &mut String, s: &BenchSummary) {
                 } else {
                     c.named.clone()
                 },
-                if c.confusable_with.is_empty() {
+                if c.alternatives.is_empty() {
                     String::new()
                 } else {
-                    format!(", confusable with {:?}", c.confusable_with)
+                    format!(", one of {:?} ({})", c.alternatives, c.outcome.label())
                 }
             );
         }

@@ -39,6 +39,22 @@ impl Diagnosed for HeatTransfer {
         true
     }
 
+    /// The front exponent's fall does not part it from a leak: every closed
+    /// compression starts below the wall's temperature (the chamber has
+    /// just blown down), so a weak exchange raises the exponent as a leak
+    /// into the chamber does, and only a strong one lowers it; 2 of 20 of
+    /// the second family's leaks lowered it too (field notes, "Telling a
+    /// leak from heat exchange"). It stays evidence for naming heat
+    /// exchange before a leak the waveforms score a little higher, not for
+    /// ruling the leak out.
+    fn signature_parts() -> bool {
+        false
+    }
+
+    fn parting_test() -> Option<&'static str> {
+        Some("a chamber gas temperature (a fast thermocouple in the front chamber): heat exchange moves it, which p, x and a cannot show")
+    }
+
     fn model_free_z(fs: &FitSet) -> Option<f64> {
         if !fs.reads_change(FRONT_EXPONENT) {
             return None;

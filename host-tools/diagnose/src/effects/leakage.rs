@@ -36,6 +36,10 @@ impl Diagnosed for Leakage {
         }
     }
 
+    fn parting_test() -> Option<&'static str> {
+        Some("a leak-down test at rest: supply the rear chamber with the piston held and watch the front chamber's pressure rise")
+    }
+
     fn contradicted(fs: &FitSet) -> Option<String> {
         // Pooled over the fit points that read the floor: at a low supply
         // the exhausting chamber can dip below the transducer's range,

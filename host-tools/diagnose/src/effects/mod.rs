@@ -213,6 +213,20 @@ pub(super) trait Diagnosed: Effect {
         Vec::new()
     }
 
+    /// Whether its model-free signature, standing where another effect's
+    /// does not, parts the two (see `rank::close_call`). True of the force
+    /// balance's and of the front feed's shift, which no other effect makes.
+    fn signature_parts() -> bool {
+        true
+    }
+
+    /// The test, outside the waveforms, that tells it from an effect they
+    /// cannot part it from, in words; `None` for an effect the force
+    /// balance sees (it parts it already).
+    fn parting_test() -> Option<&'static str> {
+        None
+    }
+
     /// A measured change since the reference record that the effect cannot
     /// make, in words; `None` where there is none (or no reference). Such
     /// an effect is not named alone, however its waveforms score: the
@@ -258,6 +272,8 @@ pub(super) trait DiagnosisEntry: Sync {
     fn seen_in_chambers(&self) -> bool;
     fn measured_size(&self, fs: &FitSet) -> Option<(Vec<f64>, Vec<f64>)>;
     fn force_balance_reading(&self, change: &dyn Fn(usize) -> (f64, f64)) -> Vec<(&'static str, f64, f64)>;
+    fn signature_parts(&self) -> bool;
+    fn parting_test(&self) -> Option<&'static str>;
     fn contradicted(&self, fs: &FitSet) -> Option<String>;
     fn pressure_reading_factors(&self, effects: &Effects) -> (f64, f64);
     fn shift_expected_features(&self, effects: &Effects, mean: &mut [f64]);
@@ -298,6 +314,12 @@ impl<T: Diagnosed> DiagnosisEntry for Entry<T> {
     }
     fn force_balance_reading(&self, change: &dyn Fn(usize) -> (f64, f64)) -> Vec<(&'static str, f64, f64)> {
         T::force_balance_reading(change)
+    }
+    fn signature_parts(&self) -> bool {
+        T::signature_parts()
+    }
+    fn parting_test(&self) -> Option<&'static str> {
+        T::parting_test()
     }
     fn contradicted(&self, fs: &FitSet) -> Option<String> {
         T::contradicted(fs)

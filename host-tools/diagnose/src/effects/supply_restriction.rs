@@ -22,6 +22,10 @@ impl Diagnosed for SupplyRestriction {
         }
     }
 
+    fn parting_test() -> Option<&'static str> {
+        Some("the supply pressure at the hammer's inlet while it runs: a restriction makes it sag in every stroke")
+    }
+
     fn draw(rng: &mut Rng) -> Self {
         SupplyRestriction {
             orifice_diameter_m: between(rng, 1.5e-3, 2.5e-3),

@@ -42,6 +42,10 @@ impl Diagnosed for ValveDelay {
         true
     }
 
+    fn parting_test() -> Option<&'static str> {
+        Some("a record of the sound hammer at the same supply pressure: the front feed's onset after the impact moves later only under a delay")
+    }
+
     fn model_free_z(fs: &FitSet) -> Option<f64> {
         if !fs.reads_change(FRONT_FEED) {
             return None;

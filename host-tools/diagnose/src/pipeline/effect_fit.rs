@@ -198,7 +198,9 @@ pub(crate) fn at_measured_sizes(
     let mut measured: Vec<(&str, Vec<f64>, Vec<f64>)> = Vec::new();
     for &name in names.iter().filter(|n| stands(n)) {
         let Some(d) = diagnosis(name) else { continue };
-        let Some((theta, sd)) = d.measured_size(fs) else { continue };
+        let Some((theta, sd)) = d.measured_size(fs) else {
+            continue;
+        };
         let fitted = fitted_of(name);
         let disagree = fitted.len() == theta.len()
             && fitted.iter().zip(theta.iter().zip(&sd)).any(|(f, (&m, &sm))| {
@@ -243,7 +245,15 @@ pub(crate) fn at_measured_sizes(
         };
         result(fs, &names, cand, params, scored, sims_before)
     } else {
-        fit_over(fs, Some((&cand, &params)), &rest, &verdict.fitted, chi2_nominal, ln_n, opts)?
+        fit_over(
+            fs,
+            Some((&cand, &params)),
+            &rest,
+            &verdict.fitted,
+            chi2_nominal,
+            ln_n,
+            opts,
+        )?
     };
     let waveform_fit: Vec<FittedParam> = measured.iter().flat_map(|m| fitted_of(m.0)).collect();
     let why = measured
@@ -272,7 +282,10 @@ pub(crate) fn at_measured_sizes(
         })
         .collect::<Vec<_>>()
         .join("; ");
-    let why = format!("{why}: reported at the measured size (it scores {:.0} there)", sized.score);
+    let why = format!(
+        "{why}: reported at the measured size (it scores {:.0} there)",
+        sized.score
+    );
     Some((
         EffectResult {
             // Named in the verdict's order (a pair's last is its second).

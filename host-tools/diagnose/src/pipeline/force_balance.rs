@@ -99,6 +99,11 @@ mod tests {
         let g = group(&[measured(4.0, true)], &runner.extractor).unwrap();
         let t = table(&g.points, &nom.features[..1]);
         let q = t[0].quantities.iter().find(|q| q.key.ends_with(".friction_n")).unwrap();
-        assert!(q.value.abs() <= q.expanded_u + 0.05, "nominal: {} ± {} N", q.value, q.expanded_u);
+        assert!(
+            q.value.abs() <= q.expanded_u + 0.05,
+            "nominal: {} ± {} N",
+            q.value,
+            q.expanded_u
+        );
     }
 }

@@ -16,7 +16,7 @@ use crate::fitset::FitSet;
 use crate::model::Candidate;
 use crate::options::Options;
 use crate::parallel::parallel;
-use crate::report::{EffectResult, FittedParam, Verdict};
+use crate::report::{Alternative, EffectResult, FittedParam, Verdict};
 use hammer_sim::effects::EFFECT_NAMES;
 
 pub(crate) struct Ranking {
@@ -27,29 +27,48 @@ pub(crate) struct Ranking {
     /// The named single effect or pair.
     pub(crate) verdict: Option<EffectResult>,
     pub(crate) reason: String,
-    /// Unseen effects scoring nearly as well as an unseen named single.
-    pub(crate) confusable: Vec<String>,
+    /// The runner-up the verdict's (last) effect cannot be told from
+    /// here ([`close_call`]): a single, or a pair with the same first.
+    pub(crate) close_call: Option<EffectResult>,
     pub(crate) chi2_nominal: f64,
     pub(crate) features_compared: usize,
 }
 
 impl Ranking {
-    /// The verdict as the report states it.
-    pub(crate) fn verdict_report(&self) -> Verdict {
+    /// The verdict as the report states it; `alternatives` is the close
+    /// call's group, each member with its size and held-out check, empty
+    /// without one. An effect in the group is not named outright.
+    pub(crate) fn verdict_report(&self, alternatives: Vec<Alternative>) -> Verdict {
         match &self.verdict {
-            Some(v) => Verdict {
-                effects: v.name.split('+').map(str::to_string).collect(),
-                params: v.params.clone(),
-                score: v.score,
-                reason: self.reason.clone(),
-                confusable_with: self.confusable.clone(),
-            },
+            Some(v) => {
+                let mut effects: Vec<String> = v.name.split('+').map(str::to_string).collect();
+                let mut params = v.params.clone();
+                if !alternatives.is_empty() {
+                    let grouped = effects.pop().unwrap_or_default();
+                    params = match (params, effects.first()) {
+                        (serde_json::Value::Object(mut m), Some(first)) => m.remove(first).unwrap_or_default(),
+                        _ => serde_json::json!({}),
+                    };
+                    debug_assert!(alternatives.iter().any(|a| a.effect == grouped));
+                }
+                Verdict {
+                    effects,
+                    params,
+                    score: v.score,
+                    reason: self.reason.clone(),
+                    alternatives: if alternatives.is_empty() {
+                        Vec::new()
+                    } else {
+                        vec![alternatives]
+                    },
+                }
+            }
             None => Verdict {
                 effects: vec!["none".into()],
                 params: serde_json::json!({}),
                 score: self.effects.first().map_or(0.0, |e| e.score),
                 reason: self.reason.clone(),
-                confusable_with: Vec::new(),
+                alternatives: Vec::new(),
             },
         }
     }
@@ -78,7 +97,8 @@ pub(crate) fn rank(fs: &FitSet, opts: &Options, step: &(dyn Fn(&str) + Sync)) ->
     // Whether an effect's chamber signature reads its size: such an effect
     // may be named on it alone (a force-balance effect is named on its
     // signature through `significant`).
-    let sized = |e: &EffectResult| diagnosis(&e.name).is_some_and(|d| d.seen_in_chambers() && d.measured_size(fs).is_some());
+    let sized =
+        |e: &EffectResult| diagnosis(&e.name).is_some_and(|d| d.seen_in_chambers() && d.measured_size(fs).is_some());
     let z_against = |i: usize, name: &str| {
         let given = against[i].get_or_init(|| first_model(fs, &effects[i], opts).map(|f| fs.against(f)));
         diagnosis(name)?.model_free_z(given.as_ref()?)
@@ -146,6 +166,9 @@ pub(crate) fn rank(fs: &FitSet, opts: &Options, step: &(dyn Fn(&str) + Sync)) ->
             }
         }
     };
+    // The close call weighs the ranking's own scores, before any size is
+    // put at a measured value.
+    let ranked = verdict.clone();
     // A size the model-free signature measures: the force balance's
     // always, the chambers' where the fit's law put it elsewhere.
     if let Some((v, why)) = verdict
@@ -156,25 +179,22 @@ pub(crate) fn rank(fs: &FitSet, opts: &Options, step: &(dyn Fn(&str) + Sync)) ->
         verdict = Some(v);
     }
     step("pairs");
-    let confusable = match &verdict {
-        Some(v) if v.name.contains('+') => confusable_with(v, &pairs, &effects, opts),
-        Some(v) => confusable_with(v, &effects, &effects, opts),
-        None => Vec::new(),
+    let close = match &ranked {
+        Some(v) if v.name.contains('+') => close_call(v, &pairs, &effects, opts),
+        Some(v) => close_call(v, &effects, &effects, opts),
+        None => None,
     };
-    let reason = match confusable.as_slice() {
-        [] => reason,
-        c => format!(
-            "{reason}; confusable here with {} (within {:.0} of its score, and no force-balance signature to part them)",
-            c.join(", "),
-            opts.confusable_margin
-        ),
+    let reason = match close {
+        None => reason,
+        Some(b) => format!("{reason}; {}", close_call_reason(ranked.as_ref().unwrap_or(b), b, opts)),
     };
+    let close_call = close.cloned();
     Ranking {
         effects,
         pairs,
         verdict,
         reason,
-        confusable,
+        close_call,
         chi2_nominal,
         features_compared: n_compared,
     }
@@ -319,28 +339,67 @@ fn own_evidence(z: Option<f64>, score: f64, share: f64, min_share: f64, opts: &O
     }
 }
 
-/// The effects the named single, or a named pair's second effect, cannot
-/// be told from when the force balance cannot see it: the effect each other
-/// candidate (`candidates`: the singles, or the pairs with the same first)
-/// adds instead, if the force balance cannot see that one either and it
-/// scores within `confusable_margin` of the named.
-fn confusable_with(
+/// The runner-up the named single, or a named pair's second effect, cannot
+/// be told from here: among `candidates` (the singles, or the pairs with
+/// the same first) the best-scoring other effect that scores within
+/// [`Options::close_call_margin`] of the named one's score and that no
+/// model-free evidence parts from it ([`parted`]). Two effects at most make
+/// a finding: a third as close leaves the best two.
+fn close_call<'e>(
     named: &EffectResult,
-    candidates: &[EffectResult],
+    candidates: &'e [EffectResult],
     singles: &[EffectResult],
     opts: &Options,
-) -> Vec<String> {
+) -> Option<&'e EffectResult> {
     let last = |e: &EffectResult| e.name.rsplit('+').next().unwrap_or_default().to_string();
-    let unseen = |name: &str| singles.iter().any(|s| s.name == name && s.model_free_z.is_none());
-    if !unseen(&last(named)) {
-        return Vec::new();
-    }
+    let single = |name: &str| singles.iter().find(|s| s.name == name);
+    let a = single(&last(named))?;
     candidates
         .iter()
-        .filter(|e| e.name != named.name && unseen(&last(e)) && e.contradicted_by.is_none())
-        .filter(|e| e.score >= named.score - opts.confusable_margin)
-        .map(last)
-        .collect()
+        .filter(|e| e.name != named.name && last(e) != last(named))
+        .filter(|e| within_close_call(named.score, e.score, opts))
+        .filter(|e| single(&last(e)).is_some_and(|b| !parted(a, b, opts)))
+        .max_by(|x, y| x.score.total_cmp(&y.score))
+}
+
+/// Whether `other` scores within [`Options::close_call_margin`] of `named`.
+fn within_close_call(named: f64, other: f64, opts: &Options) -> bool {
+    named > 0.0 && named - other <= opts.close_call_margin * named
+}
+
+/// Whether model-free evidence parts singles `a` and `b`: the force
+/// balance sees either (it measures what it sees, whatever the waveforms
+/// score), a measured change rules one out, or a signature that parts
+/// (`signature_parts`: not heat exchange's exponent) stands for one and not
+/// the other.
+fn parted(a: &EffectResult, b: &EffectResult, opts: &Options) -> bool {
+    let in_force_balance =
+        |e: &EffectResult| e.model_free_z.is_some() && diagnosis(&e.name).is_some_and(|d| !d.seen_in_chambers());
+    let stands = |e: &EffectResult| {
+        e.model_free_z.is_some_and(|z| z >= opts.min_model_free_z)
+            && diagnosis(&e.name).is_some_and(|d| d.signature_parts())
+    };
+    in_force_balance(a)
+        || in_force_balance(b)
+        || a.contradicted_by.is_some()
+        || b.contradicted_by.is_some()
+        || stands(a) != stands(b)
+}
+
+fn close_call_reason(named: &EffectResult, other: &EffectResult, opts: &Options) -> String {
+    let last = |e: &EffectResult| e.name.rsplit('+').next().unwrap_or_default().to_string();
+    let (a, b) = (last(named), last(other));
+    let tests: Vec<String> = [&a, &b]
+        .iter()
+        .filter_map(|n| Some(format!("for {n}, {}", diagnosis(n)?.parting_test()?)))
+        .collect();
+    format!(
+        "one of {a} or {b}: {b} scores {:.0} against {:.0}, within {:.0} % (the close-call rule), and no model-free evidence parts them; what would: {}",
+        other.score,
+        named.score,
+        100.0 * opts.close_call_margin,
+        if tests.is_empty() { "no test of the catalogue".to_string() } else { tests.join("; ") }
+    )
 }
 
 /// A pair can only be named if the single leaves more than the threshold
@@ -582,33 +641,77 @@ mod tests {
         assert!(!significant(&weak, &opts), "the model-based fit disagrees");
     }
 
-    /// An unseen effect named with another unseen one close behind is
-    /// flagged; one the force balance sees, or one far ahead, is not.
+    /// A runner-up within the close-call margin that no model-free evidence
+    /// parts from the named effect makes "one of these two"; one further
+    /// behind, one the force balance sees, one a measured change rules out,
+    /// or one a parting signature (a late feed) stands for alone, does not.
+    /// Heat exchange's exponent does not part it from a leak.
     #[test]
-    fn a_close_unseen_runner_up_is_flagged_confusable() {
+    fn a_close_call_groups_what_no_evidence_parts() {
         let opts = Options::default();
         let ln_n = 20f64.ln();
-        let heat = result("heat_transfer", 1, 500.0, 1000.0, ln_n);
-        let leak = result("leakage", 1, 510.0, 1000.0, ln_n);
-        let supply = result("supply_restriction", 1, 530.0, 1000.0, ln_n);
+        let margin = opts.close_call_margin;
+        // Scores out of a nominal χ² of 10 000, as against a record.
+        let at = |name: &str, behind: f64| result(name, 1, 5000.0 + behind * 5000.0, 10000.0, ln_n);
+        let heat = at("heat_transfer", 0.0);
+        let leak = at("leakage", 0.5 * margin);
+        let supply = at("supply_restriction", 2.0 * margin);
         let friction = EffectResult {
             model_free_z: Some(0.5),
-            ..result("coulomb_friction", 2, 510.0, 1000.0, ln_n)
+            ..at("coulomb_friction", 0.1 * margin)
         };
-        let seen = EffectResult {
-            model_free_z: Some(9.0),
-            ..result("pressure_gain_error", 2, 100.0, 1000.0, ln_n)
+        let all = [heat.clone(), friction.clone(), leak.clone(), supply.clone()];
+        assert_eq!(
+            close_call(&heat, &all, &all, &opts).map(|e| e.name.as_str()),
+            Some("leakage")
+        );
+        let far = [heat.clone(), friction.clone(), supply.clone()];
+        assert!(
+            close_call(&heat, &far, &far, &opts).is_none(),
+            "too far behind; the force balance parts friction"
+        );
+        // Heat exchange's exponent, standing, does not part it from a leak.
+        let heat_seen = EffectResult {
+            model_free_z: Some(40.0),
+            ..heat.clone()
         };
-        let all = [seen.clone(), heat.clone(), friction, leak, supply];
-        assert_eq!(confusable_with(&heat, &all, &all, &opts), ["leakage"]);
-        assert!(confusable_with(&seen, &all, &all, &opts).is_empty());
-        // A pair's unseen second effect, against the pairs with the same first.
+        let all = [heat_seen.clone(), leak.clone()];
+        assert!(close_call(&heat_seen, &all, &all, &opts).is_some());
+        // A late front feed does: only a delay makes it.
+        let delay = EffectResult {
+            model_free_z: Some(12.0),
+            ..at("valve_delay", 0.0)
+        };
+        let all = [delay.clone(), leak.clone()];
+        assert!(close_call(&delay, &all, &all, &opts).is_none());
+        // A leak the front floor rules out is not an alternative.
+        let ruled_out = EffectResult {
+            contradicted_by: Some("the front chamber's floor fell".into()),
+            ..leak.clone()
+        };
+        let all = [heat.clone(), ruled_out];
+        assert!(close_call(&heat, &all, &all, &opts).is_none());
+        // A pair's second effect, against the pairs with the same first.
+        let singles = [heat.clone(), leak.clone(), friction.clone()];
         let pairs = [
-            result("pressure_gain_error+heat_transfer", 3, 80.0, 1000.0, ln_n),
-            result("pressure_gain_error+leakage", 3, 85.0, 1000.0, ln_n),
-            result("pressure_gain_error+coulomb_friction", 4, 82.0, 1000.0, ln_n),
+            result("pressure_gain_error+heat_transfer", 3, 800.0, 10000.0, ln_n),
+            result(
+                "pressure_gain_error+leakage",
+                3,
+                800.0 + 0.5 * margin * 9000.0,
+                10000.0,
+                ln_n,
+            ),
+            result("pressure_gain_error+coulomb_friction", 4, 802.0, 10000.0, ln_n),
         ];
-        assert_eq!(confusable_with(&pairs[0], &pairs, &all, &opts), ["leakage"]);
+        let b = close_call(&pairs[0], &pairs, &singles, &opts).unwrap();
+        assert_eq!(b.name, "pressure_gain_error+leakage");
+        let reason = close_call_reason(&pairs[0], b, &opts);
+        assert!(reason.contains("one of heat_transfer or leakage"), "{reason}");
+        assert!(
+            reason.contains("leak-down test") && reason.contains("temperature"),
+            "{reason}"
+        );
     }
 
     /// A significant effect with a model-free signature close behind an
@@ -676,15 +779,6 @@ mod tests {
         let reason = none_reason(&[leak.clone(), weak], &opts);
         assert!(reason.contains("best supply_restriction"), "{reason}");
         assert!(reason.contains("leakage scored higher but is ruled out"), "{reason}");
-        // Not confusable with what it rules out.
-        let heat = result("heat_transfer", 1, 295.0, 1000.0, ln_n);
-        assert!(confusable_with(
-            &heat,
-            &[heat.clone(), leak.clone()],
-            &[heat.clone(), leak.clone()],
-            &opts
-        )
-        .is_empty());
         // Beside another effect whose own signature stands (a late valve
         // lowers the floor too), the contradiction is lifted.
         let mut with_delay = [leak.clone(), seen("valve_delay", 900.0, 1000.0, 12.0)];

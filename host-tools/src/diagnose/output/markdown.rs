@@ -82,26 +82,112 @@ fn cell(s: &str) -> String {
     s.replace('|', "\\|").replace(['\n', '\r'], " ")
 }
 
-/// The verdict's effects joined by ` + `, `None` when no effect was named.
+/// The verdict's effects joined by ` + `, a close call as `one of (a | b)`;
+/// `None` when no effect was named.
 pub fn verdict_name(r: &Report) -> Option<String> {
-    let e: Vec<&str> = r
+    let mut e: Vec<String> = r
         .verdict
         .effects
         .iter()
-        .map(String::as_str)
         .filter(|e| !e.is_empty() && *e != "none")
+        .cloned()
         .collect();
+    for g in &r.verdict.alternatives {
+        let members: Vec<&str> = g.iter().map(|a| a.effect.as_str()).collect();
+        e.push(format!("one of ({})", members.join(" | ")));
+    }
     (!e.is_empty()).then(|| e.join(" + "))
 }
 
-/// The result the verdict rests on: the named single effect or pair, else the best single effect.
+/// The result the verdict rests on: the named single effect or pair (a
+/// close call's first member in it), else the best single effect.
 fn top_result(r: &Report) -> Option<&EffectResult> {
-    let joined = r.verdict.effects.join("+");
+    let mut names: Vec<&str> = r.verdict.effects.iter().map(String::as_str).collect();
+    names.extend(
+        r.verdict
+            .alternatives
+            .iter()
+            .filter_map(|g| Some(g.first()?.effect.as_str())),
+    );
+    let joined = names.join("+");
     r.effects
         .iter()
         .chain(&r.pairs)
         .find(|e| e.name == joined)
         .or_else(|| r.effects.first())
+}
+
+/// A close call: each member's size, score and held-out check, and what
+/// would part them.
+fn close_call_md(s: &mut String, report: &Report) {
+    for g in &report.verdict.alternatives {
+        line!(s, "### A close call: one of {}", g.len());
+        line!(s);
+        line!(
+            s,
+            "The signals cannot part these effects here: each fits within the close-call margin of the other and no model-free evidence tells them apart. Each member's held-out check is run with it in the model."
+        );
+        line!(s);
+        line!(
+            s,
+            "| effect | score (ΔBIC) | held-out energy error, % | held-out frequency error, % | parameters |"
+        );
+        line!(s, "|---|---:|---:|---:|---|");
+        for a in g {
+            line!(
+                s,
+                "| {} | {} | {} | {} | {} |",
+                cell(&a.effect),
+                num(a.score),
+                pct(a.impact_energy_error_after),
+                pct(a.frequency_error_after),
+                cell(&params_inline(&a.params))
+            );
+        }
+        line!(s);
+        line!(s, "What would part them:");
+        line!(s);
+        for a in g {
+            if let Some(t) = &a.parting_test {
+                line!(s, "- for {}: {t}", a.effect);
+            }
+        }
+        line!(s);
+    }
+}
+
+/// The force balance at every operating point, with U.
+fn force_balance_md(s: &mut String, report: &Report) {
+    let Some(first) = report.force_balance.first() else {
+        return;
+    };
+    line!(s, "### The force balance at every operating point");
+    line!(s);
+    line!(
+        s,
+        "Each quantity is the change since {} (value ± U, U = 2u: the cycles' scatter over their number{}). The force balance needs no valve or port law: the sizes of friction, viscous friction, a gain error and a zero shift are taken from it.",
+        if first.against_record { "the record" } else { "the nominal model" },
+        if first.against_record { " and the record's" } else { "" }
+    );
+    line!(s);
+    let keys: Vec<&str> = first.quantities.iter().map(|q| q.key.as_str()).collect();
+    line!(s, "| supply, bar | fitted | {} |", keys.join(" | "));
+    line!(s, "|---:|---|{}", "---:|".repeat(keys.len()));
+    for row in &report.force_balance {
+        let vals: Vec<String> = row
+            .quantities
+            .iter()
+            .map(|q| format!("{} ± {}", num(q.value), num(q.expanded_u)))
+            .collect();
+        line!(
+            s,
+            "| {} | {} | {} |",
+            fmt_bar(row.supply_bar),
+            if row.fit_point { "yes" } else { "held out" },
+            vals.join(" | ")
+        );
+    }
+    line!(s);
 }
 
 fn fitted_params(e: &EffectResult) -> String {
@@ -267,7 +353,9 @@ fn verdict_md(s: &mut String, report: &Report) {
     line!(s, "{params}");
     line!(s, "```");
     line!(s);
+    close_call_md(s, report);
     model_free_md(s, report);
+    force_balance_md(s, report);
     chambers_md(s, report);
     recalibration_md(s, report);
     remainder_md(s, report);

@@ -131,7 +131,7 @@ mod tests {
                 params: serde_json::json!({ "force_n": 2.3 }),
                 score: 1234.5,
                 reason: "explains 87 % of the nominal chi2".into(),
-                confusable_with: vec![],
+                alternatives: vec![],
             },
             recalibration: vec![],
             remainder: vec![],
@@ -380,7 +380,7 @@ mod tests {
             params: serde_json::json!({}),
             score: f64::NAN,
             reason: String::new(),
-            confusable_with: vec![],
+            alternatives: vec![],
         };
         let md = markdown(&r, &[]);
         assert!(md.contains("**none**"));
