@@ -1,0 +1,117 @@
+//! The worker process: one FMU instance, driven over its standard input
+//! and output by the host ([`super::pool`]). A foreign library runs here
+//! and only here, so a crash, a hang or an abort ends this process and the
+//! host reports it; the host's own memory is never the FMU's to spoil.
+//!
+//! Protocol: the host writes one JSON [`Request`] per line; the worker
+//! answers each with one JSON [`Reply`] line, a [`Reply::Samples`] followed
+//! by its values as little-endian f64 (row by row: t = 0, then each step),
+//! so a run's samples cross the pipe exactly and without formatting.
+
+use std::io::{BufRead, Write};
+use std::path::PathBuf;
+
+use serde::{Deserialize, Serialize};
+
+use super::fmi2::{self, Instance, Typed};
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub enum Request {
+    /// Load the binary `so` (after `preload`, opened RTLD_GLOBAL) and
+    /// instantiate it.
+    Open {
+        so: PathBuf,
+        guid: String,
+        resources: PathBuf,
+        preload: Vec<PathBuf>,
+    },
+    /// One run from t = 0: values set before initialisation, `steps`
+    /// communication steps of `step_s`, `outputs` read at each point.
+    Run {
+        starts: Vec<(Typed, f64)>,
+        outputs: Vec<Typed>,
+        step_s: f64,
+        steps: usize,
+    },
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub enum Reply {
+    Ready,
+    /// `values` f64 follow the line.
+    Samples {
+        values: usize,
+    },
+    Failed(String),
+}
+
+fn send(out: &mut impl Write, reply: &Reply, data: &[f64]) -> std::io::Result<()> {
+    let line = serde_json::to_string(reply).map_err(std::io::Error::other)?;
+    out.write_all(line.as_bytes())?;
+    out.write_all(b"\n")?;
+    let mut bytes = Vec::with_capacity(data.len() * 8);
+    for x in data {
+        bytes.extend(x.to_le_bytes());
+    }
+    out.write_all(&bytes)?;
+    out.flush()
+}
+
+/// Serves requests from standard input until it closes; the process's
+/// exit code (0: the host closed the pipe; 2: a broken protocol).
+pub fn serve() -> i32 {
+    let stdin = std::io::stdin();
+    let mut stdout = std::io::stdout().lock();
+    let mut instance: Option<Instance> = None;
+    let mut ran = false;
+    for line in stdin.lock().lines() {
+        let Ok(line) = line else { return 2 };
+        let request: Request = match serde_json::from_str(&line) {
+            Ok(r) => r,
+            Err(e) => {
+                eprintln!("fmu worker: a request it cannot read: {e}");
+                return 2;
+            }
+        };
+        let (reply, data) = match request {
+            Request::Open {
+                so,
+                guid,
+                resources,
+                preload,
+            } => {
+                let opened = preload
+                    .iter()
+                    .try_for_each(|p| fmi2::open(p, true).map(|_| ()))
+                    .and_then(|()| Instance::new(&so, &guid, &resources));
+                match opened {
+                    Ok(i) => {
+                        instance = Some(i);
+                        (Reply::Ready, Vec::new())
+                    }
+                    Err(e) => (Reply::Failed(e), Vec::new()),
+                }
+            }
+            Request::Run {
+                starts,
+                outputs,
+                step_s,
+                steps,
+            } => match instance.as_mut() {
+                None => (Reply::Failed("no instance".into()), Vec::new()),
+                Some(i) => {
+                    let r = i.run(ran, &starts, &outputs, step_s, steps);
+                    ran = true;
+                    match r {
+                        Ok(v) => (Reply::Samples { values: v.len() }, v),
+                        Err(e) => (Reply::Failed(e), Vec::new()),
+                    }
+                }
+            },
+        };
+        if send(&mut stdout, &reply, &data).is_err() {
+            return 2;
+        }
+    }
+    0
+}
