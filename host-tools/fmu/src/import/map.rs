@@ -224,22 +224,15 @@ impl Coverage {
     }
 }
 
-/// The velocity at which a saturating friction law is read: far past any
-/// smoothing speed, so a law that still grows there is not a force law.
-const SLIDING_MPS: f64 = 1e6;
-
-/// The force of `effect`'s law at `supply_bar` with `params`, N (its magnitude
-/// at full sliding speed), or None when the effect has no saturating
-/// piston-force law.
+/// The force of `effect`'s supply-pressure law at `supply_bar` with
+/// `params` (its config table), N; None when it has no such law.
 pub fn law_force_n(effect: &dyn EffectEntry, params: toml::Value, supply_bar: f64) -> Option<f64> {
-    if !effect.has_piston_drag() {
-        return None;
-    }
-    let mut effects = hammer_sim::Effects::default();
-    effect.set(&mut effects, params).ok()?;
-    let a = effect.piston_drag_n(&effects, 0.0, SLIDING_MPS, supply_bar);
-    let b = effect.piston_drag_n(&effects, 0.0, 2.0 * SLIDING_MPS, supply_bar);
-    (a == b && a.is_finite()).then_some(a.abs())
+    effect.supply_law_n(params, supply_bar).filter(|f| f.is_finite())
+}
+
+/// A force on the piston: what a piston-force input can carry.
+pub fn is_piston_force(e: &dyn EffectEntry) -> bool {
+    e.has_piston_drag() || law_force_n(e, e.default_params(), 1.0).is_some()
 }
 
 impl ModelMap {
@@ -388,7 +381,7 @@ impl ModelMap {
                     Coverage::InFmu
                 } else if e.sensor() && self.outside.sensor_effects {
                     Coverage::OnOutputs
-                } else if e.has_piston_drag() && self.outside.piston_force.is_some() {
+                } else if is_piston_force(*e) && self.outside.piston_force.is_some() {
                     Coverage::ForceInput
                 } else {
                     Coverage::NotModelled
@@ -510,7 +503,7 @@ mod tests {
     fn example() -> String {
         let friction = REGISTRY
             .iter()
-            .find(|e| e.has_piston_drag() && e.params().len() > 2)
+            .find(|e| law_force_n(*e, e.default_params(), 1.0).is_some())
             .unwrap();
         let p0 = friction.params()[0];
         format!(
@@ -562,7 +555,7 @@ piston_force = {{ input = "Fext", unit = "N" }}
                 Coverage::InFmu
             } else if e.sensor() {
                 Coverage::OnOutputs
-            } else if e.has_piston_drag() {
+            } else if is_piston_force(e) {
                 Coverage::ForceInput
             } else {
                 Coverage::NotModelled
