@@ -503,7 +503,7 @@ mod tests {
     fn example() -> String {
         let friction = REGISTRY
             .iter()
-            .find(|e| law_force_n(*e, e.default_params(), 1.0).is_some())
+            .find(|e| law_force_n(**e, e.default_params(), 1.0).is_some())
             .unwrap();
         let p0 = friction.params()[0];
         format!(
