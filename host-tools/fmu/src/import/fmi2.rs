@@ -157,10 +157,16 @@ pub enum Typed {
 }
 
 fn check(s: Status, call: &str) -> Result<(), String> {
+    check_with(s, || call.to_string())
+}
+
+/// [`check`] with the call's description made only on failure (the
+/// per-step calls would otherwise format a string each step).
+fn check_with(s: Status, call: impl FnOnce() -> String) -> Result<(), String> {
     if s <= 1 {
         Ok(())
     } else {
-        Err(format!("{call} returned {}", status_name(s)))
+        Err(format!("{} returned {}", call(), status_name(s)))
     }
 }
 
@@ -254,7 +260,7 @@ impl Instance {
             let t = step_s * k as f64;
             // SAFETY: as above.
             let s = unsafe { (self.api.do_step)(c, t, step_s, 1) };
-            check(s, &format!("fmi2DoStep at t = {t} s"))?;
+            check_with(s, || format!("fmi2DoStep at t = {t} s"))?;
             self.read(outputs, step_s * (k + 1) as f64, &mut out)?;
         }
         Ok(out)
@@ -270,7 +276,7 @@ impl Instance {
                 Typed::Boolean(vr) => (self.api.set_boolean)(c, &vr, 1, &c_int::from(x != 0.0)),
             }
         };
-        check(s, &format!("setting value reference {} to {x}", vr_of(v)))
+        check_with(s, || format!("setting value reference {} to {x}", vr_of(v)))
     }
 
     fn read(&mut self, outputs: &[Typed], t: f64, out: &mut Vec<f64>) -> Result<(), String> {
@@ -285,7 +291,7 @@ impl Instance {
                     Typed::Boolean(vr) => (self.api.get_boolean)(self.comp, &vr, 1, &mut i),
                 }
             };
-            check(s, &format!("reading value reference {} at t = {t} s", vr_of(*v)))?;
+            check_with(s, || format!("reading value reference {} at t = {t} s", vr_of(*v)))?;
             let x = if matches!(v, Typed::Real(_)) { r } else { f64::from(i) };
             if !x.is_finite() {
                 return Err(format!(
