@@ -593,6 +593,19 @@ piston_force = {{ input = "Fext", unit = "N" }}
         assert_eq!(m.effects_off(), vec![("fric_on".to_string(), 0.0)]);
     }
 
+    /// The map docs/your-model.md shows ("Writing the map") reads.
+    #[test]
+    fn the_documented_map_reads() {
+        let doc = include_str!("../../../../docs/your-model.md");
+        let from = doc.find("## Writing the map").unwrap();
+        let block = &doc[from..];
+        let start = block.find("```toml\n").unwrap() + 8;
+        let end = start + block[start..].find("```").unwrap();
+        let m = ModelMap::parse(&block[start..end]).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(m.signals.accel.sign, -1.0);
+        assert_eq!(m.effects.len(), 2);
+    }
+
     /// Each mistake is named where it is.
     #[test]
     fn bad_maps_are_named() {
