@@ -90,6 +90,7 @@ fn the_projects_fmu_through_the_import_is_the_built_in_simulator() {
     ];
     for (name, a, b) in pairs {
         let d = rel_diff(a, b);
+        eprintln!("{name}: largest difference relative to the largest value {d:e}");
         assert!(d <= 1e-9, "{name}: relative difference {d:e}");
     }
     let impacts = run.impacts.as_ref().unwrap();

@@ -3,11 +3,13 @@
  * freq_hz, scaled by the supply pressure) whose `mode` parameter makes it
  * misbehave the ways a foreign FMU can: 1 doStep fails, 2 a NaN output,
  * 3 doStep hangs, 4 doStep crashes, 5 the outputs never cycle. Built
- * with -DNO_RESET it lacks fmi2Reset (a missing FMI function).
+ * with -DNO_RESET it lacks fmi2Reset (a missing FMI function). It prints
+ * to standard output at initialisation, as FMUs do.
  * Value references: 0 supply_bar, 1 freq_hz, 2 mode (Integer),
  * 3 derived (calculatedParameter), 10 p_rear, 11 p_front, 12 accel. */
 #include <math.h>
 #include <signal.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <unistd.h>
@@ -49,7 +51,13 @@ fmi2Status fmi2SetupExperiment(fmi2Component c, int tol_on, double tol, double t
     return 0;
 }
 fmi2Status fmi2EnterInitializationMode(fmi2Component c) { (void)c; return 0; }
-fmi2Status fmi2ExitInitializationMode(fmi2Component c) { outputs(c); return 0; }
+/* Prints to standard output, as FMUs do: the protocol must not see it. */
+fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
+    printf("mock: initialised\n");
+    fflush(stdout);
+    outputs(c);
+    return 0;
+}
 fmi2Status fmi2Terminate(fmi2Component c) { (void)c; return 0; }
 #ifndef NO_RESET
 fmi2Status fmi2Reset(fmi2Component c) {

@@ -207,7 +207,8 @@ pub enum Coverage {
     InFmu,
     /// The project applies it to the FMU's outputs (sensor effects).
     OnOutputs,
-    /// The project drives it through the FMU's piston-force input.
+    /// The FMU's piston-force input could carry it (the map names one);
+    /// the runner does not drive that input yet.
     ForceInput,
     /// Left out of the run; its detection floor reads "not modelled".
     NotModelled,
@@ -218,7 +219,7 @@ impl Coverage {
         match self {
             Coverage::InFmu => "in the FMU",
             Coverage::OnOutputs => "applied to the outputs",
-            Coverage::ForceInput => "through the piston-force input",
+            Coverage::ForceInput => "piston-force input (read and checked; the runner does not drive it yet)",
             Coverage::NotModelled => "not modelled",
         }
     }

@@ -57,11 +57,26 @@ fn send(out: &mut impl Write, reply: &Reply, data: &[f64]) -> std::io::Result<()
     out.flush()
 }
 
+/// The protocol's own copy of standard output; file descriptor 1 then
+/// points at standard error, so an FMU that prints (many do, with printf)
+/// lands in the log, not in the middle of a reply.
+fn protocol_out() -> std::io::Result<std::fs::File> {
+    use std::os::fd::FromRawFd;
+    // SAFETY: dup and dup2 on the process's own standard descriptors.
+    let fd = unsafe { libc::dup(1) };
+    if fd < 0 || unsafe { libc::dup2(2, 1) } < 0 {
+        return Err(std::io::Error::last_os_error());
+    }
+    // SAFETY: fd is a new descriptor this process owns from here on.
+    Ok(unsafe { std::fs::File::from_raw_fd(fd) })
+}
+
 /// Serves requests from standard input until it closes; the process's
 /// exit code (0: the host closed the pipe; 2: a broken protocol).
 pub fn serve() -> i32 {
     let stdin = std::io::stdin();
-    let mut stdout = std::io::stdout().lock();
+    let Ok(out) = protocol_out() else { return 2 };
+    let mut stdout = std::io::BufWriter::new(out);
     let mut instance: Option<Instance> = None;
     let mut ran = false;
     for line in stdin.lock().lines() {
