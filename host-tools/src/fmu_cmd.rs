@@ -130,17 +130,14 @@ fn export(args: &FmuArgs) -> Result<()> {
     Ok(())
 }
 
-/// The FMU opened with its map (the given one, else the one beside it).
+/// The FMU opened with its map (the given one, else the one beside it;
+/// with neither it is opened without a map: loaded and instantiated, not run).
 fn open(a: &RunArgs, threads: usize) -> Result<(FmuModel, PathBuf)> {
     let map_path = a.model_map.clone().unwrap_or_else(|| hammer_fmu::map_path(&a.fmu));
     let map = if a.model_map.is_none() && !map_path.is_file() {
-        anyhow::bail!(
-            "FMU {}: no model map: give --model-map (none beside it at {})",
-            a.fmu.display(),
-            map_path.display()
-        );
+        None
     } else {
-        ModelMap::read(&map_path).map_err(anyhow::Error::msg)?
+        Some(ModelMap::read(&map_path).map_err(anyhow::Error::msg)?)
     };
     if !(a.time_limit > 0.0 && a.time_limit.is_finite()) || !(a.duration > 0.0 && a.duration.is_finite()) {
         anyhow::bail!("--time-limit and --duration must be positive seconds");
@@ -150,7 +147,19 @@ fn open(a: &RunArgs, threads: usize) -> Result<(FmuModel, PathBuf)> {
         time_limit: Duration::from_secs_f64(a.time_limit),
         worker: WorkerCommand::this_program().map_err(anyhow::Error::msg)?,
     };
-    Ok((FmuModel::open(&a.fmu, Some(map), opts)?, map_path))
+    Ok((FmuModel::open(&a.fmu, map, opts)?, map_path))
+}
+
+/// The map of an FMU opened with one, else the error that says how to give it.
+fn need_map<'m>(model: &'m FmuModel, a: &RunArgs, map_path: &std::path::Path) -> Result<&'m ModelMap> {
+    model.map().ok_or_else(|| {
+        anyhow::anyhow!(
+            "FMU {}: no model map (none given, none beside it at {}): it loads and instantiates, \
+             but without a map nothing can be run or named; give --model-map (docs/your-model.md, \"Writing the map\")",
+            a.fmu.display(),
+            map_path.display()
+        )
+    })
 }
 
 fn check(a: &RunArgs) -> Result<()> {
@@ -170,7 +179,7 @@ fn check(a: &RunArgs) -> Result<()> {
             ""
         }
     );
-    let map = model.map().context("no map")?;
+    let map = need_map(&model, a, &map_path)?;
     outln!(
         "map {} (sha256 {}): fits the FMU: {} signals, supply {} ({}, {}), {} nuisance parameters, {} fixed",
         map_path.display(),
@@ -223,7 +232,8 @@ fn builtin_run_s(supply_bar: f64, duration_s: f64) -> Result<f64> {
 }
 
 fn speed(a: &SpeedArgs) -> Result<()> {
-    let (model, _) = open(&a.run, 1)?;
+    let (model, map_path) = open(&a.run, 1)?;
+    need_map(&model, &a.run, &map_path)?;
     let (bar, dur) = (a.run.supply_bar, a.run.duration);
     model.run(bar * 1e5, &[], dur)?;
     let runs = a.runs.max(1);

@@ -234,6 +234,11 @@ fn bad_fmus_exit_2_naming_the_fmu_and_what_failed() {
     };
     let (code, out, err) = check(&good, &good_map, &[]);
     assert_eq!(code, 0, "the good mock passes: {err}");
+    // Without a map (none beside it): loaded and instantiated, then refused.
+    let (code, out2, err2) = hammer(&["fmu", "check", good.to_str().unwrap()]);
+    assert_eq!(code, 2, "{out2}{err2}");
+    assert!(out2.contains("loaded and instantiated"), "{out2}");
+    assert!(err2.contains("mock.fmu: no model map"), "{err2}");
     assert!(out.contains("coulomb_friction       not modelled"), "{out}");
     let cases: Vec<(&str, PathBuf, PathBuf, Vec<&str>, &str)> = vec![
         (
