@@ -349,6 +349,27 @@ fn bad_fmus_exit_2_naming_the_fmu_and_what_failed() {
     );
     let unknown = model.run(5e5, &[("nope".into(), 1.0)], 0.1).unwrap_err();
     assert_eq!(unknown.kind, FailKind::Map);
+    // The same outputs read as absolute kPa, and the acceleration with the
+    // other sign: SI gauge and the project's sign out.
+    let text = MOCK_MAP
+        .replacen(
+            r#"p_rear = { output = "p_rear", unit = "Pa", pressure = "gauge" }"#,
+            r#"p_rear = { output = "p_rear", unit = "kPa", pressure = "absolute" }"#,
+            1,
+        )
+        .replacen(r#"unit = "m/s2" }"#, r#"unit = "m/s2", sign = -1 }"#, 1);
+    let read_as = FmuModel::open(&good, Some((ModelMap::parse(&text).unwrap(), text)), options(1, 5.0)).unwrap();
+    let other = read_as.run(5e5, &[], 0.1).unwrap();
+    let p_atm_pa = 101_325.0;
+    for i in [0, 10, 500, 1000] {
+        let expect = ok.p_rear_pa[i] * 1e3 - p_atm_pa;
+        assert!(
+            (other.p_rear_pa[i] - expect).abs() <= 1e-9 * expect.abs().max(p_atm_pa),
+            "{i}"
+        );
+        assert_eq!(other.accel_mps2[i], -ok.accel_mps2[i]);
+        assert_eq!(other.p_front_pa[i], ok.p_front_pa[i]);
+    }
 }
 
 /// pythonfmu is installed (or the test is skipped outside CI).
