@@ -47,7 +47,8 @@ type Answer = Result<(Reply, Vec<f64>), String>;
 /// One worker process.
 pub struct Worker {
     child: Child,
-    stdin: ChildStdin,
+    /// None once closed (the worker then frees its instance and exits).
+    stdin: Option<ChildStdin>,
     replies: Receiver<Answer>,
     /// The last lines the worker (the FMU's logger) wrote to its stderr.
     log: std::sync::Arc<Mutex<Vec<String>>>,
@@ -120,7 +121,7 @@ impl Worker {
         });
         Ok(Self {
             child,
-            stdin,
+            stdin: Some(stdin),
             replies,
             log,
         })
@@ -129,12 +130,13 @@ impl Worker {
     /// Sends `request` and waits at most `limit` for its reply.
     pub fn ask(&mut self, request: &Request, limit: Duration) -> Result<(Reply, Vec<f64>), (FailKind, String)> {
         let line = serde_json::to_string(request).map_err(|e| (FailKind::Worker, e.to_string()))?;
-        let sent = self
-            .stdin
-            .write_all(line.as_bytes())
-            .and_then(|()| self.stdin.write_all(b"\n"))
-            .and_then(|()| self.stdin.flush());
-        if sent.is_err() {
+        let sent = self.stdin.as_mut().map(|stdin| {
+            stdin
+                .write_all(line.as_bytes())
+                .and_then(|()| stdin.write_all(b"\n"))
+                .and_then(|()| stdin.flush())
+        });
+        if !matches!(sent, Some(Ok(()))) {
             return Err(self.died());
         }
         match self.replies.recv_timeout(limit) {
@@ -188,9 +190,22 @@ fn signal_name(sig: i32) -> &'static str {
     }
 }
 
+/// How long a worker whose input was closed may take to free its instance
+/// (`fmi2FreeInstance`: a tool's runtime licence is returned there) and exit.
+const EXIT_GRACE: Duration = Duration::from_secs(2);
+
 impl Drop for Worker {
     fn drop(&mut self) {
-        // Closing stdin ends a healthy worker; a stuck one is killed.
+        // Closing stdin ends a healthy worker (its instance freed); one
+        // that has not exited within the grace period is killed.
+        drop(self.stdin.take());
+        let start = std::time::Instant::now();
+        while start.elapsed() < EXIT_GRACE {
+            if let Ok(Some(_)) = self.child.try_wait() {
+                return;
+            }
+            std::thread::sleep(Duration::from_millis(2));
+        }
         let _ = self.child.kill();
         let _ = self.child.wait();
     }
