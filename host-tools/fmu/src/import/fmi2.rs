@@ -231,6 +231,8 @@ impl Instance {
     /// Sets the values before initialisation, runs to `stop_s` in steps of
     /// `step_s` and reads `outputs` at t = 0 and after each step, row by
     /// row. `reset` first when the instance ran before.
+    /// `drive`, if given, is asked before each step for an input to set
+    /// (held over the step) from the time and the last row read.
     pub fn run(
         &mut self,
         reset: bool,
@@ -238,6 +240,7 @@ impl Instance {
         outputs: &[Typed],
         step_s: f64,
         steps: usize,
+        mut drive: Option<&mut dyn FnMut(f64, &[f64]) -> (Typed, f64)>,
     ) -> Result<Vec<f64>, String> {
         let c = self.comp;
         // SAFETY (every call below): the instance is live and the arrays
@@ -258,6 +261,14 @@ impl Instance {
         self.read(outputs, 0.0, &mut out)?;
         for k in 0..steps {
             let t = step_s * k as f64;
+            if let Some(d) = drive.as_mut() {
+                let (input, value) = d(t, &out[out.len() - outputs.len()..]);
+                if !value.is_finite() {
+                    return Err(format!("the piston-force input at t = {t} s is {value}"));
+                }
+                // SAFETY: as above.
+                unsafe { self.set(input, value)? };
+            }
             // SAFETY: as above.
             let s = unsafe { (self.api.do_step)(c, t, step_s, 1) };
             check_with(s, || format!("fmi2DoStep at t = {t} s"))?;

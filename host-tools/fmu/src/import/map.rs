@@ -207,8 +207,7 @@ pub enum Coverage {
     InFmu,
     /// The project applies it to the FMU's outputs (sensor effects).
     OnOutputs,
-    /// The FMU's piston-force input could carry it (the map names one);
-    /// the runner does not drive that input yet.
+    /// The project drives it through the FMU's piston-force input.
     ForceInput,
     /// Left out of the run; its detection floor reads "not modelled".
     NotModelled,
@@ -219,7 +218,7 @@ impl Coverage {
         match self {
             Coverage::InFmu => "in the FMU",
             Coverage::OnOutputs => "applied to the outputs",
-            Coverage::ForceInput => "piston-force input (read and checked; the runner does not drive it yet)",
+            Coverage::ForceInput => "through the piston-force input",
             Coverage::NotModelled => "not modelled",
         }
     }
@@ -231,9 +230,18 @@ pub fn law_force_n(effect: &dyn EffectEntry, params: toml::Value, supply_bar: f6
     effect.supply_law_n(params, supply_bar).filter(|f| f.is_finite())
 }
 
-/// A force on the piston: what a piston-force input can carry.
+/// A friction force on the piston: what a piston-force input can carry.
+/// Asked of the built-in plant (its friction with the effect on at its
+/// defaults), so a new friction effect needs no list here.
 pub fn is_piston_force(e: &dyn EffectEntry) -> bool {
-    e.has_piston_drag() || law_force_n(e, e.default_params(), 1.0).is_some()
+    if e.has_piston_drag() {
+        return true;
+    }
+    let mut cfg = hammer_sim::SimConfig::default();
+    if e.sensor() || e.set(&mut cfg.effects, e.default_params()).is_err() {
+        return false;
+    }
+    hammer_sim::model::HammerModel::new(&cfg).friction_n(0.0, 1.0) != 0.0
 }
 
 impl ModelMap {

@@ -13,10 +13,11 @@ use super::archive::{unpack, Unpacked};
 use super::check::{check_map, output, settable};
 use super::describe::Description;
 use super::fmi2::Typed;
+use super::map::is_piston_force;
 use super::map::{map_hash, ModelMap, Reference, Signal};
 use super::pool::{Pool, Worker, WorkerCommand};
 use super::units::{from_gauge_pa, gauge_pa, Quantity};
-use super::worker::{Reply, Request};
+use super::worker::{Drive, Reply, Request};
 use super::{FailKind, FmuError};
 
 /// How the FMU is run.
@@ -90,6 +91,9 @@ struct Plan {
     supply: (Typed, f64, Reference),
     base: Vec<(Typed, f64)>,
     step_s: f64,
+    /// The piston-force input: variable, FMU value per newton, the velocity
+    /// column and m/s per its value.
+    force: Option<(Typed, f64, usize, f64)>,
 }
 
 /// A foreign FMU, ready to run.
@@ -284,6 +288,19 @@ impl FmuModel {
     /// `settings` (FMU parameter names, values in the FMU's units; a switch
     /// is 0 or 1) set before initialisation.
     pub fn run(&self, supply_pa: f64, settings: &[(String, f64)], duration_s: f64) -> Result<Signals, FmuError> {
+        self.run_with_friction(supply_pa, settings, &hammer_sim::Effects::default(), duration_s)
+    }
+
+    /// [`Self::run`] with the friction of `outside`'s effects driven
+    /// through the map's piston-force input (`[outside] piston_force`),
+    /// evaluated before each communication step and held over it.
+    pub fn run_with_friction(
+        &self,
+        supply_pa: f64,
+        settings: &[(String, f64)],
+        outside: &hammer_sim::Effects,
+        duration_s: f64,
+    ) -> Result<Signals, FmuError> {
         let plan = self
             .plan
             .as_ref()
@@ -308,11 +325,13 @@ impl FmuModel {
         }
         let (sv, per_unit, reference) = plan.supply;
         starts.push((sv, from_gauge_pa(supply_pa, per_unit, reference)));
+        let drive = self.drive(plan, outside, supply_pa)?;
         let request = Request::Run {
             starts,
             outputs: plan.outputs.clone(),
             step_s: plan.step_s,
             steps: steps as usize,
+            drive,
         };
         let mut w = match self.pool.take() {
             Some(w) => w,
@@ -341,6 +360,38 @@ impl FmuModel {
             }
         };
         Ok(signals(plan, &data))
+    }
+}
+
+impl FmuModel {
+    /// The worker's drive for `outside`'s friction (None without effects).
+    fn drive(&self, plan: &Plan, outside: &hammer_sim::Effects, supply_pa: f64) -> Result<Option<Drive>, FmuError> {
+        let active = outside.active();
+        if active.is_empty() {
+            return Ok(None);
+        }
+        let Some((input, input_per_n, velocity_column, mps_per_velocity)) = plan.force else {
+            return Err(self.err(
+                FailKind::Map,
+                format!(
+                    "{} cannot go in from outside: the map names no piston-force input",
+                    active.join(", ")
+                ),
+            ));
+        };
+        for name in &active {
+            if !hammer_sim::effects::entry(name).is_some_and(is_piston_force) {
+                return Err(self.err(FailKind::Map, format!("{name} is not a force on the piston")));
+            }
+        }
+        Ok(Some(Drive {
+            input,
+            input_per_n,
+            velocity_column,
+            mps_per_velocity,
+            effects: outside.clone(),
+            supply_bar: supply_pa / 1e5,
+        }))
     }
 }
 
@@ -390,6 +441,18 @@ fn plan(map: &ModelMap, desc: &Description) -> Result<Plan, String> {
             optional[k] = true;
         }
     }
+    let force = match (&map.outside.piston_force, &s.velocity) {
+        (Some(f), Some(_)) => {
+            let column = 3 + usize::from(s.position.is_some());
+            Some((
+                settable(desc, &f.input, true)?,
+                f.sign,
+                column,
+                convs[column].sign * convs[column].per_unit,
+            ))
+        }
+        _ => None,
+    };
     let supply_var = settable(desc, map.supply.variable(), false)?;
     let per_unit = Quantity::Pressure.to_si(&map.supply.unit).unwrap_or(f64::NAN);
     let mut base = Vec::new();
@@ -410,6 +473,7 @@ fn plan(map: &ModelMap, desc: &Description) -> Result<Plan, String> {
         supply: (supply_var, per_unit, map.supply.pressure),
         base,
         step_s,
+        force,
     })
 }
 

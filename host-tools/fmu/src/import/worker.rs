@@ -32,7 +32,40 @@ pub enum Request {
         outputs: Vec<Typed>,
         step_s: f64,
         steps: usize,
+        drive: Option<Drive>,
     },
+}
+
+/// Friction from outside: before each step the built-in plant's friction
+/// law ([`hammer_sim::model::HammerModel::friction_n`], the one place it is
+/// written) at the step's start time and the last velocity read, set on
+/// the FMU's piston-force input and held over the step.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Drive {
+    pub input: Typed,
+    /// The FMU's input value per newton along the project's axis (its unit
+    /// and sign).
+    pub input_per_n: f64,
+    /// Which output column is the velocity, and m/s per its value.
+    pub velocity_column: usize,
+    pub mps_per_velocity: f64,
+    /// The effects whose friction goes in, and the run's supply pressure.
+    pub effects: hammer_sim::Effects,
+    pub supply_bar: f64,
+}
+
+impl Drive {
+    /// The closure the instance asks before each step.
+    fn law(&self) -> impl FnMut(f64, &[f64]) -> (Typed, f64) + '_ {
+        let mut cfg = hammer_sim::SimConfig::default();
+        cfg.supply.pressure_bar = self.supply_bar;
+        cfg.effects = self.effects.clone();
+        let plant = hammer_sim::model::HammerModel::new(&cfg);
+        move |t, row| {
+            let v = row[self.velocity_column] * self.mps_per_velocity;
+            (self.input, plant.friction_n(t, v) * self.input_per_n)
+        }
+    }
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -112,10 +145,13 @@ pub fn serve() -> i32 {
                 outputs,
                 step_s,
                 steps,
+                drive,
             } => match instance.as_mut() {
                 None => (Reply::Failed("no instance".into()), Vec::new()),
                 Some(i) => {
-                    let r = i.run(ran, &starts, &outputs, step_s, steps);
+                    let mut law = drive.as_ref().map(Drive::law);
+                    let hook = law.as_mut().map(|l| l as &mut dyn FnMut(f64, &[f64]) -> (Typed, f64));
+                    let r = i.run(ran, &starts, &outputs, step_s, steps, hook);
                     ran = true;
                     match r {
                         Ok(v) => (Reply::Samples { values: v.len() }, v),
