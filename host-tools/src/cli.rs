@@ -120,33 +120,9 @@ pub enum Command {
     DiagnoseBench(crate::diagnose::command::BenchArgs),
     /// Export the simulator as an FMI 2.0 co-simulation FMU for x86_64
     /// Linux (parameters: every value of the config and every effect with
-    /// its switch), with its model map beside it (docs/your-model.md).
-    Fmu(FmuArgs),
-}
-
-#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
-pub enum FmuFamily {
-    Hammer,
-    Variants,
-}
-
-#[derive(Args, Debug)]
-pub struct FmuArgs {
-    /// The FMU to write; the model map goes beside it (`X.fmu` → `X.map.toml`).
-    #[arg(long)]
-    pub out: PathBuf,
-    /// TOML file whose values become the FMU's start values (with
-    /// `--family variants`: `[params]`, `[structure]`, `[supply]`,
-    /// `[effects.*]`, `seed`, `duration_s`).
-    #[arg(long)]
-    pub config: Option<PathBuf>,
-    /// Which model: the built-in simulator, or hammer-variants' second family.
-    #[arg(long, value_enum, default_value = "hammer")]
-    pub family: FmuFamily,
-    /// The FMU's shared library (default: $HAMMER_FMU_LIB, else
-    /// libhammer_fmu.so beside this program; `cargo build --release -p hammer-fmu`).
-    #[arg(long)]
-    pub lib: Option<PathBuf>,
+    /// its switch), with its model map beside it (docs/your-model.md);
+    /// `hammer fmu check my.fmu` is the pre-flight of a bench engineer's FMU.
+    Fmu(crate::fmu_cmd::FmuArgs),
 }
 
 #[derive(Args, Debug)]
@@ -392,7 +368,7 @@ pub fn run(cli: Cli) -> Result<()> {
             }
             Ok(())
         }
-        Command::Fmu(args) => fmu_cmd(&args),
+        Command::Fmu(args) => crate::fmu_cmd::run(&args),
         Command::Figures(args) => {
             let files = crate::plot::effect_figures(&args.out, args.supply_bar)?;
             for f in files {
@@ -459,39 +435,6 @@ fn capture_cmd(args: &CaptureArgs) -> Result<()> {
         codes.len(),
         args.out.display(),
         hammer_trace::trace::sidecar_path(&args.out).display()
-    );
-    Ok(())
-}
-
-fn fmu_cmd(args: &FmuArgs) -> Result<()> {
-    let in_file = || args.config.as_ref().map_or(String::new(), |p| p.display().to_string());
-    let model = match args.family {
-        FmuFamily::Hammer => {
-            let cfg: SimConfig = args
-                .config
-                .as_deref()
-                .map_or_else(|| Ok(SimConfig::default()), load_toml)?;
-            cfg.validate().with_context(in_file)?;
-            hammer_fmu::Model::Hammer(cfg)
-        }
-        FmuFamily::Variants => {
-            let cfg: hammer_fmu::VariantsConfig = args
-                .config
-                .as_deref()
-                .map_or_else(|| Ok(Default::default()), load_toml)?;
-            cfg.validate().map_err(anyhow::Error::msg).with_context(in_file)?;
-            hammer_fmu::Model::Variants(cfg)
-        }
-    };
-    let lib = hammer_fmu::find_library(args.lib.as_deref()).map_err(anyhow::Error::msg)?;
-    let w = hammer_fmu::write_fmu(&model, &lib, &args.out).map_err(anyhow::Error::msg)?;
-    outln!(
-        "wrote {} (FMI 2.0 co-simulation, linux64; {} parameters, {} outputs; GUID {}) and {}",
-        w.fmu.display(),
-        w.parameters,
-        w.outputs,
-        w.guid,
-        w.map.display()
     );
     Ok(())
 }

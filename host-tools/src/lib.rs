@@ -23,6 +23,8 @@
 //! - [`flash`], [`capture`], [`calibrate`], [`selftest`], [`demo`], [`soak`], [`monitor`]: live: raw captures, calibration, the
 //!   no-hardware demo, the full-rate soak, the dashboard, logs and replay;
 //! - [`commission`]: the hammer's reference record, from the board's raw captures;
+//! - [`fmu_cmd`]: `hammer fmu`: the export, the pre-flight and speed of a
+//!   foreign FMU (`hammer-fmu`'s import), its hidden worker process;
 //! - [`cli`]: the subcommands, thin over the above.
 
 #[macro_use]
@@ -41,6 +43,7 @@ pub mod diagnose;
 pub mod drift;
 pub mod estimate;
 pub mod flash;
+pub mod fmu_cmd;
 pub mod import;
 pub mod monitor;
 pub mod plot;

@@ -163,7 +163,7 @@ pub fn write_fmu(model: &Model, library: &Path, out: &Path) -> Result<Written, S
     let zip = zip_stored(&files);
     std::fs::write(out, zip).map_err(|e| format!("{}: {e}", out.display()))?;
     let map = map_path(out);
-    std::fs::write(&map, model_map(&table, out, who.nuisance)).map_err(|e| format!("{}: {e}", map.display()))?;
+    std::fs::write(&map, model_map(&table, out, who.nuisance)?).map_err(|e| format!("{}: {e}", map.display()))?;
     let outputs = table.vars.iter().filter(|v| v.is_output()).count();
     Ok(Written {
         fmu: out.to_path_buf(),
@@ -174,70 +174,106 @@ pub fn write_fmu(model: &Model, library: &Path, out: &Path) -> Result<Written, S
     })
 }
 
-/// The model map of the built-in model's FMU.
-fn model_map(table: &Table, fmu: &Path, nuisance: &[(&str, f64)]) -> String {
+/// The model map of the project's own FMU, in the one format
+/// [`crate::import::map`] reads: the noiseless outputs (the diagnosis
+/// applies the sensor effects itself, so the sensor effects are left to
+/// `[outside]`), the supply parameter, the nuisance list, and every
+/// physical catalogue effect with its switch and parameters.
+fn model_map(table: &Table, fmu: &Path, nuisance: &[(&str, f64)]) -> Result<String, String> {
+    use crate::import::map::{
+        EffectCarrier, EffectParam, ModelMap, Nuisance, Outside, Reference, Signal, Signals, Supply,
+    };
     let name = fmu
         .file_name()
         .map_or(String::new(), |n| n.to_string_lossy().into_owned());
-    let mut m = String::new();
-    let _ = writeln!(
-        m,
-        "# The model map of {name} for `hammer diagnose --model {name} --model-map` (written by `hammer fmu`).\n\
-         # Signals are the noiseless outputs: the diagnosis applies the sensor effects itself.\n\
-         fmu = {name:?}\n\n\
-         [signals]\n\
-         p_rear = {{ output = \"p_rear_true_pa\", unit = \"Pa\", pressure = \"gauge\", sign = 1 }}\n\
-         p_front = {{ output = \"p_front_true_pa\", unit = \"Pa\", pressure = \"gauge\", sign = 1 }}\n\
-         accel = {{ output = \"accel_true_mps2\", unit = \"m/s2\", sign = 1 }}\n\
-         position = {{ output = \"x_m\", unit = \"m\" }}\n\
-         velocity = {{ output = \"v_mps\", unit = \"m/s\" }}\n\
-         impact_counter = {{ output = \"impact_count\" }}\n\n\
-         [supply]\n\
-         parameter = \"supply.pressure_bar\"\n\
-         unit = \"bar\"\n\
-         pressure = \"gauge\"\n"
-    );
     let start = |n: &str| {
         table.vars.iter().find(|v| v.name == n).and_then(|v| match v.start {
             Val::Real(x) => Some(x),
             _ => None,
         })
     };
-    for &(p, u) in nuisance {
-        let nominal = start(p).unwrap_or(f64::NAN);
-        let _ = writeln!(
-            m,
-            "[[nuisance]]\nparameter = {p:?}\nnominal = {nominal:?}\nrelative_uncertainty = {u:?}\n"
-        );
-    }
-    for (k, e) in REGISTRY.iter().enumerate() {
-        let _ = writeln!(
-            m,
-            "[effects.{}]\nswitch = \"effects.{}.on\"\nsensor = {}",
-            e.name(),
-            e.name(),
-            e.sensor()
-        );
-        for v in &table.vars {
-            let Binding::EffectParam(j, key) = &v.binding else {
+    let signal = |output: &str, unit: Option<&str>, pressure: Option<Reference>| Signal {
+        output: output.to_string(),
+        unit: unit.map(str::to_string),
+        pressure,
+        sign: 1.0,
+    };
+    let out = |k: usize| table.outputs[k];
+    let named = |n: &str| table.outputs.iter().find(|o| o.name == n).copied();
+    let (x, v, count) = (named("x_m"), named("v_mps"), named("impact_count"));
+    let mut effects = std::collections::BTreeMap::new();
+    for (k, e) in REGISTRY.iter().enumerate().filter(|(_, e)| !e.sensor()) {
+        let mut params = std::collections::BTreeMap::new();
+        for var in &table.vars {
+            let Binding::EffectParam(j, key) = &var.binding else {
                 continue;
             };
             let Some(p) = e.params().iter().find(|p| p.key == key).filter(|_| *j == k) else {
                 continue;
             };
-            let nominal = match v.start {
+            let nominal = match var.start {
                 Val::Real(x) => x,
                 _ => f64::NAN,
             };
-            let _ = writeln!(
-                m,
-                "params.{key} = {{ parameter = {:?}, unit = {:?}, lo = {:?}, hi = {:?}, nominal = {nominal:?} }}",
-                v.name, p.unit, p.lo, p.hi
+            params.insert(
+                key.clone(),
+                EffectParam {
+                    parameter: var.name.clone(),
+                    unit: p.unit.to_string(),
+                    lo: p.lo,
+                    hi: p.hi,
+                    nominal,
+                    off: None,
+                    scale: None,
+                },
             );
         }
-        let _ = writeln!(m);
+        effects.insert(
+            e.name().to_string(),
+            EffectCarrier {
+                switch: Some(format!("effects.{}.on", e.name())),
+                params,
+                law: None,
+            },
+        );
     }
-    m
+    let map = ModelMap {
+        fmu: Some(name),
+        step_s: None,
+        signals: Signals {
+            p_rear: signal(out(0).name, out(0).unit, Some(Reference::Gauge)),
+            p_front: signal(out(1).name, out(1).unit, Some(Reference::Gauge)),
+            accel: signal(out(2).name, out(2).unit, None),
+            position: x.map(|o| signal(o.name, o.unit, None)),
+            velocity: v.map(|o| signal(o.name, o.unit, None)),
+            impact_counter: count.map(|o| signal(o.name, None, None)),
+        },
+        supply: Supply {
+            parameter: Some("supply.pressure_bar".into()),
+            input: None,
+            unit: "bar".into(),
+            pressure: Reference::Gauge,
+        },
+        nuisance: nuisance
+            .iter()
+            .map(|&(p, u)| Nuisance {
+                parameter: p.to_string(),
+                nominal: start(p).unwrap_or(f64::NAN),
+                relative_uncertainty: u,
+            })
+            .collect(),
+        fixed: Default::default(),
+        effects,
+        outside: Outside::default(),
+    };
+    map.validate()
+        .map_err(|e| format!("the model map written would not read back: {e}"))?;
+    Ok(format!(
+        "# The model map of {} for `hammer fmu check` and `hammer diagnose --model-map` (written by `hammer fmu`;\n\
+         # format: docs/your-model.md). Signals are the noiseless outputs: the project applies the sensor effects.\n{}",
+        map.fmu.as_deref().unwrap_or(""),
+        map.to_toml()?
+    ))
 }
 
 /// documentation/index.html: the variables, as the description lists them.
@@ -270,7 +306,7 @@ fn documentation(table: &Table) -> String {
 
 /// A zip archive of `files`, stored (no compression): the few lines a
 /// reader needs, without a dependency for it.
-fn zip_stored(files: &[(String, Vec<u8>)]) -> Vec<u8> {
+pub fn zip_stored(files: &[(String, Vec<u8>)]) -> Vec<u8> {
     let mut out = Vec::new();
     let mut central = Vec::new();
     // 1980-01-01 00:00 in DOS time: a fixed date keeps the file reproducible.

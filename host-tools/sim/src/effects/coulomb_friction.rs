@@ -61,6 +61,10 @@ impl Effect for CoulombFriction {
         Param::new("step_at_s", "s", 0.0, 1e6),
         Param::new("step_factor", "1", 0.0, 100.0),
     ];
+
+    fn supply_law_n(&self, supply_bar: f64) -> Option<f64> {
+        Some(self.force_n(supply_bar))
+    }
 }
 
 #[cfg(test)]

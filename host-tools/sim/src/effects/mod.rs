@@ -60,6 +60,14 @@ pub trait Effect:
         0.0
     }
 
+    /// The force of a friction law that depends on the supply pressure
+    /// alone, N, at `supply_bar`: what a foreign model that takes friction
+    /// as one force parameter is given per run (`hammer_fmu::import::map`'s
+    /// `law`). None for an effect without such a law.
+    fn supply_law_n(&self, _supply_bar: f64) -> Option<f64> {
+        None
+    }
+
     /// Checks every parameter against its range; errors name `effects.NAME.key`.
     fn validate(&self) -> Result<(), ConfigError> {
         let table = toml::Value::try_from(self).ok();
@@ -90,6 +98,9 @@ pub trait EffectEntry: Sync {
     fn has_piston_drag(&self) -> bool;
     /// [`Effect::piston_drag_n`] if the effect is on, else 0.
     fn piston_drag_n(&self, effects: &Effects, t_s: f64, v_mps: f64, supply_bar: f64) -> f64;
+    /// [`Effect::supply_law_n`] with `params` (as in a config file); None
+    /// when the effect has no such law or the parameters do not read.
+    fn supply_law_n(&self, params: toml::Value, supply_bar: f64) -> Option<f64>;
 }
 
 struct Entry<T>(PhantomData<fn() -> T>);
@@ -125,6 +136,9 @@ impl<T: Effect> EffectEntry for Entry<T> {
     }
     fn piston_drag_n(&self, effects: &Effects, t_s: f64, v_mps: f64, supply_bar: f64) -> f64 {
         T::get(effects).map_or(0.0, |e| e.piston_drag_n(t_s, v_mps, supply_bar))
+    }
+    fn supply_law_n(&self, params: toml::Value, supply_bar: f64) -> Option<f64> {
+        params.try_into::<T>().ok()?.supply_law_n(supply_bar)
     }
 }
 

@@ -1,0 +1,246 @@
+//! A foreign FMU's modelDescription.xml, as far as the import needs it:
+//! identity (name, GUID, FMI version, generation tool), the co-simulation
+//! capabilities (model identifier, `canBeInstantiatedOnlyOncePerProcess`),
+//! the default experiment and the scalar variables (causality,
+//! variability, initial, type, start). A small element scanner rather than
+//! an XML library: the description is flat attributes, and the tools that
+//! write it (FMI 2.0, section 2.2) use no DTD, CDATA or namespaces there.
+
+use std::collections::HashMap;
+
+/// A variable's base type.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum VarKind {
+    Real,
+    Integer,
+    Boolean,
+    String,
+    Enumeration,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct Variable {
+    pub name: String,
+    pub vr: u32,
+    pub kind: VarKind,
+    /// FMI 2.0 defaults when absent: causality `local`, variability `continuous`.
+    pub causality: String,
+    pub variability: String,
+    pub initial: Option<String>,
+    pub unit: Option<String>,
+    pub start: Option<String>,
+}
+
+impl Variable {
+    /// Why the import cannot set this variable before initialisation
+    /// (a parameter) or during the run (`during_run`: an input), if it
+    /// cannot.
+    pub fn not_settable(&self, during_run: bool) -> Option<String> {
+        let c = self.causality.as_str();
+        let v = self.variability.as_str();
+        if c == "calculatedParameter" || self.initial.as_deref() == Some("calculated") {
+            return Some(format!("{} is calculated by the FMU", self.name));
+        }
+        if v == "constant" {
+            return Some(format!("{} is a constant", self.name));
+        }
+        if during_run {
+            if c != "input" && !(c == "parameter" && v == "tunable") {
+                return Some(format!(
+                    "{} is fixed after initialisation (causality {c}, variability {v}): it must be an input",
+                    self.name
+                ));
+            }
+        } else if c != "parameter" && c != "input" {
+            return Some(format!("{} is not a parameter (causality {c})", self.name));
+        }
+        if self.kind == VarKind::String {
+            return Some(format!("{} is a string", self.name));
+        }
+        None
+    }
+}
+
+/// What modelDescription.xml says.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Description {
+    pub fmi_version: String,
+    pub model_name: String,
+    pub guid: String,
+    pub generation_tool: Option<String>,
+    /// The co-simulation interface's model identifier (names the binary);
+    /// None when the FMU has no co-simulation interface.
+    pub model_identifier: Option<String>,
+    pub once_per_process: bool,
+    pub default_step_s: Option<f64>,
+    pub default_stop_s: Option<f64>,
+    pub variables: Vec<Variable>,
+}
+
+impl Description {
+    /// Parses the description's text (errors say what is missing).
+    pub fn parse(xml: &str) -> Result<Self, String> {
+        let mut root: Option<HashMap<String, String>> = None;
+        let mut cosim: Option<HashMap<String, String>> = None;
+        let mut experiment: Option<HashMap<String, String>> = None;
+        let mut variables = Vec::new();
+        let mut open: Option<HashMap<String, String>> = None;
+        for (name, attrs) in elements(xml)? {
+            match name.as_str() {
+                "fmiModelDescription" => root = Some(attrs),
+                "CoSimulation" => cosim = Some(attrs),
+                "DefaultExperiment" => experiment = Some(attrs),
+                "ScalarVariable" => open = Some(attrs),
+                "Real" | "Integer" | "Boolean" | "String" | "Enumeration" => {
+                    let Some(sv) = open.take() else { continue };
+                    variables.push(variable(&name, sv, &attrs)?);
+                }
+                _ => {}
+            }
+        }
+        let mut root = root.ok_or("no fmiModelDescription element")?;
+        let mut take = |k: &str| root.remove(k).ok_or(format!("fmiModelDescription has no {k}"));
+        let fmi_version = take("fmiVersion")?;
+        let model_name = take("modelName")?;
+        let guid = take("guid")?;
+        let generation_tool = root.remove("generationTool");
+        let flag = |m: &Option<HashMap<String, String>>, k: &str| {
+            m.as_ref().and_then(|m| m.get(k)).is_some_and(|v| v == "true")
+        };
+        let num = |k: &str| experiment.as_ref().and_then(|m| m.get(k)).and_then(|v| v.parse().ok());
+        Ok(Description {
+            fmi_version,
+            model_name,
+            guid,
+            generation_tool,
+            model_identifier: cosim.as_ref().and_then(|m| m.get("modelIdentifier").cloned()),
+            once_per_process: flag(&cosim, "canBeInstantiatedOnlyOncePerProcess"),
+            default_step_s: num("stepSize"),
+            default_stop_s: num("stopTime"),
+            variables,
+        })
+    }
+
+    pub fn variable(&self, name: &str) -> Option<&Variable> {
+        self.variables.iter().find(|v| v.name == name)
+    }
+}
+
+fn variable(kind: &str, mut sv: HashMap<String, String>, attrs: &HashMap<String, String>) -> Result<Variable, String> {
+    let name = sv.remove("name").ok_or("a ScalarVariable has no name")?;
+    let vr = sv
+        .get("valueReference")
+        .and_then(|v| v.parse().ok())
+        .ok_or_else(|| format!("ScalarVariable {name} has no valueReference"))?;
+    Ok(Variable {
+        vr,
+        kind: match kind {
+            "Real" => VarKind::Real,
+            "Integer" => VarKind::Integer,
+            "Boolean" => VarKind::Boolean,
+            "String" => VarKind::String,
+            _ => VarKind::Enumeration,
+        },
+        causality: sv.remove("causality").unwrap_or_else(|| "local".into()),
+        variability: sv.remove("variability").unwrap_or_else(|| "continuous".into()),
+        initial: sv.remove("initial"),
+        unit: attrs.get("unit").cloned(),
+        start: attrs.get("start").cloned(),
+        name,
+    })
+}
+
+/// Every element's name and attributes, in document order (end tags,
+/// comments, processing instructions and declarations skipped).
+fn elements(xml: &str) -> Result<Vec<(String, HashMap<String, String>)>, String> {
+    let mut out = Vec::new();
+    let mut rest = xml;
+    while let Some(at) = rest.find('<') {
+        rest = &rest[at + 1..];
+        if let Some(r) = rest.strip_prefix("!--") {
+            let end = r.find("-->").ok_or("an unterminated comment")?;
+            rest = &r[end + 3..];
+            continue;
+        }
+        if rest.starts_with('?') || rest.starts_with('!') || rest.starts_with('/') {
+            rest = &rest[rest.find('>').ok_or("an unterminated tag")? + 1..];
+            continue;
+        }
+        let name_end = rest
+            .find(|c: char| c.is_whitespace() || c == '>' || c == '/')
+            .ok_or("an unterminated tag")?;
+        let name = rest[..name_end].to_string();
+        rest = &rest[name_end..];
+        let mut attrs = HashMap::new();
+        loop {
+            rest = rest.trim_start();
+            if let Some(r) = rest.strip_prefix("/>").or_else(|| rest.strip_prefix('>')) {
+                rest = r;
+                break;
+            }
+            let eq = rest.find('=').ok_or_else(|| format!("a bad attribute in <{name}>"))?;
+            let key = rest[..eq].trim().to_string();
+            let r = rest[eq + 1..].trim_start();
+            let quote = r.chars().next().filter(|c| *c == '"' || *c == '\'');
+            let quote = quote.ok_or_else(|| format!("an unquoted attribute {key} in <{name}>"))?;
+            let end = r[1..]
+                .find(quote)
+                .ok_or_else(|| format!("an unterminated attribute {key} in <{name}>"))?;
+            attrs.insert(key, unescape(&r[1..1 + end]));
+            rest = &r[end + 2..];
+        }
+        out.push((name, attrs));
+    }
+    Ok(out)
+}
+
+fn unescape(s: &str) -> String {
+    s.replace("&lt;", "<")
+        .replace("&gt;", ">")
+        .replace("&quot;", "\"")
+        .replace("&apos;", "'")
+        .replace("&amp;", "&")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_description_reads_and_settability_is_judged() {
+        let xml = r#"<?xml version="1.0"?>
+<!-- a comment with <b>tags</b> -->
+<fmiModelDescription fmiVersion="2.0" modelName="m &amp; n" guid="{1}" generationTool='Tool 1'>
+  <CoSimulation modelIdentifier="m" canBeInstantiatedOnlyOncePerProcess="true"/>
+  <DefaultExperiment stopTime="1.5" stepSize="1e-4"/>
+  <ModelVariables>
+    <ScalarVariable name="k" valueReference="3" causality="parameter" variability="fixed" initial="exact"><Real unit="N" start="2"/></ScalarVariable>
+    <ScalarVariable name="d" valueReference="4" causality="calculatedParameter" variability="fixed"><Real/></ScalarVariable>
+    <ScalarVariable name="u" valueReference="5" causality="input"><Real start="0"/></ScalarVariable>
+    <ScalarVariable name="y" valueReference="6" causality="output"><Integer/></ScalarVariable>
+  </ModelVariables>
+</fmiModelDescription>"#;
+        let d = Description::parse(xml).unwrap();
+        assert_eq!((d.model_name.as_str(), d.guid.as_str()), ("m & n", "{1}"));
+        assert_eq!(d.generation_tool.as_deref(), Some("Tool 1"));
+        assert_eq!(d.model_identifier.as_deref(), Some("m"));
+        assert!(d.once_per_process);
+        assert_eq!((d.default_step_s, d.default_stop_s), (Some(1e-4), Some(1.5)));
+        assert_eq!(d.variables.len(), 4);
+        let k = d.variable("k").unwrap();
+        assert_eq!((k.vr, k.kind, k.unit.as_deref()), (3, VarKind::Real, Some("N")));
+        assert_eq!(k.not_settable(false), None);
+        assert!(k.not_settable(true).unwrap().contains("fixed after initialisation"));
+        assert!(d
+            .variable("d")
+            .unwrap()
+            .not_settable(false)
+            .unwrap()
+            .contains("calculated"));
+        assert_eq!(d.variable("u").unwrap().not_settable(true), None);
+        assert!(d.variable("y").unwrap().not_settable(false).is_some());
+        assert_eq!(d.variable("y").unwrap().kind, VarKind::Integer);
+        assert!(Description::parse("<fmiModelDescription modelName=\"x\"/>").is_err());
+        assert!(Description::parse("<a b=c>").is_err());
+    }
+}

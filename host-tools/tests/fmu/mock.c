@@ -1,0 +1,121 @@
+/* A small FMI 2.0 co-simulation FMU in C for host-tools/tests/fmu_import.rs:
+ * a hammer-like cycle (chamber pressures and acceleration periodic at
+ * freq_hz, scaled by the supply pressure) whose `mode` parameter makes it
+ * misbehave the ways a foreign FMU can: 1 doStep fails, 2 a NaN output,
+ * 3 doStep hangs, 4 doStep crashes, 5 the outputs never cycle. Built
+ * with -DNO_RESET it lacks fmi2Reset (a missing FMI function). It prints
+ * to standard output at initialisation, as FMUs do.
+ * Value references: 0 supply_bar, 1 freq_hz, 2 mode (Integer),
+ * 3 derived (calculatedParameter), 10 p_rear, 11 p_front, 12 accel. */
+#include <math.h>
+#include <signal.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+typedef void *fmi2Component;
+typedef int fmi2Status;
+typedef unsigned int fmi2ValueReference;
+
+typedef struct {
+    double supply_bar, freq_hz, t, out[3];
+    int mode;
+} Mock;
+
+static void outputs(Mock *m) {
+    double w = 2.0 * 3.141592653589793 * m->freq_hz * m->t;
+    double p = m->supply_bar * 1e5;
+    if (m->mode == 5) w = 0.0;
+    m->out[0] = 0.5 * p * (1.0 + sin(w));
+    m->out[1] = 0.5 * p * (1.0 - sin(w));
+    m->out[2] = 100.0 * cos(w);
+    if (m->mode == 2 && m->t > 0.01) m->out[1] = NAN;
+}
+
+const char *fmi2GetVersion(void) { return "2.0"; }
+const char *fmi2GetTypesPlatform(void) { return "default"; }
+
+fmi2Component fmi2Instantiate(const char *name, int type, const char *guid, const char *res, const void *cb, int vis, int log) {
+    (void)name; (void)type; (void)guid; (void)res; (void)cb; (void)vis; (void)log;
+    Mock *m = calloc(1, sizeof(Mock));
+    m->supply_bar = 5.0;
+    m->freq_hz = 40.0;
+    return m;
+}
+void fmi2FreeInstance(fmi2Component c) { free(c); }
+fmi2Status fmi2SetDebugLogging(fmi2Component c, int on, size_t n, const char *const *cat) { (void)c; (void)on; (void)n; (void)cat; return 0; }
+fmi2Status fmi2SetupExperiment(fmi2Component c, int tol_on, double tol, double t0, int stop_on, double stop) {
+    (void)tol_on; (void)tol; (void)stop_on; (void)stop;
+    ((Mock *)c)->t = t0;
+    return 0;
+}
+fmi2Status fmi2EnterInitializationMode(fmi2Component c) { (void)c; return 0; }
+/* Prints to standard output, as FMUs do: the protocol must not see it. */
+fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
+    printf("mock: initialised\n");
+    fflush(stdout);
+    outputs(c);
+    return 0;
+}
+fmi2Status fmi2Terminate(fmi2Component c) { (void)c; return 0; }
+#ifndef NO_RESET
+fmi2Status fmi2Reset(fmi2Component c) {
+    Mock *m = c;
+    m->supply_bar = 5.0;
+    m->freq_hz = 40.0;
+    m->mode = 0;
+    m->t = 0.0;
+    return 0;
+}
+#endif
+
+fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference *vr, size_t n, const double *v) {
+    Mock *m = c;
+    for (size_t i = 0; i < n; i++) {
+        if (vr[i] == 0) m->supply_bar = v[i];
+        else if (vr[i] == 1) m->freq_hz = v[i];
+        else return 3;
+    }
+    return 0;
+}
+fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference *vr, size_t n, const int *v) {
+    Mock *m = c;
+    for (size_t i = 0; i < n; i++) {
+        if (vr[i] == 2) m->mode = v[i];
+        else return 3;
+    }
+    return 0;
+}
+fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference *vr, size_t n, const int *v) { (void)c; (void)vr; (void)v; return n ? 3 : 0; }
+fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference *vr, size_t n, double *v) {
+    Mock *m = c;
+    for (size_t i = 0; i < n; i++) {
+        if (vr[i] >= 10 && vr[i] <= 12) v[i] = m->out[vr[i] - 10];
+        else if (vr[i] == 0) v[i] = m->supply_bar;
+        else if (vr[i] == 3) v[i] = 2.0 * m->supply_bar;
+        else return 3;
+    }
+    return 0;
+}
+fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference *vr, size_t n, int *v) {
+    for (size_t i = 0; i < n; i++) {
+        if (vr[i] == 2) v[i] = ((Mock *)c)->mode;
+        else return 3;
+    }
+    return 0;
+}
+fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference *vr, size_t n, int *v) { (void)c; (void)vr; (void)v; return n ? 3 : 0; }
+
+fmi2Status fmi2DoStep(fmi2Component c, double t, double h, int no_set) {
+    Mock *m = c;
+    (void)no_set;
+    if (m->t > 0.02) {
+        if (m->mode == 1) return 3;
+        if (m->mode == 3) for (;;) pause();
+        if (m->mode == 4) raise(SIGSEGV);
+    }
+    m->t = t + h;
+    outputs(m);
+    return 0;
+}

@@ -1,0 +1,64 @@
+"""A small hammer-like model written with pythonfmu 0.7.0 (pinned in .ci/run),
+built into an FMU by host-tools/tests/fmu_import.rs: a piston between a rear
+and a front chamber, a valve that feeds the rear chamber until the piston hits
+the anvil and the front chamber until it is back, first-order chamber filling,
+an impact with restitution, a Coulomb friction force, an external piston force
+input. Its own laws, not the project's: an FMU "by another tool"."""
+import math
+
+from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real
+from pythonfmu.default_experiment import DefaultExperiment
+
+
+class PyHammer(Fmi2Slave):
+    author = "hammer-monitor tests"
+    description = "hammer-like cycle for the FMU import test"
+    default_experiment = DefaultExperiment(start_time=0.0, stop_time=0.3, step_size=1e-4)
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self.supply_bar = 5.0
+        self.friction_n = 0.0
+        self.f_ext_n = 0.0
+        self.mass_kg = 0.2
+        self.area_m2 = 3e-4
+        self.stroke_m = 0.02
+        self.tau_s = 2e-3
+        self.p_rear = 0.0
+        self.p_front = 0.0
+        self.accel = 0.0
+        self.x = 0.0
+        self.v = 0.0
+        self.impacts = 0
+        self.forward = True
+        for name in ["supply_bar", "friction_n", "mass_kg", "area_m2", "stroke_m", "tau_s"]:
+            self.register_variable(Real(name, causality=Fmi2Causality.parameter, variability=Fmi2Variability.tunable))
+        self.register_variable(Real("f_ext_n", causality=Fmi2Causality.input))
+        for name in ["p_rear", "p_front", "accel", "x", "v"]:
+            self.register_variable(Real(name, causality=Fmi2Causality.output))
+        self.register_variable(Integer("impacts", causality=Fmi2Causality.output))
+
+    def do_step(self, current_time, step_size):
+        n = 10
+        dt = step_size / n
+        p_s = self.supply_bar * 1e5
+        for _ in range(n):
+            target_r, target_f = (p_s, 0.0) if self.forward else (0.0, p_s)
+            self.p_rear += (target_r - self.p_rear) * dt / self.tau_s
+            self.p_front += (target_f - self.p_front) * dt / self.tau_s
+            force = (self.p_rear - self.p_front) * self.area_m2 + self.f_ext_n
+            if self.v != 0.0:
+                force -= math.copysign(self.friction_n, self.v)
+            self.accel = force / self.mass_kg
+            self.v += self.accel * dt
+            self.x += self.v * dt
+            if self.x >= self.stroke_m and self.v > 0.0:
+                self.x = self.stroke_m
+                self.v = -0.3 * self.v
+                self.impacts += 1
+                self.forward = False
+            elif self.x <= 0.0 and self.v < 0.0:
+                self.x = 0.0
+                self.v = 0.0
+                self.forward = True
+        return True
