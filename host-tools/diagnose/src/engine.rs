@@ -103,6 +103,9 @@ pub fn diagnose_against(
     let nominal = nominal::nominal(&grouped.points, &runner, opts, &step)?;
     let mut reference_infos = Vec::new();
     let mut baselines = Vec::new();
+    // The hammer's own features, kept before the move onto the model: the
+    // held-out check is run on them (below).
+    let own_points = (!references.is_empty()).then(|| grouped.points.clone());
     if !references.is_empty() {
         let (read, infos) = reference::baselines(references, &hammer)?;
         reference::transplant(&mut grouped.points, &nominal.features, &read)?;
@@ -123,20 +126,78 @@ pub fn diagnose_against(
             ..opts.clone()
         }
     };
-    let (fs, model_form) = nominal::fit_set(points, &nominal, &runner, &fit_opts);
-    let ranking = rank::rank(&fs, &fit_opts, &step);
-    let detection_floors = floor::floors(&fs, &ranking, &fit_opts);
+    let (fs, model_form) = nominal::fit_set(points, &nominal, &runner, &[], &fit_opts);
+    // Against the model alone the ranking's nuisance profile is linearised
+    // at the nominal model recalibrated first, not at the nominal values:
+    // at a real hammer's ±20 % the model is far from linear there, and a
+    // profile linearised at nominal left half the singles of the
+    // same-structure benchmark named wrong or beside an effect not hidden
+    // (issue 44). Against a record the record has cancelled the nominal
+    // values' error, so the ranking stays at them.
+    let recal_nominal = references
+        .is_empty()
+        .then(|| held_out::recalibrate_nominal(&fs, opts))
+        .flatten();
+    let relinearised = match &recal_nominal {
+        Some(rc) => Some((nominal::nominal(points, &rc.runner, opts, &|_| {})?, rc)),
+        None => None,
+    };
+    let relinearised = relinearised
+        .as_ref()
+        .map(|(nom, rc)| nominal::fit_set(points, nom, &rc.runner, &rc.delta, &fit_opts));
+    let (rank_fs, model_form) = match &relinearised {
+        Some((f, form)) => (f, form.clone()),
+        None => (&fs, model_form),
+    };
+    let ranking = rank::rank(rank_fs, &fit_opts, &step);
+    let detection_floors = floor::floors(rank_fs, &ranking, &fit_opts);
     step("detection floors");
 
-    let models = held_out::models(&fs, &nominal.bars, ranking.verdict.as_ref(), opts);
+    // The check of the verdict's model runs on the hammer's own features,
+    // in both modes: the verdict's effects with the nominal parameters
+    // refitted to what the hammer measured, weighed as against the model
+    // alone. Against a record, checked on the change instead, the refit
+    // read the effect's change through the model's law for it; on a hammer
+    // of another form that law's change missed the hammer's (a leak that
+    // took 56 % of the impact energy, seed 1 case 13 of the structural
+    // benchmark: 11 % off at the held-out point, 0.06 % without the
+    // record), so a record subtracted from the check what it added to
+    // the naming (issue 44). On the hammer's own features a verdict the
+    // record shares with the model alone gets the same check.
+    let own_fs = own_points
+        .as_ref()
+        .map(|p| nominal::fit_set(p, &nominal, &runner, &[], opts).0);
+    let (check_fs, check_points) = match (&own_fs, &own_points) {
+        (Some(f), Some(p)) => (f, p.as_slice()),
+        _ => (&fs, points.as_slice()),
+    };
+    let models = held_out::models(
+        check_fs,
+        &nominal.bars,
+        ranking.verdict.as_ref(),
+        recal_nominal.clone(),
+        opts,
+    );
     step("held-out check");
-    let shrink = held_out::shrink(points, &nominal.features, &models);
+    let shrink = held_out::shrink(check_points, &nominal.features, &models);
     let located = where_::locate(inputs, &grouped, &nominal, &models, base, opts);
     let recalibration = held_out::recalibration(base, &models, opts.nominal_uncertainty);
     let chambers = chamber_table(&fs, &nominal.bars, &models, &baselines);
-    let (alternatives, alternative_sims) = close_call_group(&fs, points, &nominal, &ranking, &shrink, opts);
+    let (alternatives, alternative_sims) = close_call_group(
+        check_fs,
+        check_points,
+        &nominal,
+        &ranking,
+        &shrink,
+        recal_nominal.clone(),
+        opts,
+    );
 
-    let simulations = fs.simulations() + models.simulations() + alternative_sims;
+    let simulations = fs.simulations()
+        + own_fs.as_ref().map_or(0, |f| f.simulations())
+        + relinearised.as_ref().map_or(0, |(f, _)| f.simulations())
+        + models.simulations()
+        + alternative_sims;
     Ok(Outcome {
         report: Report {
             tool: format!("hammer diagnose {}", env!("CARGO_PKG_VERSION")),
@@ -218,12 +279,13 @@ fn close_call_group(
     nominal: &nominal::Nominal,
     ranking: &rank::Ranking,
     shrink: &Shrink,
+    nominal_recalibrated: Option<crate::fitset::Recalibrated>,
     opts: &Options,
 ) -> (Vec<Alternative>, usize) {
     let (Some(named), Some(other)) = (&ranking.verdict, &ranking.close_call) else {
         return (Vec::new(), 0);
     };
-    let models = held_out::models(fs, &nominal.bars, Some(other), opts);
+    let models = held_out::models(fs, &nominal.bars, Some(other), nominal_recalibrated, opts);
     let other_shrink = held_out::shrink(points, &nominal.features, &models);
     let member = |e: &EffectResult, s: &Shrink| {
         let name = e.name.rsplit('+').next().unwrap_or_default().to_string();

@@ -10,6 +10,7 @@ use crate::input::{DiagnoseError, MeasuredInput};
 use crate::report::InputInfo;
 
 /// One operating point: the cycles of every input at its supply pressure.
+#[derive(Clone)]
 pub(crate) struct Point {
     pub(crate) supply_bar: f64,
     pub(crate) fit: Vec<CycleFeatures>,

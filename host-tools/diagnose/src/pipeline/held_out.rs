@@ -72,14 +72,27 @@ impl Models {
     }
 }
 
-/// Recalibrates the nominal model alone and with the verdict's effects, and
-/// runs both at every point of `bars`.
-pub(crate) fn models(fs: &FitSet, bars: &[f64], verdict: Option<&EffectResult>, opts: &Options) -> Models {
+/// The nominal model recalibrated alone on `fs` (`None` where the nominal
+/// values are trusted exactly, or it fails).
+pub(crate) fn recalibrate_nominal(fs: &FitSet, opts: &Options) -> Option<Recalibrated> {
+    let h = opts.nominal_uncertainty;
+    (h > 0.0)
+        .then(|| fs.recalibrate(&Candidate::default(), h, RECALIBRATION_STEPS, opts.threads, None))
+        .flatten()
+}
+
+/// Recalibrates the nominal model alone (unless `nominal_recalibrated`
+/// gives it, as the ranking did on the same fit set) and with the
+/// verdict's effects, and runs both at every point of `bars`.
+pub(crate) fn models(
+    fs: &FitSet,
+    bars: &[f64],
+    verdict: Option<&EffectResult>,
+    nominal_recalibrated: Option<Recalibrated>,
+    opts: &Options,
+) -> Models {
     let fitted_cand = verdict.map(|v| v.candidate.clone());
     let h = opts.nominal_uncertainty;
-    let reweighed = fs.against_reference.then(|| refit_weights(fs, fitted_cand.as_ref()));
-    let counted = fs;
-    let fs = reweighed.as_ref().unwrap_or(fs);
     let recalibrated = |cand: &Candidate, from: Option<&[f64]>| -> Option<Recalibrated> {
         if h > 0.0 {
             fs.recalibrate(cand, h, RECALIBRATION_STEPS, opts.threads, from)
@@ -97,7 +110,10 @@ pub(crate) fn models(fs: &FitSet, bars: &[f64], verdict: Option<&EffectResult>, 
     };
     let none = || bars.iter().map(|_| None).collect::<Vec<_>>();
     let nominal = Candidate::default();
-    let recal_nominal = recalibrated(&nominal, None);
+    let recal_nominal = match nominal_recalibrated {
+        Some(r) => Some(r),
+        None => recalibrated(&nominal, None),
+    };
     // The verdict's model starts where the nominal one got to (if that is
     // better than nominal for it): the effects move the nominal parameters
     // less than the hammer's form does.
@@ -110,11 +126,6 @@ pub(crate) fn models(fs: &FitSet, bars: &[f64], verdict: Option<&EffectResult>, 
     };
     let (recal_runner, recal_runs) = model_runs(&recal_nominal, &nominal);
     let effects_only_runs = fitted_cand.as_ref().map_or_else(none, |c| model_runs(&None, c).1);
-    if let Some(r) = &reweighed {
-        counted
-            .sims
-            .fetch_add(r.simulations(), std::sync::atomic::Ordering::Relaxed);
-    }
     Models {
         fitted_cand,
         fitted_runner,
@@ -125,24 +136,6 @@ pub(crate) fn models(fs: &FitSet, bars: &[f64], verdict: Option<&EffectResult>, 
         recal_nominal,
         recal_verdict,
     }
-}
-
-/// The fit set as the refit against a record weighs it: each waveform by
-/// what the verdict's model (the nominal one with no verdict) leaves of it.
-///
-/// Against a record the ranking weighs the waveforms by their floors
-/// alone (the nominal model's miss is the change itself, not a form error,
-/// `engine::diagnose_against`). What the named effect's model leaves of
-/// the change, though, is the form error of the change: on a hammer of
-/// another form its law moves the waveforms otherwise than the model's.
-/// Weighed by their floors, those 86 features outvoted the impact energy
-/// and period in the refit, which missed the fit points' own energy by
-/// −16 % to +30 % (issue 44; seed 7 case 15 of the structural benchmark,
-/// heat exchange: 4.03 J for 4.42 J measured at 4 bar). Inflated by that
-/// remainder, as the fit against the model alone is by the nominal
-/// model's, the refit meets the energy the floors ask of it.
-fn refit_weights<'a>(fs: &FitSet<'a>, verdict: Option<&Candidate>) -> FitSet<'a> {
-    fs.reweighed(&fs.model_form_factors(verdict.unwrap_or(&Candidate::default())))
 }
 
 /// The recalibrated nominal model's features at point `i` (at `bar`), as
