@@ -44,6 +44,11 @@ pub struct BenchOptions {
     /// ([`super::engine::diagnose_against`]).
     #[serde(default)]
     pub reference: bool,
+    /// With `reference`: each case diagnosed against the model alone too,
+    /// beside it (`CaseResult::alone`). The CLI's benchmark does; a test of
+    /// one case need not pay for it.
+    #[serde(default)]
+    pub alone_beside: bool,
 }
 
 impl Default for BenchOptions {
@@ -56,6 +61,7 @@ impl Default for BenchOptions {
             jitter: 0.03,
             structural: false,
             reference: false,
+            alone_beside: false,
         }
     }
 }
@@ -470,7 +476,7 @@ pub fn run_case(opts: &BenchOptions, index: usize, diag: &Options) -> anyhow::Re
     let friction = hammer_sim::effects::CoulombFriction::NAME;
     let friction_within_u =
         friction_within_u(r, j.named.params.get(friction)).filter(|_| hidden.names().iter().any(|n| n == friction));
-    let alone = if references.is_empty() {
+    let alone = if references.is_empty() || !opts.alone_beside {
         None
     } else {
         let t = std::time::Instant::now();

@@ -206,6 +206,9 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         jitter,
         structural: args.structural,
         reference: args.reference,
+        // A record must add evidence, never subtract it: the benchmark
+        // shows every case beside its diagnosis against the model alone.
+        alone_beside: args.reference,
     };
     let diag = Options {
         figures: false,
