@@ -39,6 +39,12 @@ fn main() {
                 1e3 * t
             );
         }
+        if let Some(e) = c.port_shift_error {
+            println!(
+                "  the named delay shifts the model's front port within {:.1} % of that",
+                100.0 * e
+            );
+        }
         for f in &r.detection_floors {
             println!("  floor: {}", f.statement);
         }

@@ -284,6 +284,11 @@ pub struct CaseResult {
     /// to the generator's (structural benchmark with references only).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub front_dead_volume_error: Option<f64>,
+    /// A named valve delay's size in physical terms against the truth's:
+    /// the diagnosis model's front port shift at the named τ (the mean over
+    /// the points) relative to the hammer's true shift, |error|.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub port_shift_error: Option<f64>,
     /// With a hidden friction named: whether the verdict's friction law
     /// lies within U of the force balance's reading at every operating
     /// point, the held-out one included.
@@ -340,6 +345,25 @@ fn judge(r: &super::engine::Report, hidden: &Hidden, truth: &Effects, points: &[
         correct,
         param_errors,
     }
+}
+
+/// How much later the diagnosis model's front port opens after the impact
+/// with a valve delay of `tau_s` than without, the mean over `points`: a
+/// named delay's size in the physical terms the truth has.
+fn model_port_shift_s(base: &SimConfig, tau_s: f64, points: &[f64]) -> Option<f64> {
+    let opening = |bar: f64, tau: Option<f64>| {
+        let mut c = base.clone();
+        c.supply.pressure_bar = bar;
+        c.solver.duration_s = 1.0;
+        c.effects.valve_delay = tau.map(|tau_s| ValveDelay { tau_s });
+        let run = hammer_sim::simulate_truth(&c).ok()?;
+        front_port_opening_of_model(&run, &c, SETTLE_S)
+    };
+    let shifts: Vec<f64> = points
+        .iter()
+        .map(|&bar| Some(opening(bar, Some(tau_s))? - opening(bar, None)?))
+        .collect::<Option<_>>()?;
+    (!shifts.is_empty()).then(|| shifts.iter().sum::<f64>() / shifts.len() as f64)
 }
 
 /// Whether the verdict's friction law lies within U of the force balance's
@@ -476,6 +500,11 @@ pub fn run_case(opts: &BenchOptions, index: usize, diag: &Options) -> anyhow::Re
     let friction = hammer_sim::effects::CoulombFriction::NAME;
     let friction_within_u =
         friction_within_u(r, j.named.params.get(friction)).filter(|_| hidden.names().iter().any(|n| n == friction));
+    let port_shift_error = true_port_delay_s.and_then(|truth| {
+        let named = j.named.params.get(ValveDelay::NAME)?;
+        let tau = named.get("tau_s")?.as_f64()?;
+        Some((model_port_shift_s(&base, tau, &opts.points)? - truth).abs() / truth)
+    });
     let alone = if references.is_empty() || !opts.alone_beside {
         None
     } else {
@@ -527,6 +556,7 @@ pub fn run_case(opts: &BenchOptions, index: usize, diag: &Options) -> anyhow::Re
         detection_floors: r.detection_floors.clone(),
         front_dead_volume_error,
         friction_within_u,
+        port_shift_error,
         alone,
         report: Some(out.report),
     })

@@ -160,6 +160,10 @@ pub struct Tally {
     /// Friction cases whose fitted law lies within U of the force balance
     /// at every point: (within, all).
     pub friction_within_u: (usize, usize),
+    /// Named valve delays whose front port shift in the model lies within
+    /// 15 % of the hammer's true shift: (within, all).
+    #[serde(default)]
+    pub port_shift_within_15pct: (usize, usize),
     /// The same counts against the model alone (with references only).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub alone: Option<Box<Tally>>,
@@ -181,6 +185,10 @@ impl Tally {
     pub fn of(cases: &[super::CaseResult]) -> Self {
         let mut t = Self::count(cases.iter().map(|c| (&c.hidden, c.outcome)));
         for c in cases {
+            if let Some(e) = c.port_shift_error {
+                t.port_shift_within_15pct.0 += usize::from(e <= 0.15);
+                t.port_shift_within_15pct.1 += 1;
+            }
             if let Some(w) = c.friction_within_u {
                 t.friction_within_u.0 += usize::from(w);
                 t.friction_within_u.1 += 1;
@@ -258,6 +266,13 @@ impl Tally {
             let _ = writeln!(
                 out,
                 "  friction cases with the fitted law within U of the force balance at every point: {w}/{n}"
+            );
+        }
+        let (w, n) = self.port_shift_within_15pct;
+        if n > 0 {
+            let _ = writeln!(
+                out,
+                "  valve delays named, sized in physical terms (the model's front port shift at the named τ against the hammer's true shift): within 15 % in {w}/{n}"
             );
         }
         if let Some(a) = &self.alone {
