@@ -13,9 +13,10 @@
 //!   a supply restriction or a worn valve makes smaller (`fill`).
 //!
 //! They run on one cycle's samples at a time (slices, no allocation), on the
-//! host from a raw trace or capture. The board does not compute them: its
-//! image has under 50 B of flash to spare (`docs/firmware.md`), and they
-//! need the samples around the impact that its checkpoint sums do not keep.
+//! host from a raw trace or capture, and at a cycle's close from its codes
+//! (`at_close`: the reading of a one-cycle capture, no_std, what a board
+//! runs; they need the samples around the impacts that the estimator's
+//! checkpoint sums do not keep, so the board keeps a ring of them).
 //!
 //! Module map:
 //! - this file: [`ChamberGeometry`], [`Feed`] and [`Characteristics`], and
@@ -24,8 +25,11 @@
 //! - `closed`: the closed phase's polytropic fit and the feed onset after it,
 //!   reading ln p and ln V from the caller's room where it gives one (`Cached`);
 //! - `fill`: the effective feed area from the energy equation;
-//! - `charge`: the air each chamber draws per cycle (an estimate).
+//! - `charge`: the air each chamber draws per cycle (an estimate);
+//! - `at_close`: one cycle's characteristics from its ADC codes and its
+//!   report, in room the caller lends (the board's reading).
 
+pub mod at_close;
 mod charge;
 mod closed;
 mod fill;

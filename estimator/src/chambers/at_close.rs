@@ -1,0 +1,282 @@
+//! One cycle's characteristics at its close, from the cycle's ADC codes and
+//! its report: what a board computes, no_std and f32 from the codes on.
+//!
+//! The reading is the host's reading of a one-cycle raw capture
+//! (`hammer_sim::characteristics::characterise_spans` with a tail), step for
+//! step: the pressures read back by their group delay; the piston's track
+//! closed between the cycle's two impacts, once from the accelerometer (the
+//! value) and once from the force balance (its spread widens the
+//! uncertainties); after the closing impact, where a front feed may start,
+//! the accelerometer integrated from the rebound the cycle's own opening
+//! impact gave (a steady hammer rebounds alike from each impact). Only the
+//! samples of the cycle and [`LOOK_AFTER_S`] after it are needed, so the
+//! report of a cycle can wait for them (`docs/estimator.md`).
+//!
+//! The caller lends the room ([`Work`]: seven floats a sample of the window
+//! and the closed fits' logarithms); nothing is allocated. A window longer
+//! than the room gives `None`, never a reading of part of it.
+
+use super::track::{self, PhaseFriction, Piston};
+use super::{characterise, ChamberGeometry, Characteristics, Window, LOOK_AFTER_S, P_ATM_PA};
+use crate::{Config, CycleReport, RawSample};
+
+/// Samples kept after [`LOOK_AFTER_S`] past the closing impact (the host's
+/// capture reader reads as far).
+pub const AFTER_MARGIN: usize = 64;
+/// The longest a shock is looked for after its impact (a contact lasts
+/// tens of microseconds; the accelerometer's ringing a little longer).
+const MAX_SHOCK_S: f32 = 0.5e-3;
+/// How long after a shock the front chamber is taken as closed, to fit the
+/// rebound of the tail's track when the cycle's own gave none.
+const REBOUND_FIT_S: f32 = 0.5e-3;
+
+/// Samples the window of a cycle of `cycle` samples takes at `dt_s`: the
+/// cycle, both its impacts, and the look-after with its margin.
+pub fn window_samples(cycle: usize, dt_s: f32) -> usize {
+    cycle + 1 + look_after(dt_s) + AFTER_MARGIN
+}
+
+/// [`LOOK_AFTER_S`] in samples, rounded up.
+fn look_after(dt_s: f32) -> usize {
+    let x = LOOK_AFTER_S / dt_s;
+    let whole = x as usize;
+    if (whole as f32) < x {
+        whole + 1
+    } else {
+        whole
+    }
+}
+
+/// The room a reading works in, each slice at least as long as the window
+/// (`room`: two floats a sample for the closed fits' logarithms; shorter is
+/// allowed and only slower, [`characterise`]).
+pub struct Work<'a> {
+    pub p_rear_pa: &'a mut [f32],
+    pub p_front_pa: &'a mut [f32],
+    pub accel_mps2: &'a mut [f32],
+    pub x_accel_m: &'a mut [f32],
+    pub x_force_m: &'a mut [f32],
+    pub before: &'a mut [f32],
+    pub after: &'a mut [f32],
+    pub room: &'a mut [f32],
+}
+
+impl ChamberGeometry {
+    /// The chambers `c` describes: the piston's areas, the travel as the
+    /// impact position, the dead volumes and outlets of `c.chambers`.
+    pub fn of(c: &Config) -> Self {
+        let ch = &c.chambers;
+        Self {
+            rear_area_m2: c.geometry.rear_area_m2(),
+            front_area_m2: c.geometry.front_area_m2(),
+            rear_dead_m3: ch.rear_dead_m3 as f64,
+            front_dead_m3: ch.front_dead_m3 as f64,
+            impact_position_m: c.geometry.travel_m as f64,
+            rear_outlet_m: ch.rear_outlet_m as f64,
+            front_outlet_m: ch.front_outlet_m as f64,
+        }
+    }
+}
+
+/// The characteristics of the cycle `report` closes. `codes` starts at the
+/// cycle's opening impact (its first shock sample, index 0) and holds the
+/// closing one at `close` and at least half the look-after past it (all of
+/// it and [`AFTER_MARGIN`] are read where there). `None` where the window
+/// does not fit `work`, the cycle is not a valid one, or the samples after
+/// it are too few.
+pub fn characterise_cycle(
+    cfg: &Config,
+    geo: &ChamberGeometry,
+    codes: &[RawSample],
+    close: usize,
+    report: &CycleReport,
+    work: &mut Work,
+) -> Option<Characteristics> {
+    let dt = cfg.dt_s();
+    let look = look_after(dt);
+    let following = (close + look + AFTER_MARGIN).min(codes.len().checked_sub(1)?);
+    let n = following + 1;
+    let fits = [
+        work.p_rear_pa.len(),
+        work.p_front_pa.len(),
+        work.accel_mps2.len(),
+        work.x_accel_m.len(),
+        work.x_force_m.len(),
+        work.before.len(),
+        work.after.len(),
+    ]
+    .iter()
+    .all(|&l| l >= n);
+    if !(fits && report.is_valid() && 0 < close && close + look / 2 <= following && geo.is_valid()) {
+        return None;
+    }
+    let codes = &codes[..n];
+    // The pressures, read back by the channels' group delay.
+    let lag = cfg.chambers.pressure_group_delay_s / dt;
+    advanced(codes, |s| cfg.rear.value(s.rear), lag, &mut work.p_rear_pa[..n]);
+    advanced(codes, |s| cfg.front.value(s.front), lag, &mut work.p_front_pa[..n]);
+    for (a, s) in work.accel_mps2[..n].iter_mut().zip(codes) {
+        *a = cfg.accel.value(s.accel);
+    }
+    let (p1, p2, accel) = (&work.p_rear_pa[..n], &work.p_front_pa[..n], &work.accel_mps2[..n]);
+    let piston = Piston::of(cfg);
+    let friction = PhaseFriction {
+        backhaul_n: report.friction_backhaul_n,
+        stroke_n: report.friction_stroke_n,
+    };
+    let impact = geo.impact_position_m as f32;
+    let threshold = cfg.impact_threshold_mps2;
+    // The tracks between the impacts (NaN after the closing one).
+    let (x_acc, x_force) = (&mut work.x_accel_m[..n], &mut work.x_force_m[..n]);
+    x_acc.fill(f32::NAN);
+    x_force.fill(f32::NAN);
+    let blank = crate::math::round(cfg.blank_after_s / dt) as usize;
+    let a_end = shock_end(accel, 0, threshold, dt).min(close - 1);
+    x_acc[..a_end].fill(impact);
+    x_force[..a_end].fill(impact);
+    let balance = || track::force_balance(p1, p2, &piston, friction);
+    let tau = cfg.accel_zero_shift_tau_s;
+    let source = track::accelerometer(accel, report.accel_zero_shift_mps2, tau, dt, 0, blank, balance());
+    let (before, after) = (&mut work.before[..n], &mut work.after[..n]);
+    for i in a_end..=close {
+        before[i] = source(i, usize::MAX);
+        after[i] = if i < blank { source(i, 0) } else { before[i] };
+    }
+    let (before, after) = (&*before, &*after);
+    track::closed(dt, impact, a_end, close, x_acc, |i, turn| {
+        if i < turn {
+            before[i]
+        } else {
+            after[i]
+        }
+    });
+    track::closed(dt, impact, a_end, close, x_force, balance());
+    let rebound = |x: &[f32]| {
+        if a_end + 1 < close {
+            Some((x[a_end + 1] - x[a_end]) / dt).filter(|v| v.is_finite())
+        } else {
+            None
+        }
+    };
+    let (r_acc, r_force) = (rebound(x_acc), rebound(x_force));
+    // After the closing impact: the tail's track from each rebound.
+    let tail_end = shock_end(accel, close, threshold, dt);
+    tail(accel, p2, dt, geo, close, tail_end, r_acc, x_acc);
+    tail(accel, p2, dt, geo, close, tail_end, r_force, x_force);
+    let end = (close + look + AFTER_MARGIN).min(following);
+    let supply_abs = cfg.supply_pressure_pa + P_ATM_PA;
+    let room = &mut *work.room;
+    let mut read = |x: &[f32]| {
+        let w = Window {
+            dt_s: dt,
+            p_rear_pa: &p1[..=end],
+            p_front_pa: &p2[..=end],
+            x_m: &x[..=end],
+            open: 0,
+            close,
+            fit_dead_volume: false,
+        };
+        characterise(&w, geo, supply_abs, room)
+    };
+    let by_accel = read(x_acc);
+    Some(by_accel.widened(&read(x_force)))
+}
+
+/// `out[i]` = the channel `value` reads, `lag` samples later (linear
+/// interpolation; the last samples repeat the end): a delayed channel
+/// brought back in time.
+fn advanced(codes: &[RawSample], value: impl Fn(&RawSample) -> f32, lag: f32, out: &mut [f32]) {
+    let n = codes.len().min(out.len());
+    if n == 0 {
+        return;
+    }
+    if lag.is_nan() || lag <= 0.0 {
+        for (o, s) in out.iter_mut().zip(codes) {
+            *o = value(s);
+        }
+        return;
+    }
+    let whole = lag as usize;
+    let frac = lag - whole as f32;
+    for (i, o) in out[..n].iter_mut().enumerate() {
+        let a = value(&codes[(i + whole).min(n - 1)]);
+        let b = value(&codes[(i + whole + 1).min(n - 1)]);
+        *o = a + frac * (b - a);
+    }
+}
+
+/// The first sample after the impact at `i` where the accelerometer has
+/// left the impact region (`i` itself if it never does within the shock's
+/// longest).
+fn shock_end(accel: &[f32], i: usize, threshold_mps2: f32, dt_s: f32) -> usize {
+    let last = (i + (MAX_SHOCK_S / dt_s) as usize).min(accel.len().saturating_sub(1));
+    (i + 1..=last)
+        .find(|&k| crate::math::abs(accel[k]) < threshold_mps2)
+        .unwrap_or(i)
+}
+
+/// The track after the closing impact, from the end of its shock: the
+/// accelerometer integrated from `rebound`; without one, the rebound fitted
+/// to the front chamber's first half millisecond, closed at the adiabatic
+/// exponent. The displacement is integrated as it is written (no room of
+/// its own), twice where the fit needs it first.
+#[allow(clippy::too_many_arguments)]
+fn tail(
+    accel: &[f32],
+    p2: &[f32],
+    dt: f32,
+    geo: &ChamberGeometry,
+    close: usize,
+    a_end: usize,
+    rebound: Option<f32>,
+    x: &mut [f32],
+) {
+    let n = accel.len().min(p2.len()).min(x.len());
+    let impact = geo.impact_position_m as f32;
+    let a_end = a_end.clamp(close, n);
+    x[close..a_end].fill(impact);
+    if a_end + 2 >= n {
+        return;
+    }
+    let len = n - a_end;
+    let v0 = match rebound {
+        Some(v0) => v0,
+        None => {
+            let (v_dead, a2) = (geo.front_dead_m3 as f32, geo.front_area_m2 as f32);
+            let p_abs = |i: usize| p2[i] + P_ATM_PA;
+            let fit = ((REBOUND_FIT_S / dt) as usize).clamp(2, len - 1);
+            let (mut num, mut den) = (0.0f32, 0.0f32);
+            displacement(accel, dt, a_end, len, |k, uk| {
+                if (1..=fit).contains(&k) {
+                    let ratio = p_abs(a_end) / p_abs(a_end + k);
+                    let x_closed = impact - v_dead * (crate::math::powf(ratio, 1.0 / 1.4) - 1.0) / a2;
+                    let tk = k as f32 * dt;
+                    num += (x_closed - impact - uk) * tk;
+                    den += tk * tk;
+                }
+            });
+            if den > 0.0 {
+                (num / den).min(0.0)
+            } else {
+                0.0
+            }
+        }
+    };
+    displacement(accel, dt, a_end, len, |k, uk| {
+        x[a_end + k] = (impact + v0 * k as f32 * dt + uk).min(impact);
+    });
+}
+
+/// `f(k, u)` for the `len` samples from `a_end`: u the displacement the
+/// accelerometer gives from rest at `a_end` (the trapezoid, twice).
+fn displacement(accel: &[f32], dt: f32, a_end: usize, len: usize, mut f: impl FnMut(usize, f32)) {
+    let (mut u, mut v) = (0.0f32, 0.0f32);
+    f(0, 0.0);
+    for k in 1..len {
+        let i = a_end + k;
+        let v_next = v + 0.5 * dt * (accel[i - 1] + accel[i]);
+        u += 0.5 * dt * (v + v_next);
+        v = v_next;
+        f(k, u);
+    }
+}
