@@ -207,6 +207,22 @@ const EDGE_GUARD_M: f32 = 2e-3;
 /// a sample of the window); where it is shorter they are computed as read,
 /// with the same figures, several times slower.
 pub fn characterise(w: &Window, geo: &ChamberGeometry, supply_abs_pa: f32, room: &mut [f32]) -> Characteristics {
+    if w.fit_dead_volume {
+        characterise_with::<true>(w, geo, supply_abs_pa, room)
+    } else {
+        characterise_with::<false>(w, geo, supply_abs_pa, room)
+    }
+}
+
+/// [`characterise`] with the dead-volume fit decided at build time: a
+/// reading without it (`DEAD_VOLUME` false, the board's) links none of the
+/// fit's double-precision sums.
+pub(crate) fn characterise_with<const DEAD_VOLUME: bool>(
+    w: &Window,
+    geo: &ChamberGeometry,
+    supply_abs_pa: f32,
+    room: &mut [f32],
+) -> Characteristics {
     let n = w.p_rear_pa.len().min(w.p_front_pa.len()).min(w.x_m.len());
     if !(w.open < w.close && w.close < n && w.dt_s > 0.0 && geo.is_valid()) {
         return Characteristics::default();
@@ -222,7 +238,7 @@ pub fn characterise(w: &Window, geo: &ChamberGeometry, supply_abs_pa: f32, room:
             let end = (w.close + look_after).min(n);
             let p = &w.p_front_pa[start..end];
             let x = &w.x_m[start..end];
-            feed(w, p, x, |x| geo.front_volume_m3(x), start, w.close, supply_abs_pa, room)
+            feed::<DEAD_VOLUME>(w, p, x, |x| geo.front_volume_m3(x), start, w.close, supply_abs_pa, room)
         });
     // Rear: closed once the backhaul has covered its outlet, until the feed;
     // the search ends where the stroke uncovers it again.
@@ -232,7 +248,7 @@ pub fn characterise(w: &Window, geo: &ChamberGeometry, supply_abs_pa: f32, room:
         let end = (turn..w.close).find(|&i| w.x_m[i] >= rear_edge).unwrap_or(w.close);
         let p = &w.p_rear_pa[start..end];
         let x = &w.x_m[start..end];
-        feed(w, p, x, |x| geo.rear_volume_m3(x), start, w.open, supply_abs_pa, room)
+        feed::<DEAD_VOLUME>(w, p, x, |x| geo.rear_volume_m3(x), start, w.open, supply_abs_pa, room)
     });
     let found = Characteristics {
         front,
@@ -247,7 +263,7 @@ pub fn characterise(w: &Window, geo: &ChamberGeometry, supply_abs_pa: f32, room:
 
 /// One chamber: the closed fit, the onset, the state there and the fill.
 #[allow(clippy::too_many_arguments)]
-fn feed(
+fn feed<const DEAD_VOLUME: bool>(
     w: &Window,
     p: &[f32],
     x: &[f32],
@@ -291,7 +307,7 @@ fn feed(
         closed_exponent_uncertainty: o.exponent_uncertainty,
         feed_area_m2: area.area_m2,
         feed_area_uncertainty_m2: u_area,
-        dead_volume_offset_m3: if w.fit_dead_volume {
+        dead_volume_offset_m3: if DEAD_VOLUME && w.fit_dead_volume {
             closed::dead_volume_offset(p, x, &volume, w.dt_s, &o).unwrap_or(f32::NAN)
         } else {
             f32::NAN

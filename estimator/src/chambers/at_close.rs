@@ -12,12 +12,17 @@
 //! samples of the cycle and [`LOOK_AFTER_S`] after it are needed, so the
 //! report of a cycle can wait for them (`docs/estimator.md`).
 //!
+//! f32 throughout: the geometry comes from the configuration's f32 fields
+//! ([`ChamberGeometry::of`]) and the dead-volume fit, the chambers' one use
+//! of double precision, is not linked here (a hammer's record fits it, on
+//! the host).
+//!
 //! The caller lends the room ([`Work`]: seven floats a sample of the window
 //! and the closed fits' logarithms); nothing is allocated. A window longer
 //! than the room gives `None`, never a reading of part of it.
 
 use super::track::{self, PhaseFriction, Piston};
-use super::{characterise, ChamberGeometry, Characteristics, Window, LOOK_AFTER_S, P_ATM_PA};
+use super::{characterise_with, ChamberGeometry, Characteristics, Window, LOOK_AFTER_S, P_ATM_PA};
 use crate::{Config, CycleReport, RawSample};
 
 /// Samples kept after [`LOOK_AFTER_S`] past the closing impact (the host's
@@ -63,12 +68,14 @@ pub struct Work<'a> {
 
 impl ChamberGeometry {
     /// The chambers `c` describes: the piston's areas, the travel as the
-    /// impact position, the dead volumes and outlets of `c.chambers`.
+    /// impact position, the dead volumes and outlets of `c.chambers`. The
+    /// areas in the estimator's f32 arithmetic (a board has no double
+    /// precision; the readings use them in f32 in any case).
     pub fn of(c: &Config) -> Self {
         let ch = &c.chambers;
         Self {
-            rear_area_m2: c.geometry.rear_area_m2(),
-            front_area_m2: c.geometry.front_area_m2(),
+            rear_area_m2: c.rear_area_m2() as f64,
+            front_area_m2: c.front_area_m2() as f64,
             rear_dead_m3: ch.rear_dead_m3 as f64,
             front_dead_m3: ch.front_dead_m3 as f64,
             impact_position_m: c.geometry.travel_m as f64,
@@ -176,7 +183,9 @@ pub fn characterise_cycle(
             close,
             fit_dead_volume: false,
         };
-        characterise(&w, geo, supply_abs, room)
+        // No dead-volume fit (a record's, on the host): none of its
+        // double-precision sums in a board's image.
+        characterise_with::<false>(&w, geo, supply_abs, room)
     };
     let by_accel = read(x_acc);
     Some(by_accel.widened(&read(x_force)))

@@ -480,7 +480,8 @@ mod tests {
             pressure_lag_s: config.chambers.pressure_group_delay_s as f64,
         };
         let geo = ChamberGeometry::of(&config);
-        // The board's f32 chambers are the hammer's, as the reading uses them (in f32).
+        // The board's f32 chambers are the hammer's as the reading uses them
+        // (in f32; the areas computed in f32, within an ulp of the f64 ones).
         let h = cfg.hammer.chambers();
         let f32s = |g: &ChamberGeometry| {
             [
@@ -494,7 +495,9 @@ mod tests {
             ]
             .map(|v| v as f32)
         };
-        assert_eq!(f32s(&geo), f32s(&h));
+        for (k, (a, b)) in f32s(&geo).into_iter().zip(f32s(&h)).enumerate() {
+            assert!(if k < 2 { (a / b - 1.0).abs() < 2e-7 } else { a == b }, "{k}: {a} {b}");
+        }
         let reading = Reading::of(&config);
         let n = window_samples(6_000, config.dt_s());
         let mut buf = vec![vec![0.0f32; n]; 8];
