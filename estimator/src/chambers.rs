@@ -176,14 +176,60 @@ impl Characteristics {
     }
 }
 
-/// One cycle's samples and the indices of its two impacts. All slices have
-/// the same length and reach past `close` far enough to see a feed that
-/// starts after the closing impact ([`LOOK_AFTER_S`]); pressures gauge.
-#[derive(Debug, Clone, Copy)]
-pub struct Window<'a> {
+/// One channel of a cycle's window, read sample by sample: a slice, or a
+/// board's ADC codes read through their calibration where they are kept
+/// (`at_close`: no room for the pressures as floats).
+pub trait Series {
+    fn len(&self) -> usize;
+    fn at(&self, i: usize) -> f32;
+    fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+impl Series for [f32] {
+    fn len(&self) -> usize {
+        <[f32]>::len(self)
+    }
+    fn at(&self, i: usize) -> f32 {
+        self[i]
+    }
+}
+
+/// `inner[start..end]`, of any series.
+pub struct Part<'a, S: Series + ?Sized> {
+    inner: &'a S,
+    start: usize,
+    len: usize,
+}
+
+impl<'a, S: Series + ?Sized> Part<'a, S> {
+    pub fn new(inner: &'a S, start: usize, end: usize) -> Self {
+        let end = end.min(inner.len());
+        Self {
+            inner,
+            start: start.min(end),
+            len: end - start.min(end),
+        }
+    }
+}
+
+impl<S: Series + ?Sized> Series for Part<'_, S> {
+    fn len(&self) -> usize {
+        self.len
+    }
+    fn at(&self, i: usize) -> f32 {
+        self.inner.at(self.start + i)
+    }
+}
+
+/// One cycle's samples and the indices of its two impacts. All channels
+/// have the same length and reach past `close` far enough to see a feed
+/// that starts after the closing impact ([`LOOK_AFTER_S`]); pressures gauge.
+pub struct Window<'a, P: Series + ?Sized = [f32]> {
     pub dt_s: f32,
-    pub p_rear_pa: &'a [f32],
-    pub p_front_pa: &'a [f32],
+    pub p_rear_pa: &'a P,
+    pub p_front_pa: &'a P,
     /// The piston's position: the [`track`] of the force balance, or a
     /// simulator's truth.
     pub x_m: &'a [f32],
@@ -194,6 +240,14 @@ pub struct Window<'a> {
     /// where a hammer's own record is read, not in every model run.
     pub fit_dead_volume: bool,
 }
+
+impl<P: Series + ?Sized> Clone for Window<'_, P> {
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+
+impl<P: Series + ?Sized> Copy for Window<'_, P> {}
 
 /// How long after the closing impact a front feed is still looked for.
 pub const LOOK_AFTER_S: f32 = 8e-3;
@@ -206,19 +260,24 @@ const EDGE_GUARD_M: f32 = 2e-3;
 /// `room` keeps the closed fits' logarithms ([`closed::Cached`]: two floats
 /// a sample of the window); where it is shorter they are computed as read,
 /// with the same figures, several times slower.
-pub fn characterise(w: &Window, geo: &ChamberGeometry, supply_abs_pa: f32, room: &mut [f32]) -> Characteristics {
+pub fn characterise<P: Series + ?Sized>(
+    w: &Window<P>,
+    geo: &ChamberGeometry,
+    supply_abs_pa: f32,
+    room: &mut [f32],
+) -> Characteristics {
     if w.fit_dead_volume {
-        characterise_with::<true>(w, geo, supply_abs_pa, room)
+        characterise_with::<true, P>(w, geo, supply_abs_pa, room)
     } else {
-        characterise_with::<false>(w, geo, supply_abs_pa, room)
+        characterise_with::<false, P>(w, geo, supply_abs_pa, room)
     }
 }
 
 /// [`characterise`] with the dead-volume fit decided at build time: a
 /// reading without it (`DEAD_VOLUME` false, the board's) links none of the
 /// fit's double-precision sums.
-pub(crate) fn characterise_with<const DEAD_VOLUME: bool>(
-    w: &Window,
+pub(crate) fn characterise_with<const DEAD_VOLUME: bool, P: Series + ?Sized>(
+    w: &Window<P>,
     geo: &ChamberGeometry,
     supply_abs_pa: f32,
     room: &mut [f32],
@@ -236,9 +295,18 @@ pub(crate) fn characterise_with<const DEAD_VOLUME: bool>(
         .map(|i| i + 1)
         .and_then(|start| {
             let end = (w.close + look_after).min(n);
-            let p = &w.p_front_pa[start..end];
+            let p = Part::new(w.p_front_pa, start, end);
             let x = &w.x_m[start..end];
-            feed::<DEAD_VOLUME>(w, p, x, |x| geo.front_volume_m3(x), start, w.close, supply_abs_pa, room)
+            feed::<DEAD_VOLUME, P>(
+                w,
+                &p,
+                x,
+                |x| geo.front_volume_m3(x),
+                start,
+                w.close,
+                supply_abs_pa,
+                room,
+            )
         });
     // Rear: closed once the backhaul has covered its outlet, until the feed;
     // the search ends where the stroke uncovers it again.
@@ -246,9 +314,9 @@ pub(crate) fn characterise_with<const DEAD_VOLUME: bool>(
     let rear = (w.open..w.close).find(|&i| w.x_m[i] < rear_edge).and_then(|start| {
         let turn = (start..w.close).fold(start, |m, i| if w.x_m[i] < w.x_m[m] { i } else { m });
         let end = (turn..w.close).find(|&i| w.x_m[i] >= rear_edge).unwrap_or(w.close);
-        let p = &w.p_rear_pa[start..end];
+        let p = Part::new(w.p_rear_pa, start, end);
         let x = &w.x_m[start..end];
-        feed::<DEAD_VOLUME>(w, p, x, |x| geo.rear_volume_m3(x), start, w.open, supply_abs_pa, room)
+        feed::<DEAD_VOLUME, P>(w, &p, x, |x| geo.rear_volume_m3(x), start, w.open, supply_abs_pa, room)
     });
     let found = Characteristics {
         front,
@@ -263,9 +331,9 @@ pub(crate) fn characterise_with<const DEAD_VOLUME: bool>(
 
 /// One chamber: the closed fit, the onset, the state there and the fill.
 #[allow(clippy::too_many_arguments)]
-fn feed<const DEAD_VOLUME: bool>(
-    w: &Window,
-    p: &[f32],
+fn feed<const DEAD_VOLUME: bool, P: Series + ?Sized>(
+    w: &Window<P>,
+    p: &Part<P>,
     x: &[f32],
     volume: impl Fn(f32) -> f32,
     start: usize,
@@ -286,7 +354,7 @@ fn feed<const DEAD_VOLUME: bool>(
     }
     // Onset time from the reference impact.
     let t_ref = (reference as f32 - start as f32) * w.dt_s;
-    let at = |s: &[f32]| interpolate(s, start, o.onset_s / w.dt_s);
+    let k = o.onset_s / w.dt_s;
     // The fill is read from where the rise is established (the port's first
     // opening passes little air, and when exactly it began is the onset's
     // uncertainty, not the fill's).
@@ -300,9 +368,9 @@ fn feed<const DEAD_VOLUME: bool>(
     Some(Feed {
         onset_s: o.onset_s - t_ref,
         onset_uncertainty_s: o.onset_uncertainty_s,
-        x_m: at(w.x_m),
-        p_rear_pa: at(w.p_rear_pa),
-        p_front_pa: at(w.p_front_pa),
+        x_m: interpolate(w.x_m, start, k),
+        p_rear_pa: interpolate(w.p_rear_pa, start, k),
+        p_front_pa: interpolate(w.p_front_pa, start, k),
         closed_exponent: o.exponent,
         closed_exponent_uncertainty: o.exponent_uncertainty,
         feed_area_m2: area.area_m2,
@@ -316,13 +384,17 @@ fn feed<const DEAD_VOLUME: bool>(
 }
 
 /// `s` at the fractional sample `start + k`, linearly interpolated.
-fn interpolate(s: &[f32], start: usize, k: f32) -> f32 {
+fn interpolate<S: Series + ?Sized>(s: &S, start: usize, k: f32) -> f32 {
     let k = if k > 0.0 { k } else { 0.0 };
     let i = start + k as usize;
     let frac = k - (k as usize) as f32;
-    match (s.get(i), s.get(i + 1)) {
-        (Some(a), Some(b)) => a + frac * (b - a),
-        (Some(a), None) => *a,
-        _ => f32::NAN,
+    let n = s.len();
+    if i + 1 < n {
+        let (a, b) = (s.at(i), s.at(i + 1));
+        a + frac * (b - a)
+    } else if i < n {
+        s.at(i)
+    } else {
+        f32::NAN
     }
 }

@@ -102,19 +102,10 @@ fn offsets(bar: f64, seconds: f64) {
     let geo = ChamberGeometry::of(&config);
     let dt = config.dt_s() as f64;
     let n = window_samples((config.max_period_s as f64 / dt) as usize, config.dt_s());
-    let mut room = vec![vec![0.0f32; n]; 8];
-    let [a, b, c, d, e, f, g, h] = &mut room[..] else {
-        unreachable!()
-    };
+    let (mut x_room, mut logs_room) = (vec![0.0f32; n], vec![0.0f32; 2 * n]);
     let mut work = Work {
-        p_rear_pa: a,
-        p_front_pa: b,
-        accel_mps2: c,
-        x_accel_m: d,
-        x_force_m: e,
-        before: f,
-        after: g,
-        room: h,
+        x_m: &mut x_room,
+        room: &mut logs_room,
     };
     // The run's start-up dropped as a record's is: the second half's cycles.
     let steady = reports.len() / 4;

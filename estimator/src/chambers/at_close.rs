@@ -17,13 +17,18 @@
 //! of double precision, is not linked here (a hammer's record fits it, on
 //! the host).
 //!
-//! The caller lends the room ([`Work`]: seven floats a sample of the window
-//! and the closed fits' logarithms); nothing is allocated. A window longer
-//! than the room gives `None`, never a reading of part of it.
+//! The caller lends the room ([`Work`]): one float a sample of the window
+//! for the position track (read once from each track, one after the
+//! other), and optionally room for the closed fits' logarithms (two floats
+//! a sample of a closed phase; shorter is allowed and only slower). The
+//! pressures and the acceleration are read from the codes where they are
+//! kept ([`Codes`]: a board's ring), through their calibration, as they are
+//! needed; nothing is allocated. A window longer than the room gives
+//! `None`, never a reading of part of it.
 
 use super::track::{self, PhaseFriction, Piston};
-use super::{characterise_with, ChamberGeometry, Characteristics, Window, LOOK_AFTER_S, P_ATM_PA};
-use crate::{Config, CycleReport, RawSample};
+use super::{characterise_with, ChamberGeometry, Characteristics, Part, Series, Window, LOOK_AFTER_S, P_ATM_PA};
+use crate::{ChannelCal, Config, CycleReport, RawSample};
 
 /// Samples kept after [`LOOK_AFTER_S`] past the closing impact (the host's
 /// capture reader reads as far).
@@ -52,18 +57,76 @@ fn look_after(dt_s: f32) -> usize {
     }
 }
 
-/// The room a reading works in, each slice at least as long as the window
-/// (`room`: two floats a sample for the closed fits' logarithms; shorter is
-/// allowed and only slower, [`characterise`]).
+/// The room a reading works in: `x_m` at least as long as the window, the
+/// closed fits' cache `room` any length ([`characterise`](super::characterise)).
 pub struct Work<'a> {
-    pub p_rear_pa: &'a mut [f32],
-    pub p_front_pa: &'a mut [f32],
-    pub accel_mps2: &'a mut [f32],
-    pub x_accel_m: &'a mut [f32],
-    pub x_force_m: &'a mut [f32],
-    pub before: &'a mut [f32],
-    pub after: &'a mut [f32],
+    pub x_m: &'a mut [f32],
     pub room: &'a mut [f32],
+}
+
+/// A cycle's sample-sets where they are kept (a slice, a board's ring).
+pub trait Codes {
+    fn len(&self) -> usize;
+    fn get(&self, i: usize) -> RawSample;
+    fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+impl Codes for [RawSample] {
+    fn len(&self) -> usize {
+        <[RawSample]>::len(self)
+    }
+    fn get(&self, i: usize) -> RawSample {
+        self[i]
+    }
+}
+
+/// One channel of `codes` through its calibration, read `lag` samples
+/// later (linear interpolation; the last samples repeat the end): a delayed
+/// channel brought back in time, as the host's capture reading does it.
+struct Channel<'a, C: Codes + ?Sized> {
+    codes: &'a C,
+    n: usize,
+    cal: ChannelCal,
+    pick: fn(&RawSample) -> u16,
+    whole: usize,
+    frac: f32,
+    lagged: bool,
+}
+
+impl<'a, C: Codes + ?Sized> Channel<'a, C> {
+    fn new(codes: &'a C, n: usize, cal: ChannelCal, pick: fn(&RawSample) -> u16, lag: f32) -> Self {
+        let lagged = !(lag.is_nan() || lag <= 0.0);
+        let whole = if lagged { lag as usize } else { 0 };
+        Self {
+            codes,
+            n,
+            cal,
+            pick,
+            whole,
+            frac: if lagged { lag - whole as f32 } else { 0.0 },
+            lagged,
+        }
+    }
+
+    fn value(&self, i: usize) -> f32 {
+        self.cal.value((self.pick)(&self.codes.get(i)))
+    }
+}
+
+impl<C: Codes + ?Sized> Series for Channel<'_, C> {
+    fn len(&self) -> usize {
+        self.n
+    }
+    fn at(&self, i: usize) -> f32 {
+        if !self.lagged {
+            return self.value(i);
+        }
+        let a = self.value((i + self.whole).min(self.n - 1));
+        let b = self.value((i + self.whole + 1).min(self.n - 1));
+        a + self.frac * (b - a)
+    }
 }
 
 impl ChamberGeometry {
@@ -91,10 +154,10 @@ impl ChamberGeometry {
 /// it and [`AFTER_MARGIN`] are read where there). `None` where the window
 /// does not fit `work`, the cycle is not a valid one, or the samples after
 /// it are too few.
-pub fn characterise_cycle(
+pub fn characterise_cycle<C: Codes + ?Sized>(
     cfg: &Config,
     geo: &ChamberGeometry,
-    codes: &[RawSample],
+    codes: &C,
     close: usize,
     report: &CycleReport,
     work: &mut Work,
@@ -103,29 +166,14 @@ pub fn characterise_cycle(
     let look = look_after(dt);
     let following = (close + look + AFTER_MARGIN).min(codes.len().checked_sub(1)?);
     let n = following + 1;
-    let fits = [
-        work.p_rear_pa.len(),
-        work.p_front_pa.len(),
-        work.accel_mps2.len(),
-        work.x_accel_m.len(),
-        work.x_force_m.len(),
-        work.before.len(),
-        work.after.len(),
-    ]
-    .iter()
-    .all(|&l| l >= n);
-    if !(fits && report.is_valid() && 0 < close && close + look / 2 <= following && geo.is_valid()) {
+    if !(work.x_m.len() >= n && report.is_valid() && 0 < close && close + look / 2 <= following && geo.is_valid()) {
         return None;
     }
-    let codes = &codes[..n];
     // The pressures, read back by the channels' group delay.
     let lag = cfg.chambers.pressure_group_delay_s / dt;
-    advanced(codes, |s| cfg.rear.value(s.rear), lag, &mut work.p_rear_pa[..n]);
-    advanced(codes, |s| cfg.front.value(s.front), lag, &mut work.p_front_pa[..n]);
-    for (a, s) in work.accel_mps2[..n].iter_mut().zip(codes) {
-        *a = cfg.accel.value(s.accel);
-    }
-    let (p1, p2, accel) = (&work.p_rear_pa[..n], &work.p_front_pa[..n], &work.accel_mps2[..n]);
+    let p1 = Channel::new(codes, n, cfg.rear, |s| s.rear, lag);
+    let p2 = Channel::new(codes, n, cfg.front, |s| s.front, lag);
+    let accel = Channel::new(codes, n, cfg.accel, |s| s.accel, 0.0);
     let piston = Piston::of(cfg);
     let friction = PhaseFriction {
         backhaul_n: report.friction_backhaul_n,
@@ -133,51 +181,46 @@ pub fn characterise_cycle(
     };
     let impact = geo.impact_position_m as f32;
     let threshold = cfg.impact_threshold_mps2;
-    // The tracks between the impacts (NaN after the closing one).
-    let (x_acc, x_force) = (&mut work.x_accel_m[..n], &mut work.x_force_m[..n]);
-    x_acc.fill(f32::NAN);
-    x_force.fill(f32::NAN);
     let blank = crate::math::round(cfg.blank_after_s / dt) as usize;
-    let a_end = shock_end(accel, 0, threshold, dt).min(close - 1);
-    x_acc[..a_end].fill(impact);
-    x_force[..a_end].fill(impact);
-    let balance = || track::force_balance(p1, p2, &piston, friction);
+    let a_end = shock_end(&accel, 0, threshold, dt).min(close - 1);
+    let tail_end = shock_end(&accel, close, threshold, dt);
+    let end = (close + look + AFTER_MARGIN).min(following);
+    let supply_abs = cfg.supply_pressure_pa + P_ATM_PA;
+    let balance = || track::force_balance(&p1, &p2, &piston, friction);
     let tau = cfg.accel_zero_shift_tau_s;
-    let source = track::accelerometer(accel, report.accel_zero_shift_mps2, tau, dt, 0, blank, balance());
-    let (before, after) = (&mut work.before[..n], &mut work.after[..n]);
-    for i in a_end..=close {
-        before[i] = source(i, usize::MAX);
-        after[i] = if i < blank { source(i, 0) } else { before[i] };
-    }
-    let (before, after) = (&*before, &*after);
-    track::closed(dt, impact, a_end, close, x_acc, |i, turn| {
-        if i < turn {
-            before[i]
+    // The accelerometer's source: the force balance while it still rings
+    // (friction's sign split at the turn), its own reading after.
+    let source = track::accelerometer(&accel, report.accel_zero_shift_mps2, tau, dt, 0, blank, balance());
+    let by_accel = |i: usize, turn: usize| {
+        if i < turn || i >= blank {
+            source(i, usize::MAX)
         } else {
-            after[i]
+            source(i, 0)
         }
-    });
-    track::closed(dt, impact, a_end, close, x_force, balance());
-    let rebound = |x: &[f32]| {
-        if a_end + 1 < close {
+    };
+    let x = &mut work.x_m[..n];
+    let room = &mut *work.room;
+    // Each track in turn in the one room: the force balance's first (its
+    // spread widens the uncertainties), then the accelerometer's (the value).
+    let mut read = |by_force: bool| {
+        x.fill(f32::NAN);
+        x[..a_end].fill(impact);
+        if by_force {
+            track::closed(dt, impact, a_end, close, x, balance());
+        } else {
+            track::closed(dt, impact, a_end, close, x, by_accel);
+        }
+        let rebound = if a_end + 1 < close {
             Some((x[a_end + 1] - x[a_end]) / dt).filter(|v| v.is_finite())
         } else {
             None
-        }
-    };
-    let (r_acc, r_force) = (rebound(x_acc), rebound(x_force));
-    // After the closing impact: the tail's track from each rebound.
-    let tail_end = shock_end(accel, close, threshold, dt);
-    tail(accel, p2, dt, geo, close, tail_end, r_acc, x_acc);
-    tail(accel, p2, dt, geo, close, tail_end, r_force, x_force);
-    let end = (close + look + AFTER_MARGIN).min(following);
-    let supply_abs = cfg.supply_pressure_pa + P_ATM_PA;
-    let room = &mut *work.room;
-    let mut read = |x: &[f32]| {
+        };
+        // After the closing impact: the tail's track from the rebound.
+        tail(&accel, &p2, dt, geo, close, tail_end, rebound, x);
         let w = Window {
             dt_s: dt,
-            p_rear_pa: &p1[..=end],
-            p_front_pa: &p2[..=end],
+            p_rear_pa: &Part::new(&p1, 0, end + 1),
+            p_front_pa: &Part::new(&p2, 0, end + 1),
             x_m: &x[..=end],
             open: 0,
             close,
@@ -185,42 +228,19 @@ pub fn characterise_cycle(
         };
         // No dead-volume fit (a record's, on the host): none of its
         // double-precision sums in a board's image.
-        characterise_with::<false>(&w, geo, supply_abs, room)
+        characterise_with::<false, _>(&w, geo, supply_abs, room)
     };
-    let by_accel = read(x_acc);
-    Some(by_accel.widened(&read(x_force)))
-}
-
-/// `out[i]` = the channel `value` reads, `lag` samples later (linear
-/// interpolation; the last samples repeat the end): a delayed channel
-/// brought back in time.
-fn advanced(codes: &[RawSample], value: impl Fn(&RawSample) -> f32, lag: f32, out: &mut [f32]) {
-    let n = codes.len().min(out.len());
-    if n == 0 {
-        return;
-    }
-    if lag.is_nan() || lag <= 0.0 {
-        for (o, s) in out.iter_mut().zip(codes) {
-            *o = value(s);
-        }
-        return;
-    }
-    let whole = lag as usize;
-    let frac = lag - whole as f32;
-    for (i, o) in out[..n].iter_mut().enumerate() {
-        let a = value(&codes[(i + whole).min(n - 1)]);
-        let b = value(&codes[(i + whole + 1).min(n - 1)]);
-        *o = a + frac * (b - a);
-    }
+    let by_force = read(true);
+    Some(read(false).widened(&by_force))
 }
 
 /// The first sample after the impact at `i` where the accelerometer has
 /// left the impact region (`i` itself if it never does within the shock's
 /// longest).
-fn shock_end(accel: &[f32], i: usize, threshold_mps2: f32, dt_s: f32) -> usize {
+fn shock_end(accel: &impl Series, i: usize, threshold_mps2: f32, dt_s: f32) -> usize {
     let last = (i + (MAX_SHOCK_S / dt_s) as usize).min(accel.len().saturating_sub(1));
     (i + 1..=last)
-        .find(|&k| crate::math::abs(accel[k]) < threshold_mps2)
+        .find(|&k| crate::math::abs(accel.at(k)) < threshold_mps2)
         .unwrap_or(i)
 }
 
@@ -231,8 +251,8 @@ fn shock_end(accel: &[f32], i: usize, threshold_mps2: f32, dt_s: f32) -> usize {
 /// its own), twice where the fit needs it first.
 #[allow(clippy::too_many_arguments)]
 fn tail(
-    accel: &[f32],
-    p2: &[f32],
+    accel: &impl Series,
+    p2: &impl Series,
     dt: f32,
     geo: &ChamberGeometry,
     close: usize,
@@ -252,7 +272,7 @@ fn tail(
         Some(v0) => v0,
         None => {
             let (v_dead, a2) = (geo.front_dead_m3 as f32, geo.front_area_m2 as f32);
-            let p_abs = |i: usize| p2[i] + P_ATM_PA;
+            let p_abs = |i: usize| p2.at(i) + P_ATM_PA;
             let fit = ((REBOUND_FIT_S / dt) as usize).clamp(2, len - 1);
             let (mut num, mut den) = (0.0f32, 0.0f32);
             displacement(accel, dt, a_end, len, |k, uk| {
@@ -278,12 +298,12 @@ fn tail(
 
 /// `f(k, u)` for the `len` samples from `a_end`: u the displacement the
 /// accelerometer gives from rest at `a_end` (the trapezoid, twice).
-fn displacement(accel: &[f32], dt: f32, a_end: usize, len: usize, mut f: impl FnMut(usize, f32)) {
+fn displacement(accel: &impl Series, dt: f32, a_end: usize, len: usize, mut f: impl FnMut(usize, f32)) {
     let (mut u, mut v) = (0.0f32, 0.0f32);
     f(0, 0.0);
     for k in 1..len {
         let i = a_end + k;
-        let v_next = v + 0.5 * dt * (accel[i - 1] + accel[i]);
+        let v_next = v + 0.5 * dt * (accel.at(i - 1) + accel.at(i));
         u += 0.5 * dt * (v + v_next);
         v = v_next;
         f(k, u);

@@ -457,7 +457,9 @@ mod tests {
     /// one-cycle raw capture (its codes converted as `hammer capture` does,
     /// read with a tail): every cycle read by one is read by the other, and
     /// every value and uncertainty is the same, bit for bit (compared as
-    /// their shortest decimals, so the NaN of an unread dead volume matches).
+    /// their shortest decimals, so the NaN of an unread dead volume matches),
+    /// with the closed fits' logarithms kept or computed where read; the
+    /// pressures and the acceleration read from the codes as needed.
     #[test]
     fn the_boards_reading_at_close_is_the_one_cycle_captures() {
         use hammer_estimator::chambers::at_close::{characterise_cycle, window_samples, Work};
@@ -500,19 +502,10 @@ mod tests {
         }
         let reading = Reading::of(&config);
         let n = window_samples(6_000, config.dt_s());
-        let mut buf = vec![vec![0.0f32; n]; 8];
-        let [a, b, c, d, e, f, g, h] = &mut buf[..] else {
-            unreachable!()
-        };
+        let (mut x_buf, mut logs_buf) = (vec![0.0f32; n], vec![0.0f32; 2 * n]);
         let mut work = Work {
-            p_rear_pa: a,
-            p_front_pa: b,
-            accel_mps2: c,
-            x_accel_m: d,
-            x_force_m: e,
-            before: f,
-            after: g,
-            room: h,
+            x_m: &mut x_buf,
+            room: &mut logs_buf,
         };
         let (mut read, mut worst) = (0, [0.0f32; 3]);
         for pair in reports.windows(2) {
@@ -545,19 +538,10 @@ mod tests {
             }
         }
         // A window longer than the room lent is not read at all (never in part).
-        let mut small = vec![vec![0.0f32; 2_000]; 8];
-        let [a, b, c, d, e, f, g, h] = &mut small[..] else {
-            unreachable!()
-        };
+        let (mut x_small, mut logs_small) = (vec![0.0f32; 2_000], vec![0.0f32; 2 * 2_000]);
         let mut tight = Work {
-            p_rear_pa: a,
-            p_front_pa: b,
-            accel_mps2: c,
-            x_accel_m: d,
-            x_force_m: e,
-            before: f,
-            after: g,
-            room: h,
+            x_m: &mut x_small,
+            room: &mut logs_small,
         };
         let cur = reports.iter().rposition(|r| r.is_valid()).expect("a valid cycle");
         let close = (reports[cur].t_impact_s() / trace.dt_s).round() as usize;
