@@ -4,14 +4,14 @@
 //! with its wear levelling and torn-write handling, is the board's.
 //!
 //! A record stored before protocol 5 holds the configuration without the
-//! chambers ([`DeviceConfigV4`]): it still reads, with the default
+//! chambers (`hammer_wire::DeviceConfigV4`): it still reads, with the default
 //! chambers (the paper's hammer) added, so a board keeps its calibration
 //! and thresholds across the update (its wear state is another record,
 //! whose layout did not change). `hammer calibrate` or a `SetConfig` then
 //! stores the hammer's own chambers.
 
 use hammer_estimator::Config;
-use hammer_wire::{DeviceConfig, DeviceConfigV4};
+use hammer_wire::DeviceConfig;
 
 /// Bytes of a configuration record: a little-endian length and the
 /// configuration's postcard bytes, zero-padded.
@@ -32,11 +32,21 @@ pub fn config_record(cfg: &DeviceConfig) -> Option<[u8; CONFIG_RECORD]> {
 pub fn config_from_record(rec: &[u8], rate_hz: Option<f32>) -> Option<Config> {
     let len = u16::from_le_bytes([*rec.first()?, *rec.get(1)?]) as usize;
     let bytes = rec.get(2..2 + len)?;
-    // Each layout only where it takes the record's bytes exactly: the
-    // current one is longer, so an old record never reads as a new one.
+    // Only where it takes the record's bytes exactly: the current layout is
+    // protocol 4's and six f32 after it, so an old record never reads as a
+    // new one, and it reads as one with the default chambers' bytes
+    // appended (one deserialiser in the image, not one per layout).
     let wire = match whole::<DeviceConfig>(bytes) {
         Some(w) => w,
-        None => whole::<DeviceConfigV4>(bytes)?.with_chambers_of(&DeviceConfig::from(&Config::default())),
+        None => {
+            let mut grown = [0u8; CONFIG_RECORD + CHAMBER_BYTES];
+            let default = config_record(&DeviceConfig::from(&Config::default()))?;
+            let used = u16::from_le_bytes([default[0], default[1]]) as usize;
+            let tail = default.get(2 + used - CHAMBER_BYTES..2 + used)?;
+            grown.get_mut(..len)?.copy_from_slice(bytes);
+            grown.get_mut(len..len + CHAMBER_BYTES)?.copy_from_slice(tail);
+            whole::<DeviceConfig>(&grown[..len + CHAMBER_BYTES])?
+        }
     };
     let mut cfg = Config::default().with_device(&wire);
     if let Some(r) = rate_hz {
@@ -45,6 +55,10 @@ pub fn config_from_record(rec: &[u8], rate_hz: Option<f32>) -> Option<Config> {
     cfg.validate().ok()?;
     Some(cfg)
 }
+
+/// What protocol 5 appended to the configuration: six f32 (postcard writes
+/// an f32 as its four bytes).
+const CHAMBER_BYTES: usize = 6 * 4;
 
 /// `T` from all of `bytes`, none left over.
 fn whole<'a, T: serde::Deserialize<'a>>(bytes: &'a [u8]) -> Option<T> {
@@ -57,6 +71,7 @@ fn whole<'a, T: serde::Deserialize<'a>>(bytes: &'a [u8]) -> Option<T> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use hammer_wire::DeviceConfigV4;
 
     #[test]
     fn a_record_gives_back_its_configuration_and_garbage_gives_none() {
