@@ -14,9 +14,10 @@
 //!
 //! They run on one cycle's samples at a time (slices, no allocation), on the
 //! host from a raw trace or capture, and at a cycle's close from its codes
-//! (`at_close`: the reading of a one-cycle capture, no_std, what a board
-//! runs; they need the samples around the impacts that the estimator's
-//! checkpoint sums do not keep, so the board keeps a ring of them).
+//! (`at_close`: the reading of a one-cycle capture, no_std, for a board;
+//! they need the samples around the impacts that the estimator's
+//! checkpoint sums do not keep, so a board needs a ring of them: not wired
+//! yet, `docs/firmware.md`, "Chamber characteristics on the board").
 //!
 //! Module map:
 //! - this file: [`ChamberGeometry`], [`Feed`] and [`Characteristics`], and
