@@ -79,12 +79,16 @@ impl ChamberGeometry {
         }
     }
 
-    fn rear_volume_m3(&self, x: f32) -> f32 {
-        self.rear_dead_m3 as f32 + self.rear_area_m2 as f32 * x
-    }
-
-    fn front_volume_m3(&self, x: f32) -> f32 {
-        self.front_dead_m3 as f32 + self.front_area_m2 as f32 * (self.impact_position_m as f32 - x)
+    /// The volume laws in f32, converted once (a board converts a double
+    /// in software: once a reading, not once a sample).
+    fn volumes(&self) -> Volumes {
+        Volumes {
+            rear_dead_m3: self.rear_dead_m3 as f32,
+            rear_area_m2: self.rear_area_m2 as f32,
+            front_dead_m3: self.front_dead_m3 as f32,
+            front_area_m2: self.front_area_m2 as f32,
+            impact_position_m: self.impact_position_m as f32,
+        }
     }
 
     /// True when every length and volume is finite and the chambers exist.
@@ -101,6 +105,26 @@ impl ChamberGeometry {
         all.iter().all(|v| v.is_finite() && *v > 0.0)
             && self.front_outlet_m < self.impact_position_m
             && self.rear_outlet_m < self.impact_position_m
+    }
+}
+
+/// [`ChamberGeometry`]'s volume laws, in f32.
+#[derive(Debug, Clone, Copy)]
+struct Volumes {
+    rear_dead_m3: f32,
+    rear_area_m2: f32,
+    front_dead_m3: f32,
+    front_area_m2: f32,
+    impact_position_m: f32,
+}
+
+impl Volumes {
+    fn rear_m3(&self, x: f32) -> f32 {
+        self.rear_dead_m3 + self.rear_area_m2 * x
+    }
+
+    fn front_m3(&self, x: f32) -> f32 {
+        self.front_dead_m3 + self.front_area_m2 * (self.impact_position_m - x)
     }
 }
 
@@ -288,6 +312,7 @@ pub(crate) fn characterise_with<const DEAD_VOLUME: bool, P: Series + ?Sized>(
         return Characteristics::default();
     }
     let look_after = (LOOK_AFTER_S / w.dt_s) as usize;
+    let vol = geo.volumes();
     // Front: closed once the stroke has covered its outlet, until the feed.
     let front_edge = geo.front_outlet_m as f32 + EDGE_GUARD_M;
     let front = (w.open..w.close)
@@ -298,16 +323,7 @@ pub(crate) fn characterise_with<const DEAD_VOLUME: bool, P: Series + ?Sized>(
             let end = (w.close + look_after).min(n);
             let p = Part::new(w.p_front_pa, start, end);
             let x = &w.x_m[start..end];
-            feed::<DEAD_VOLUME, P>(
-                w,
-                &p,
-                x,
-                |x| geo.front_volume_m3(x),
-                start,
-                w.close,
-                supply_abs_pa,
-                room,
-            )
+            feed::<DEAD_VOLUME, P>(w, &p, x, |x| vol.front_m3(x), start, w.close, supply_abs_pa, room)
         });
     // Rear: closed once the backhaul has covered its outlet, until the feed;
     // the search ends where the stroke uncovers it again.
@@ -317,7 +333,7 @@ pub(crate) fn characterise_with<const DEAD_VOLUME: bool, P: Series + ?Sized>(
         let end = (turn..w.close).find(|&i| w.x_m[i] >= rear_edge).unwrap_or(w.close);
         let p = Part::new(w.p_rear_pa, start, end);
         let x = &w.x_m[start..end];
-        feed::<DEAD_VOLUME, P>(w, &p, x, |x| geo.rear_volume_m3(x), start, w.open, supply_abs_pa, room)
+        feed::<DEAD_VOLUME, P>(w, &p, x, |x| vol.rear_m3(x), start, w.open, supply_abs_pa, room)
     });
     let found = Characteristics {
         front,

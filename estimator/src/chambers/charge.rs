@@ -96,8 +96,9 @@ pub(super) fn charge<P: Series + ?Sized>(
             .find(|&i| open(w.x_m[i]))
             .map_or(to, |i| i as f32)
     };
-    let rear_volume = |x: f32| geo.rear_volume_m3(x);
-    let front_volume = |x: f32| geo.front_volume_m3(x);
+    let vol = geo.volumes();
+    let rear_volume = |x: f32| vol.rear_m3(x);
+    let front_volume = |x: f32| vol.front_m3(x);
     let rc = Chamber {
         p: w.p_rear_pa,
         x: w.x_m,
