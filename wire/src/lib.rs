@@ -10,7 +10,8 @@
 //!
 //! Module map: [`msg`] (every message; the report, flags and configuration
 //! are `hammer_types`' own, carried as they are), [`frame`] (encode, and a
-//! bounded decoder that counts what it throws away), [`cobs`], [`stimulus`]
+//! bounded decoder that counts what it throws away), [`legacy`] (an older
+//! protocol's messages, for a replayed recording), [`cobs`], [`stimulus`]
 //! (the emulated board's ADC samples, through memory shared with the host
 //! instead of the link).
 //!
@@ -24,6 +25,7 @@
 
 pub mod cobs;
 pub mod frame;
+pub mod legacy;
 pub mod msg;
 pub mod stimulus;
 
