@@ -97,7 +97,7 @@ impl<const N: usize> Decoder<N> {
     /// Feeds one byte; returns `Some` when it completed a frame (good or bad).
     pub fn push<T: DeserializeOwned>(&mut self, byte: u8) -> Option<Result<T, DecodeError>> {
         self.push_with(byte, |body| match postcard::take_from_bytes::<T>(body) {
-            Ok((m, rest)) if rest.is_empty() => Some(m),
+            Ok((m, [])) => Some(m),
             _ => None,
         })
     }
