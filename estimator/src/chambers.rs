@@ -13,9 +13,11 @@
 //!   a supply restriction or a worn valve makes smaller (`fill`).
 //!
 //! They run on one cycle's samples at a time (slices, no allocation), on the
-//! host from a raw trace or capture. The board does not compute them: its
-//! image has under 50 B of flash to spare (`docs/firmware.md`), and they
-//! need the samples around the impact that its checkpoint sums do not keep.
+//! host from a raw trace or capture, and at a cycle's close from its codes
+//! (`at_close`: the reading of a one-cycle capture, no_std, for a board;
+//! they need the samples around the impacts that the estimator's
+//! checkpoint sums do not keep, so a board needs a ring of them: not wired
+//! yet, `docs/firmware.md`, "Chamber characteristics on the board").
 //!
 //! Module map:
 //! - this file: [`ChamberGeometry`], [`Feed`] and [`Characteristics`], and
@@ -24,8 +26,11 @@
 //! - `closed`: the closed phase's polytropic fit and the feed onset after it,
 //!   reading ln p and ln V from the caller's room where it gives one (`Cached`);
 //! - `fill`: the effective feed area from the energy equation;
-//! - `charge`: the air each chamber draws per cycle (an estimate).
+//! - `charge`: the air each chamber draws per cycle (an estimate);
+//! - `at_close`: one cycle's characteristics from its ADC codes and its
+//!   report, in room the caller lends (the board's reading).
 
+pub mod at_close;
 mod charge;
 mod closed;
 mod fill;
@@ -74,12 +79,16 @@ impl ChamberGeometry {
         }
     }
 
-    fn rear_volume_m3(&self, x: f32) -> f32 {
-        self.rear_dead_m3 as f32 + self.rear_area_m2 as f32 * x
-    }
-
-    fn front_volume_m3(&self, x: f32) -> f32 {
-        self.front_dead_m3 as f32 + self.front_area_m2 as f32 * (self.impact_position_m as f32 - x)
+    /// The volume laws in f32, converted once (a board converts a double
+    /// in software: once a reading, not once a sample).
+    fn volumes(&self) -> Volumes {
+        Volumes {
+            rear_dead_m3: self.rear_dead_m3 as f32,
+            rear_area_m2: self.rear_area_m2 as f32,
+            front_dead_m3: self.front_dead_m3 as f32,
+            front_area_m2: self.front_area_m2 as f32,
+            impact_position_m: self.impact_position_m as f32,
+        }
     }
 
     /// True when every length and volume is finite and the chambers exist.
@@ -96,6 +105,26 @@ impl ChamberGeometry {
         all.iter().all(|v| v.is_finite() && *v > 0.0)
             && self.front_outlet_m < self.impact_position_m
             && self.rear_outlet_m < self.impact_position_m
+    }
+}
+
+/// [`ChamberGeometry`]'s volume laws, in f32.
+#[derive(Debug, Clone, Copy)]
+struct Volumes {
+    rear_dead_m3: f32,
+    rear_area_m2: f32,
+    front_dead_m3: f32,
+    front_area_m2: f32,
+    impact_position_m: f32,
+}
+
+impl Volumes {
+    fn rear_m3(&self, x: f32) -> f32 {
+        self.rear_dead_m3 + self.rear_area_m2 * x
+    }
+
+    fn front_m3(&self, x: f32) -> f32 {
+        self.front_dead_m3 + self.front_area_m2 * (self.impact_position_m - x)
     }
 }
 
@@ -172,14 +201,60 @@ impl Characteristics {
     }
 }
 
-/// One cycle's samples and the indices of its two impacts. All slices have
-/// the same length and reach past `close` far enough to see a feed that
-/// starts after the closing impact ([`LOOK_AFTER_S`]); pressures gauge.
-#[derive(Debug, Clone, Copy)]
-pub struct Window<'a> {
+/// One channel of a cycle's window, read sample by sample: a slice, or a
+/// board's ADC codes read through their calibration where they are kept
+/// (`at_close`: no room for the pressures as floats).
+pub trait Series {
+    fn len(&self) -> usize;
+    fn at(&self, i: usize) -> f32;
+    fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+impl Series for [f32] {
+    fn len(&self) -> usize {
+        <[f32]>::len(self)
+    }
+    fn at(&self, i: usize) -> f32 {
+        self[i]
+    }
+}
+
+/// `inner[start..end]`, of any series.
+pub struct Part<'a, S: Series + ?Sized> {
+    inner: &'a S,
+    start: usize,
+    len: usize,
+}
+
+impl<'a, S: Series + ?Sized> Part<'a, S> {
+    pub fn new(inner: &'a S, start: usize, end: usize) -> Self {
+        let end = end.min(inner.len());
+        Self {
+            inner,
+            start: start.min(end),
+            len: end - start.min(end),
+        }
+    }
+}
+
+impl<S: Series + ?Sized> Series for Part<'_, S> {
+    fn len(&self) -> usize {
+        self.len
+    }
+    fn at(&self, i: usize) -> f32 {
+        self.inner.at(self.start + i)
+    }
+}
+
+/// One cycle's samples and the indices of its two impacts. All channels
+/// have the same length and reach past `close` far enough to see a feed
+/// that starts after the closing impact ([`LOOK_AFTER_S`]); pressures gauge.
+pub struct Window<'a, P: Series + ?Sized = [f32]> {
     pub dt_s: f32,
-    pub p_rear_pa: &'a [f32],
-    pub p_front_pa: &'a [f32],
+    pub p_rear_pa: &'a P,
+    pub p_front_pa: &'a P,
     /// The piston's position: the [`track`] of the force balance, or a
     /// simulator's truth.
     pub x_m: &'a [f32],
@@ -190,6 +265,14 @@ pub struct Window<'a> {
     /// where a hammer's own record is read, not in every model run.
     pub fit_dead_volume: bool,
 }
+
+impl<P: Series + ?Sized> Clone for Window<'_, P> {
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+
+impl<P: Series + ?Sized> Copy for Window<'_, P> {}
 
 /// How long after the closing impact a front feed is still looked for.
 pub const LOOK_AFTER_S: f32 = 8e-3;
@@ -202,12 +285,34 @@ const EDGE_GUARD_M: f32 = 2e-3;
 /// `room` keeps the closed fits' logarithms ([`closed::Cached`]: two floats
 /// a sample of the window); where it is shorter they are computed as read,
 /// with the same figures, several times slower.
-pub fn characterise(w: &Window, geo: &ChamberGeometry, supply_abs_pa: f32, room: &mut [f32]) -> Characteristics {
+pub fn characterise<P: Series + ?Sized>(
+    w: &Window<P>,
+    geo: &ChamberGeometry,
+    supply_abs_pa: f32,
+    room: &mut [f32],
+) -> Characteristics {
+    if w.fit_dead_volume {
+        characterise_with::<true, P>(w, geo, supply_abs_pa, room)
+    } else {
+        characterise_with::<false, P>(w, geo, supply_abs_pa, room)
+    }
+}
+
+/// [`characterise`] with the dead-volume fit decided at build time: a
+/// reading without it (`DEAD_VOLUME` false, the board's) links none of the
+/// fit's double-precision sums.
+pub(crate) fn characterise_with<const DEAD_VOLUME: bool, P: Series + ?Sized>(
+    w: &Window<P>,
+    geo: &ChamberGeometry,
+    supply_abs_pa: f32,
+    room: &mut [f32],
+) -> Characteristics {
     let n = w.p_rear_pa.len().min(w.p_front_pa.len()).min(w.x_m.len());
     if !(w.open < w.close && w.close < n && w.dt_s > 0.0 && geo.is_valid()) {
         return Characteristics::default();
     }
     let look_after = (LOOK_AFTER_S / w.dt_s) as usize;
+    let vol = geo.volumes();
     // Front: closed once the stroke has covered its outlet, until the feed.
     let front_edge = geo.front_outlet_m as f32 + EDGE_GUARD_M;
     let front = (w.open..w.close)
@@ -216,9 +321,9 @@ pub fn characterise(w: &Window, geo: &ChamberGeometry, supply_abs_pa: f32, room:
         .map(|i| i + 1)
         .and_then(|start| {
             let end = (w.close + look_after).min(n);
-            let p = &w.p_front_pa[start..end];
+            let p = Part::new(w.p_front_pa, start, end);
             let x = &w.x_m[start..end];
-            feed(w, p, x, |x| geo.front_volume_m3(x), start, w.close, supply_abs_pa, room)
+            feed::<DEAD_VOLUME, P>(w, &p, x, |x| vol.front_m3(x), start, w.close, supply_abs_pa, room)
         });
     // Rear: closed once the backhaul has covered its outlet, until the feed;
     // the search ends where the stroke uncovers it again.
@@ -226,9 +331,9 @@ pub fn characterise(w: &Window, geo: &ChamberGeometry, supply_abs_pa: f32, room:
     let rear = (w.open..w.close).find(|&i| w.x_m[i] < rear_edge).and_then(|start| {
         let turn = (start..w.close).fold(start, |m, i| if w.x_m[i] < w.x_m[m] { i } else { m });
         let end = (turn..w.close).find(|&i| w.x_m[i] >= rear_edge).unwrap_or(w.close);
-        let p = &w.p_rear_pa[start..end];
+        let p = Part::new(w.p_rear_pa, start, end);
         let x = &w.x_m[start..end];
-        feed(w, p, x, |x| geo.rear_volume_m3(x), start, w.open, supply_abs_pa, room)
+        feed::<DEAD_VOLUME, P>(w, &p, x, |x| vol.rear_m3(x), start, w.open, supply_abs_pa, room)
     });
     let found = Characteristics {
         front,
@@ -243,9 +348,9 @@ pub fn characterise(w: &Window, geo: &ChamberGeometry, supply_abs_pa: f32, room:
 
 /// One chamber: the closed fit, the onset, the state there and the fill.
 #[allow(clippy::too_many_arguments)]
-fn feed(
-    w: &Window,
-    p: &[f32],
+fn feed<const DEAD_VOLUME: bool, P: Series + ?Sized>(
+    w: &Window<P>,
+    p: &Part<P>,
     x: &[f32],
     volume: impl Fn(f32) -> f32,
     start: usize,
@@ -266,7 +371,7 @@ fn feed(
     }
     // Onset time from the reference impact.
     let t_ref = (reference as f32 - start as f32) * w.dt_s;
-    let at = |s: &[f32]| interpolate(s, start, o.onset_s / w.dt_s);
+    let k = o.onset_s / w.dt_s;
     // The fill is read from where the rise is established (the port's first
     // opening passes little air, and when exactly it began is the onset's
     // uncertainty, not the fill's).
@@ -280,14 +385,14 @@ fn feed(
     Some(Feed {
         onset_s: o.onset_s - t_ref,
         onset_uncertainty_s: o.onset_uncertainty_s,
-        x_m: at(w.x_m),
-        p_rear_pa: at(w.p_rear_pa),
-        p_front_pa: at(w.p_front_pa),
+        x_m: interpolate(w.x_m, start, k),
+        p_rear_pa: interpolate(w.p_rear_pa, start, k),
+        p_front_pa: interpolate(w.p_front_pa, start, k),
         closed_exponent: o.exponent,
         closed_exponent_uncertainty: o.exponent_uncertainty,
         feed_area_m2: area.area_m2,
         feed_area_uncertainty_m2: u_area,
-        dead_volume_offset_m3: if w.fit_dead_volume {
+        dead_volume_offset_m3: if DEAD_VOLUME && w.fit_dead_volume {
             closed::dead_volume_offset(p, x, &volume, w.dt_s, &o).unwrap_or(f32::NAN)
         } else {
             f32::NAN
@@ -296,13 +401,17 @@ fn feed(
 }
 
 /// `s` at the fractional sample `start + k`, linearly interpolated.
-fn interpolate(s: &[f32], start: usize, k: f32) -> f32 {
+fn interpolate<S: Series + ?Sized>(s: &S, start: usize, k: f32) -> f32 {
     let k = if k > 0.0 { k } else { 0.0 };
     let i = start + k as usize;
     let frac = k - (k as usize) as f32;
-    match (s.get(i), s.get(i + 1)) {
-        (Some(a), Some(b)) => a + frac * (b - a),
-        (Some(a), None) => *a,
-        _ => f32::NAN,
+    let n = s.len();
+    if i + 1 < n {
+        let (a, b) = (s.at(i), s.at(i + 1));
+        a + frac * (b - a)
+    } else if i < n {
+        s.at(i)
+    } else {
+        f32::NAN
     }
 }

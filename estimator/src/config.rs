@@ -103,6 +103,46 @@ pub struct Config {
     /// Unknown (NaN) means the baseline is keyed by the peak rear pressure.
     pub supply_pressure_pa: f32,
     pub wear: WearConfig,
+    /// The chambers and the pressure channels' delay, for the chamber
+    /// characteristics (`chambers`); with `geometry` (areas, travel = the
+    /// impact position) they make a [`crate::chambers::ChamberGeometry`].
+    pub chambers: ChamberConfig,
+}
+
+/// What the chamber characteristics need beyond the piston's areas and
+/// travel. f32: the board's FPU is single precision. The dead volumes are
+/// the hammer's (fitted on the host from its commissioning record, never on
+/// the board); positions are of the piston's rear face from the rear cover.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ChamberConfig {
+    /// Rear chamber volume at x = 0.
+    pub rear_dead_m3: f32,
+    /// Front chamber volume at the impact position.
+    pub front_dead_m3: f32,
+    /// The rear outlet is uncovered above this position.
+    pub rear_outlet_m: f32,
+    /// The front outlet is uncovered below this position.
+    pub front_outlet_m: f32,
+    /// How late the pressure channels read (their transducers' and
+    /// anti-alias filters' group delay): the characteristics read the
+    /// pressures this much earlier (`docs/estimator.md`).
+    pub pressure_group_delay_s: f32,
+}
+
+impl Default for ChamberConfig {
+    /// The paper's hammer (its dead volumes are estimates: `docs/model.md`)
+    /// with the paper's transducers behind the default one-pole filter of
+    /// 20 kHz at 100 kS/s (0.398 samples: `SensorChannel::group_delay_s`,
+    /// (1 − α)/α·dt with α = 1 − exp(−2π·20 kHz·10 µs)).
+    fn default() -> Self {
+        Self {
+            rear_dead_m3: 14.5e-6,
+            front_dead_m3: 19.9e-6,
+            rear_outlet_m: 0.030,
+            front_outlet_m: 0.020,
+            pressure_group_delay_s: 3.978_380_4e-6,
+        }
+    }
 }
 
 /// The wear indicator and the friction drift alarm.
@@ -173,6 +213,7 @@ impl Default for Config {
             stuck_after_s: 5e-3,
             supply_pressure_pa: f32::NAN,
             wear: WearConfig::default(),
+            chambers: ChamberConfig::default(),
         }
     }
 }
@@ -263,6 +304,13 @@ const REST: [(&str, f32, f32); 12] = [
     ("wear.bin_width_pa", 1e3, 1e7),
 ];
 
+const CHAMBERS: [(&str, f32, f32); 4] = [
+    ("geometry.travel_m", 1e-3, 1.0),
+    ("chambers.rear_dead_m3", 1e-9, 1e-2),
+    ("chambers.front_dead_m3", 1e-9, 1e-2),
+    ("chambers.pressure_group_delay_s", 0.0, 1e-3),
+];
+
 fn check_all(limits: &Limits, values: &[f32]) -> Result<(), ConfigError> {
     debug_assert_eq!(limits.len(), values.len(), "a value per limit");
     for (&(field, min, max), &v) in limits.iter().zip(values) {
@@ -340,6 +388,14 @@ impl Config {
                 w.bin_width_pa,
             ],
         )?;
+        let ch = &self.chambers;
+        let travel = g.travel_m;
+        check_all(
+            &CHAMBERS,
+            &[travel, ch.rear_dead_m3, ch.front_dead_m3, ch.pressure_group_delay_s],
+        )?;
+        check("chambers.rear_outlet_m", ch.rear_outlet_m, 1e-4, travel)?;
+        check("chambers.front_outlet_m", ch.front_outlet_m, 1e-4, travel)?;
         let k = self.checkpoint_samples() as f32;
         let limit_s = crate::cycle::MAX_CHECKPOINTS as f32 * k / self.sample_rate_hz;
         if self.max_period_s > limit_s {

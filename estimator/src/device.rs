@@ -66,6 +66,12 @@ impl From<&Config> for DeviceConfig {
             baseline_cycles: c.wear.baseline_cycles,
             cusum_k: c.wear.cusum_k,
             cusum_h: c.wear.cusum_h,
+            travel_m: c.geometry.travel_m,
+            rear_dead_m3: c.chambers.rear_dead_m3,
+            front_dead_m3: c.chambers.front_dead_m3,
+            rear_outlet_m: c.chambers.rear_outlet_m,
+            front_outlet_m: c.chambers.front_outlet_m,
+            pressure_group_delay_s: c.chambers.pressure_group_delay_s,
         }
     }
 }
@@ -80,7 +86,6 @@ impl Config {
         let (accel, accel_spec) = uncal(&d.accel);
         let mut c = *self;
         c.sample_rate_hz = d.sample_rate_hz;
-        // The travel is not on the wire (yet): `self`'s stays.
         c.geometry.piston_mass_kg = crate::math::widen(d.piston_mass_kg);
         c.geometry.bore_diameter_m = crate::math::widen(d.bore_diameter_m);
         c.geometry.rod_diameter_m = crate::math::widen(d.rod_diameter_m);
@@ -103,6 +108,14 @@ impl Config {
         c.wear.baseline_cycles = d.baseline_cycles;
         c.wear.cusum_k = d.cusum_k;
         c.wear.cusum_h = d.cusum_h;
+        c.geometry.travel_m = d.travel_m;
+        c.chambers = crate::ChamberConfig {
+            rear_dead_m3: d.rear_dead_m3,
+            front_dead_m3: d.front_dead_m3,
+            rear_outlet_m: d.rear_outlet_m,
+            front_outlet_m: d.front_outlet_m,
+            pressure_group_delay_s: d.pressure_group_delay_s,
+        };
         c
     }
 }
@@ -113,11 +126,18 @@ mod tests {
 
     #[test]
     fn configs_convert_without_loss() {
-        let c = Config {
+        let mut c = Config {
             supply_pressure_pa: 4e5,
             inclination_deg: 30.0,
             ..Config::default()
         };
+        // Every chamber field travels (none left at the default).
+        c.geometry.travel_m = 0.061;
+        c.chambers.rear_dead_m3 = 21e-6;
+        c.chambers.front_dead_m3 = 17e-6;
+        c.chambers.rear_outlet_m = 0.041;
+        c.chambers.front_outlet_m = 0.017;
+        c.chambers.pressure_group_delay_s = 7e-6;
         let wire = DeviceConfig::from(&c);
         let back = Config::default().with_device(&wire);
         // The geometry is f64 in the estimator, f32 on the wire.

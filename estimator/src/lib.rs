@@ -43,7 +43,7 @@ mod run;
 pub mod tare;
 pub mod wear;
 
-pub use config::{ChannelCal, ChannelSpec, Config, ConfigError, WearConfig, ADC_BITS_MAX, ADC_BITS_MIN};
+pub use config::{ChamberConfig, ChannelCal, ChannelSpec, Config, ConfigError, WearConfig, ADC_BITS_MAX, ADC_BITS_MIN};
 pub use geometry::Geometry;
 /// The canonical types the estimator produces and reads, defined once in
 /// `hammer-types` and shared with the wire, the firmware and the host.

@@ -11,7 +11,12 @@
 //!    regulator and a reference gauge): the board averages its codes
 //!    (`MeasureCodes`), and each channel's scale becomes
 //!    reference / (mean code − zero code);
-//! 3. the new configuration is sent (`SetConfig`), acknowledged, read back.
+//! 3. the new configuration is sent (`SetConfig`), acknowledged, read back;
+//!    with `--hammer-config FILE` it also carries that hammer's chambers
+//!    (travel, dead volumes, outlets) and its pressure transducers' group
+//!    delay, which the board's chamber characteristics read with; without
+//!    one the board keeps those it has (the paper's hammer by default, and
+//!    after an update from a firmware that did not store them).
 //!
 //! A 1 % gain error biases the friction by about 1 N (docs/firmware.md), so
 //! the span is refused when the channel barely moved or the pressure was
@@ -37,6 +42,22 @@ pub struct CalibrateArgs {
     /// The reference pressure, bar gauge; asked for when not given.
     #[arg(long)]
     pub reference_bar: Option<f64>,
+    /// The hammer's configuration (`hammer simulate --config`'s TOML): its
+    /// chambers' geometry and its pressure transducers' group delay are
+    /// stored with the calibration; without it the board keeps its own.
+    #[arg(long, value_name = "FILE")]
+    pub hammer_config: Option<std::path::PathBuf>,
+}
+
+/// The chambers' part of the board's configuration that `hammer_config`
+/// describes (at the board's sample rate, which sets the filter's delay).
+pub fn hammer_chambers(hammer_config: &std::path::Path, sample_rate_hz: f32) -> Result<DeviceConfig> {
+    let mut cfg: hammer_sim::SimConfig = hammer_trace::config::load_toml(hammer_config)?;
+    cfg.solver.output_step_s = 1.0 / f64::from(sample_rate_hz);
+    cfg.validate()
+        .and_then(|()| cfg.estimator_config(None))
+        .map(|c| DeviceConfig::from(&c))
+        .with_context(|| hammer_config.display().to_string())
 }
 
 /// Who applies the conditions: a person at the bench, or a test.
@@ -89,12 +110,28 @@ impl Calibration {
         s += &ch("front", &self.before.front, &self.after.front);
         s += &ch("accel", &self.before.accel, &self.after.accel);
         s += &format!(
-            "  the rear channel read {:+.2} %, the front {:+.2} % before",
+            "  the rear channel read {:+.2} %, the front {:+.2} % before\n",
             (g[0] - 1.0) * 100.0,
             (g[1] - 1.0) * 100.0
         );
+        let a = &self.after;
+        s += &format!(
+            "  chambers: travel {:.1} mm, dead volumes rear {:.2} front {:.2} cm³, outlets rear {:.1} front {:.1} mm, pressure delay {:.2} µs{}",
+            a.travel_m * 1e3,
+            a.rear_dead_m3 * 1e6,
+            a.front_dead_m3 * 1e6,
+            a.rear_outlet_m * 1e3,
+            a.front_outlet_m * 1e3,
+            a.pressure_group_delay_s * 1e6,
+            if same_chambers(&self.before, a) { " (unchanged)" } else { " (new)" }
+        );
         s
     }
+}
+
+/// True when `a` and `b` hold the same chambers.
+fn same_chambers(a: &DeviceConfig, b: &DeviceConfig) -> bool {
+    config_hash(&a.with_chambers_of(b)) == config_hash(a)
 }
 
 const T: Duration = Duration::from_secs(30);
@@ -113,8 +150,14 @@ fn config<S: Read + Write>(link: &mut Client<S>, after: &HostMsg) -> Result<Devi
     }
 }
 
-/// Runs the steps on the board at `link`.
-pub fn calibrate<S: Read + Write>(link: &mut Client<S>, op: &mut dyn Operator, samples: u32) -> Result<Calibration> {
+/// Runs the steps on the board at `link`; `chambers`: a configuration whose
+/// chambers the board is to take ([`hammer_chambers`]), else it keeps its own.
+pub fn calibrate<S: Read + Write>(
+    link: &mut Client<S>,
+    op: &mut dyn Operator,
+    samples: u32,
+    chambers: Option<&DeviceConfig>,
+) -> Result<Calibration> {
     let before = config(link, &HostMsg::GetConfig)?;
     op.vented_at_rest()?;
     // The tare answers with its Ack and the new configuration (or a rejection: not at rest).
@@ -157,6 +200,9 @@ pub fn calibrate<S: Read + Write>(link: &mut Client<S>, op: &mut dyn Operator, s
             );
         }
         cal.scale = (reference_pa / span) as f32;
+    }
+    if let Some(c) = chambers {
+        after = after.with_chambers_of(c);
     }
     let set = config(link, &HostMsg::SetConfig(after)).context("writing the calibration")?;
     Ok(Calibration {
@@ -216,11 +262,19 @@ pub fn run(args: &CalibrateArgs) -> Result<Calibration> {
         .with_context(|| format!("opening {}", connector.describe()))?;
     let mut link = Client::new(port);
     link.handshake(Duration::from_secs(10))?;
+    // The file is read before the operator is asked for anything.
+    let chambers = match &args.hammer_config {
+        Some(p) => Some(hammer_chambers(
+            p,
+            config(&mut link, &HostMsg::GetConfig)?.sample_rate_hz,
+        )?),
+        None => None,
+    };
     let stdin = std::io::stdin();
     let mut input = stdin.lock();
     let mut bench = Bench {
         input: &mut input,
         reference_bar: args.reference_bar,
     };
-    calibrate(&mut link, &mut bench, args.samples)
+    calibrate(&mut link, &mut bench, args.samples, chambers.as_ref())
 }

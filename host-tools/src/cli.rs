@@ -467,6 +467,16 @@ fn config_check(file: &std::path::Path) -> Result<()> {
         a1,
         est.sample_rate_hz / 1e3
     );
+    let ch = &est.chambers;
+    outln!(
+        "  chambers (the board's with `hammer calibrate --hammer-config`): travel {:.1} mm, dead volumes rear {:.2} front {:.2} cm³, outlets rear {:.1} front {:.1} mm, pressure delay {:.2} µs",
+        est.geometry.travel_m * 1e3,
+        ch.rear_dead_m3 * 1e6,
+        ch.front_dead_m3 * 1e6,
+        ch.rear_outlet_m * 1e3,
+        ch.front_outlet_m * 1e3,
+        ch.pressure_group_delay_s * 1e6
+    );
     let active = cfg.effects.active();
     outln!(
         "  simulator effects: {}",

@@ -7,10 +7,12 @@
 //! closed-phase exponents, feed areas: `hammer_estimator::chambers`), read
 //! by the same extractor from the record's traces and from the live
 //! captures, so whatever the extractor reads slightly wrong it reads wrong
-//! on both sides, and the model's form error never enters. The board cannot
-//! compute them (its flash is full and the checkpoint sums do not keep the
-//! samples around an impact: docs/estimator.md), so the host reads them
-//! from the board's raw captures.
+//! on both sides, and the model's form error never enters. The board does not
+//! compute them yet (the checkpoint sums do not keep the samples around an
+//! impact, and its reading, `chambers::at_close`, does not fit its RAM and
+//! time yet: docs/firmware.md), so the host reads them from the board's raw
+//! captures. A reading at a cycle's close stands about 0.03 ms later in the
+//! front feed than this one (docs/estimator.md, "At a cycle's close").
 //!
 //! A window of `k` captured cycles gives one reading per characteristic:
 //! drift = window median − record median, with the expanded uncertainty

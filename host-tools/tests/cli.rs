@@ -448,6 +448,17 @@ fn config_check_names_the_field_and_range_or_prints_the_resolved_config() {
     let (code, out, err) = hammer(&["config", "check", good.to_str().unwrap()]);
     assert_eq!(code, 0, "{err}");
     assert!(out.contains(": ok") && out.contains("supply 6 bar"), "{out}");
+    // The chambers the board is given with `hammer calibrate --hammer-config`:
+    // the paper's hammer, its transducers' delay at 100 kS/s.
+    assert!(
+        out.contains("travel 52.0 mm, dead volumes rear 14.50 front 19.90 cm³, outlets rear 30.0 front 20.0 mm, pressure delay 3.98 µs"),
+        "{out}"
+    );
+    let own = dir.join("own.toml");
+    std::fs::write(&own, "[hammer]\nfront_dead_volume_m3 = 30e-6\n").unwrap();
+    let (code, out, err) = hammer(&["config", "check", own.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.contains("front 30.00 cm³"), "{out}");
     let bad = dir.join("bad.toml");
     std::fs::write(&bad, "[estimator]\ncoverage_factor = 9.0\n").unwrap();
     let (code, _, err) = hammer(&["config", "check", bad.to_str().unwrap()]);

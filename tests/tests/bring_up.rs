@@ -193,7 +193,21 @@ fn calibration_finds_the_applied_gains_and_survives_a_reset() {
         feeder: &feeder,
         reference_pa: 600_000,
     };
-    let cal = calibrate(&mut link, &mut bench, 20_000).expect("calibration");
+    // The hammer's own chambers, from its configuration file, go with the calibration.
+    let dir = std::env::temp_dir().join(format!("bring-up-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("hammer.toml");
+    std::fs::write(&file, "[hammer]\nfront_dead_volume_m3 = 23.5e-6\n").unwrap();
+    let chambers = hammer_host::calibrate::hammer_chambers(&file, 100_000.0).expect("the hammer's file");
+    assert_eq!(chambers.front_dead_m3, 23.5e-6);
+    let cal = calibrate(&mut link, &mut bench, 20_000, Some(&chambers)).expect("calibration");
+    assert_eq!(cal.after.front_dead_m3, 23.5e-6);
+    assert_ne!(cal.before.front_dead_m3, 23.5e-6);
+    assert!(
+        cal.summary().contains("front 23.50 cm³") && cal.summary().contains("(new)"),
+        "{}",
+        cal.summary()
+    );
     println!("{}", cal.summary());
     let t = truth();
     // The gains found are the applied ones within 0.1 %, the zeros within half a code.
@@ -248,7 +262,9 @@ fn calibration_finds_the_applied_gains_and_survives_a_reset() {
     let back = get_config(&mut link);
     assert_eq!(back.rear.scale.to_bits(), cal.after.rear.scale.to_bits());
     assert_eq!(back.front.zero_code.to_bits(), cal.after.front.zero_code.to_bits());
+    assert_eq!(back.front_dead_m3, 23.5e-6, "the chambers survived the reset");
     drop(emu);
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]

@@ -13,7 +13,8 @@
 //!   name, unit, value) every rendering is driven by.
 //! - [`Codes`] / [`RawSample`]: one sample-set of ADC codes.
 //! - [`DeviceConfig`] / [`ChannelCalibration`]: the device's configuration on
-//!   the wire (the estimator maps it to and from its runtime `Config`).
+//!   the wire (the estimator maps it to and from its runtime `Config`);
+//!   [`DeviceConfigV4`], protocol 4's, to migrate a stored record.
 //! - [`WEAR_STATE_BYTES`], [`crc32`]: the saved wear state's size and the CRC
 //!   that checks it and every frame.
 //!
@@ -29,7 +30,7 @@ pub mod flags;
 pub mod report;
 pub mod sample;
 
-pub use config::{calibration_hash, ChannelCalibration, DeviceConfig};
+pub use config::{calibration_hash, ChannelCalibration, DeviceConfig, DeviceConfigV4};
 pub use crc::crc32;
 pub use fields::{Field, Value, FIELDS};
 pub use flags::Flags;

@@ -96,6 +96,16 @@ impl<const N: usize> Decoder<N> {
 
     /// Feeds one byte; returns `Some` when it completed a frame (good or bad).
     pub fn push<T: DeserializeOwned>(&mut self, byte: u8) -> Option<Result<T, DecodeError>> {
+        self.push_with(byte, |body| match postcard::take_from_bytes::<T>(body) {
+            Ok((m, [])) => Some(m),
+            _ => None,
+        })
+    }
+
+    /// [`Self::push`] with the message read from the frame's checked body by
+    /// `parse` (`None`: not a message): a host reads an older protocol's
+    /// recording this way (`crate::legacy`).
+    pub fn push_with<T>(&mut self, byte: u8, parse: impl FnOnce(&[u8]) -> Option<T>) -> Option<Result<T, DecodeError>> {
         if byte != 0 {
             if self.len < N {
                 self.buf[self.len] = byte;
@@ -115,7 +125,7 @@ impl<const N: usize> Decoder<N> {
         if len == 0 {
             return None; // back-to-back delimiters: an idle line, not a frame
         }
-        let result = self.decode(len);
+        let result = self.decode(len, parse);
         match result {
             Ok(_) => self.stats.frames = self.stats.frames.saturating_add(1),
             Err(e) => {
@@ -132,7 +142,7 @@ impl<const N: usize> Decoder<N> {
         Some(result)
     }
 
-    fn decode<T: DeserializeOwned>(&mut self, len: usize) -> Result<T, DecodeError> {
+    fn decode<T>(&mut self, len: usize, parse: impl FnOnce(&[u8]) -> Option<T>) -> Result<T, DecodeError> {
         let n = cobs::decode_in_place(&mut self.buf[..len]).ok_or(DecodeError::Cobs)?;
         if n < 5 {
             return Err(if n < 4 { DecodeError::Cobs } else { DecodeError::Message });
@@ -142,9 +152,6 @@ impl<const N: usize> Decoder<N> {
         if crc != hammer_types::crc32(body) {
             return Err(DecodeError::Crc);
         }
-        match postcard::take_from_bytes::<T>(body) {
-            Ok((m, rest)) if rest.is_empty() => Ok(m),
-            _ => Err(DecodeError::Message),
-        }
+        parse(body).ok_or(DecodeError::Message)
     }
 }

@@ -10,7 +10,8 @@
 //!
 //! Module map: [`msg`] (every message; the report, flags and configuration
 //! are `hammer_types`' own, carried as they are), [`frame`] (encode, and a
-//! bounded decoder that counts what it throws away), [`cobs`], [`stimulus`]
+//! bounded decoder that counts what it throws away), [`legacy`] (an older
+//! protocol's messages, for a replayed recording), [`cobs`], [`stimulus`]
 //! (the emulated board's ADC samples, through memory shared with the host
 //! instead of the link).
 //!
@@ -24,6 +25,7 @@
 
 pub mod cobs;
 pub mod frame;
+pub mod legacy;
 pub mod msg;
 pub mod stimulus;
 
@@ -34,7 +36,7 @@ pub use msg::*;
 /// the leading delimiter: decoders of either framing read the other's frames
 /// (an extra 0x00 is an empty frame, which they ignore), so a bump would only
 /// make hosts and devices refuse each other needlessly.
-pub const PROTOCOL_VERSION: u16 = 4;
+pub const PROTOCOL_VERSION: u16 = 5;
 /// Largest frame on the wire, both delimiters included. Bounds every buffer.
 pub const MAX_FRAME: usize = 400;
 /// Sample-sets per `Samples` or `Capture` block.

@@ -78,12 +78,28 @@ fn sample_config() -> DeviceConfig {
         baseline_cycles: 50,
         cusum_k: 0.5,
         cusum_h: 10.0,
+        travel_m: 0.0625,
+        rear_dead_m3: 1.5e-5,
+        front_dead_m3: 2.0e-5,
+        rear_outlet_m: 0.03125,
+        front_outlet_m: 0.015625,
+        pressure_group_delay_s: 4e-6,
     }
 }
 
-const GOLDEN_CONFIG_FRAME: &str = "0002050450c347010b203fb81e053dcdcc4c3c010370c10420ba430a408643ff1f6f12033c01037a440420ba430a408643ff1f6f12033c01037a440ef0ff44e7fb793fff1f0ad7a33b0103803f010f7a4417b75139a69bc43a0ad7a33c0101023f0101023f010102400108c07f20bc3e4c320101023f0107204125d6285200";
-const GOLDEN_SET_CONFIG_FRAME: &str = "0002020450c347010b203fb81e053dcdcc4c3c010370c10420ba430a408643ff1f6f12033c01037a440420ba430a408643ff1f6f12033c01037a440ef0ff44e7fb793fff1f0ad7a33b0103803f010f7a4417b75139a69bc43a0ad7a33c0101023f0101023f010102400108c07f20bc3e4c320101023f01072041e052e21300";
-const GOLDEN_CONFIG_HASH: u32 = 2_188_404_417;
+/// `c` without what protocol 5 added: protocol 4's layout.
+fn protocol4(c: &DeviceConfig) -> DeviceConfigV4 {
+    let mut buf = [0u8; MAX_FRAME];
+    let n = postcard::to_slice(c, &mut buf).unwrap().len();
+    // The six f32s protocol 5 appended, 4 bytes each (postcard writes f32 as is).
+    postcard::from_bytes(&buf[..n - 24]).unwrap()
+}
+
+const GOLDEN_CONFIG_FRAME: &str = "0002050450c347010b203fb81e053dcdcc4c3c010370c10420ba430a408643ff1f6f12033c01037a440420ba430a408643ff1f6f12033c01037a440ef0ff44e7fb793fff1f0ad7a33b0103803f010f7a4417b75139a69bc43a0ad7a33c0101023f0101023f010102400108c07f20bc3e4c320101023f01032041010b803d82a87b37acc5a7370101023d010b803cbd37863699b880fc00";
+const GOLDEN_SET_CONFIG_FRAME: &str = "0002020450c347010b203fb81e053dcdcc4c3c010370c10420ba430a408643ff1f6f12033c01037a440420ba430a408643ff1f6f12033c01037a440ef0ff44e7fb793fff1f0ad7a33b0103803f010f7a4417b75139a69bc43a0ad7a33c0101023f0101023f010102400108c07f20bc3e4c320101023f01032041010b803d82a87b37acc5a7370101023d010b803cbd3786362a9c850d00";
+/// Protocol 4's `Config` frame of the same configuration (before the chambers).
+const PROTOCOL4_CONFIG_FRAME: &str = "0002050450c347010b203fb81e053dcdcc4c3c010370c10420ba430a408643ff1f6f12033c01037a440420ba430a408643ff1f6f12033c01037a440ef0ff44e7fb793fff1f0ad7a33b0103803f010f7a4417b75139a69bc43a0ad7a33c0101023f0101023f010102400108c07f20bc3e4c320101023f0107204125d6285200";
+const GOLDEN_CONFIG_HASH: u32 = 1_601_889_007;
 /// Checked independently: Python's `zlib.crc32(struct.pack('<ffHff', ...) × 3)`.
 const GOLDEN_CALIBRATION_HASH: u32 = 2_717_027_379;
 
@@ -93,7 +109,7 @@ const GOLDEN_CALIBRATION_HASH: u32 = 2_717_027_379;
 /// update docs/wire-protocol.md, and only then update the snapshot.
 #[test]
 fn golden_frames() {
-    assert_eq!(PROTOCOL_VERSION, 4);
+    assert_eq!(PROTOCOL_VERSION, 5);
     assert_eq!(
         hex(&frame(&HostMsg::Hello { protocol_version: 1 })),
         "000106016922de3600"
@@ -118,6 +134,28 @@ fn golden_frames() {
         GOLDEN_SET_CONFIG_FRAME
     );
     assert_eq!(config_hash(&sample_config()), GOLDEN_CONFIG_HASH);
+    // Protocol 5 appended the chambers and the pressures' group delay: the
+    // configuration's bytes are protocol 4's, then those six f32s.
+    let v4 = protocol4(&sample_config());
+    let mut b4 = [0u8; MAX_FRAME];
+    let mut b5 = [0u8; MAX_FRAME];
+    let (b4, b5) = (
+        postcard::to_slice(&v4, &mut b4).unwrap(),
+        postcard::to_slice(&sample_config(), &mut b5).unwrap(),
+    );
+    assert_eq!(&b5[..b4.len()], &b4[..]);
+    assert_eq!(&b5[b4.len()..b4.len() + 4], &0.0625f32.to_le_bytes());
+    assert_eq!(config_hash(&v4.with_chambers_of(&sample_config())), GOLDEN_CONFIG_HASH);
+    // The frozen protocol-4 layout is what protocol 4 sent: its frame's
+    // payload is the variant's index and those bytes, then the CRC.
+    let mut old: Vec<u8> = (0..PROTOCOL4_CONFIG_FRAME.len() / 2)
+        .map(|i| u8::from_str_radix(&PROTOCOL4_CONFIG_FRAME[2 * i..2 * i + 2], 16).unwrap())
+        .collect();
+    let body = &mut old[1..];
+    let end = body.iter().position(|&b| b == 0).unwrap();
+    let n = hammer_wire::cobs::decode_in_place(&mut body[..end]).unwrap();
+    assert_eq!(body[0], 5, "DeviceMsg::Config's index");
+    assert_eq!(&body[1..n - 4], b4);
     // Protocol 3 added the calibration's hash to every report; protocol 4
     // made the impact time integer µs (0.5 s: varint a0 c2 1e after the seq).
     assert_eq!(sample_config().calibration_hash(), GOLDEN_CALIBRATION_HASH);

@@ -17,7 +17,7 @@
 //! cycle before): in a steady run the two are the same.
 
 use super::fill::{psi, sqrt_rt_supply, GAMMA};
-use super::{interpolate, ChamberGeometry, Characteristics, Window, P_ATM_PA};
+use super::{interpolate, ChamberGeometry, Characteristics, Series, Window, P_ATM_PA};
 
 /// The air each chamber drew in one cycle, as R·T_s·m, J.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -35,13 +35,13 @@ impl Charge {
 }
 
 /// One chamber's pressure (gauge) and volume law over the window.
-struct Chamber<'a> {
-    p: &'a [f32],
+struct Chamber<'a, P: Series + ?Sized> {
+    p: &'a P,
     x: &'a [f32],
     volume: &'a dyn Fn(f32) -> f32,
 }
 
-impl Chamber<'_> {
+impl<P: Series + ?Sized> Chamber<'_, P> {
     fn pv(&self, k: f32) -> f32 {
         (interpolate(self.p, 0, k) + P_ATM_PA) * (self.volume)(interpolate(self.x, 0, k))
     }
@@ -54,7 +54,7 @@ impl Chamber<'_> {
         );
         (a..b)
             .map(|i| {
-                let pm = 0.5 * (self.p[i] + self.p[i + 1]) + P_ATM_PA;
+                let pm = 0.5 * (self.p.at(i) + self.p.at(i + 1)) + P_ATM_PA;
                 pm * ((self.volume)(self.x[i + 1]) - (self.volume)(self.x[i]))
             })
             .sum()
@@ -63,7 +63,9 @@ impl Chamber<'_> {
     /// What blows through the feed of area `area_m2` from `a` to `b`.
     fn through(&self, a: f32, b: f32, area_m2: f32, supply_abs_pa: f32, dt: f32) -> f32 {
         let (a, b) = (a.max(0.0) as usize, (b.max(0.0) as usize).min(self.p.len()));
-        let flow: f32 = (a..b).map(|i| psi((self.p[i] + P_ATM_PA) / supply_abs_pa) * dt).sum();
+        let flow: f32 = (a..b)
+            .map(|i| psi((self.p.at(i) + P_ATM_PA) / supply_abs_pa) * dt)
+            .sum();
         if b > a {
             area_m2 * supply_abs_pa * sqrt_rt_supply() * flow
         } else {
@@ -73,7 +75,12 @@ impl Chamber<'_> {
 }
 
 /// The charge of the cycle in `w` whose feeds `c` found.
-pub(super) fn charge(w: &Window, geo: &ChamberGeometry, c: &Characteristics, supply_abs_pa: f32) -> Option<Charge> {
+pub(super) fn charge<P: Series + ?Sized>(
+    w: &Window<P>,
+    geo: &ChamberGeometry,
+    c: &Characteristics,
+    supply_abs_pa: f32,
+) -> Option<Charge> {
     let (rear, front) = (c.rear?, c.front?);
     let n = w.p_rear_pa.len().min(w.p_front_pa.len()).min(w.x_m.len());
     let dt = w.dt_s;
@@ -89,8 +96,9 @@ pub(super) fn charge(w: &Window, geo: &ChamberGeometry, c: &Characteristics, sup
             .find(|&i| open(w.x_m[i]))
             .map_or(to, |i| i as f32)
     };
-    let rear_volume = |x: f32| geo.rear_volume_m3(x);
-    let front_volume = |x: f32| geo.front_volume_m3(x);
+    let vol = geo.volumes();
+    let rear_volume = |x: f32| vol.rear_m3(x);
+    let front_volume = |x: f32| vol.front_m3(x);
     let rc = Chamber {
         p: w.p_rear_pa,
         x: w.x_m,

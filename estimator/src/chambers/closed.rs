@@ -8,6 +8,7 @@
 //! the rise (2 % to 8 %), so the same onset is read from noisy and from
 //! noise-free pressures, whatever the fill's pace.
 
+use super::Series;
 use crate::math;
 
 /// Atmospheric pressure, for gauge → absolute.
@@ -57,21 +58,21 @@ pub trait Logs {
 }
 
 /// The logarithms computed where read.
-pub struct Direct<'a, V: Fn(f32) -> f32> {
-    pub p: &'a [f32],
+pub struct Direct<'a, P: Series + ?Sized, V: Fn(f32) -> f32> {
+    pub p: &'a P,
     pub x: &'a [f32],
     pub volume: &'a V,
 }
 
-impl<V: Fn(f32) -> f32> Logs for Direct<'_, V> {
+impl<P: Series + ?Sized, V: Fn(f32) -> f32> Logs for Direct<'_, P, V> {
     fn len(&self) -> usize {
         self.p.len().min(self.x.len())
     }
     fn valid(&self) -> bool {
-        (0..self.len()).all(|i| self.p[i] + P_ATM_PA > 0.0 && (self.volume)(self.x[i]) > 0.0)
+        (0..self.len()).all(|i| self.p.at(i) + P_ATM_PA > 0.0 && (self.volume)(self.x[i]) > 0.0)
     }
     fn ln_p(&self, i: usize) -> f32 {
-        math::ln(self.p[i] + P_ATM_PA)
+        math::ln(self.p.at(i) + P_ATM_PA)
     }
     fn ln_v(&self, i: usize) -> f32 {
         math::ln((self.volume)(self.x[i]))
@@ -87,13 +88,18 @@ pub struct Cached<'a> {
 
 impl<'a> Cached<'a> {
     /// `room` holds two floats a sample; `None` where it is shorter.
-    pub fn fill(p: &[f32], x: &[f32], volume: &impl Fn(f32) -> f32, room: &'a mut [f32]) -> Option<Cached<'a>> {
+    pub fn fill(
+        p: &(impl Series + ?Sized),
+        x: &[f32],
+        volume: &impl Fn(f32) -> f32,
+        room: &'a mut [f32],
+    ) -> Option<Cached<'a>> {
         let len = p.len().min(x.len());
         let (ln_p, rest) = room.split_at_mut_checked(len)?;
         let ln_v = rest.get_mut(..len)?;
         let mut valid = true;
         for i in 0..len {
-            let (pa, v) = (p[i] + P_ATM_PA, volume(x[i]));
+            let (pa, v) = (p.at(i) + P_ATM_PA, volume(x[i]));
             valid &= pa > 0.0 && v > 0.0;
             ln_p[i] = math::ln(pa);
             ln_v[i] = math::ln(v);
@@ -118,7 +124,7 @@ impl Logs for Cached<'_> {
 }
 
 /// `p` (gauge) and `x` start in the closed phase and run past the feed.
-pub fn onset(p: &[f32], x: &[f32], volume: &impl Fn(f32) -> f32, dt_s: f32) -> Option<Onset> {
+pub fn onset(p: &(impl Series + ?Sized), x: &[f32], volume: &impl Fn(f32) -> f32, dt_s: f32) -> Option<Onset> {
     onset_of(&Direct { p, x, volume }, dt_s)
 }
 
@@ -171,7 +177,13 @@ pub fn onset_of(logs: &impl Logs, dt_s: f32) -> Option<Onset> {
 /// None where the phase moves the volume too little to tell δ from n (by
 /// less than a fifth), where the fit is singular, or where δ leaves the
 /// plausible range (−60 % … +100 % of the smallest volume).
-pub fn dead_volume_offset(p: &[f32], x: &[f32], volume: &impl Fn(f32) -> f32, dt_s: f32, o: &Onset) -> Option<f32> {
+pub fn dead_volume_offset(
+    p: &(impl Series + ?Sized),
+    x: &[f32],
+    volume: &impl Fn(f32) -> f32,
+    dt_s: f32,
+    o: &Onset,
+) -> Option<f32> {
     let hold = ((HOLD_S / dt_s) as usize).max(3);
     let len = ((o.onset_s / dt_s) as usize)
         .saturating_sub(hold)
@@ -201,7 +213,7 @@ pub fn dead_volume_offset(p: &[f32], x: &[f32], volume: &impl Fn(f32) -> f32, dt
             let v = vol(i);
             let u = math::ln(v) as f64;
             let w = (v_min / v) as f64;
-            let y = math::ln(p[i] + P_ATM_PA) as f64;
+            let y = math::ln(p.at(i) + P_ATM_PA) as f64;
             su += u;
             sw += w;
             sy += y;
@@ -475,7 +487,7 @@ mod tests {
         let vol = |x: f32| 20e-6 + 7e-4 * (0.052 - x);
         let feed_at = 600usize;
         let (x, p) = compressed_then_fed::<1000>(&vol, 0.025, 2e5, 1.4, feed_at, 2e4);
-        let o = onset(&p, &x, &vol, DT).expect("a feed");
+        let o = onset(&p[..], &x, &vol, DT).expect("a feed");
         assert!((o.exponent - 1.4).abs() < 1e-3, "n = {}", o.exponent);
         let t_feed = feed_at as f32 * DT;
         assert!(
@@ -498,7 +510,7 @@ mod tests {
         const N: usize = 1000;
         let vol = |x: f32| 20e-6 + 7e-4 * (0.052 - x);
         let (x, p) = compressed_then_fed::<N>(&vol, 0.025, 2e5, 1.4, 600, 2e5);
-        let clean = onset(&p, &x, &vol, DT).expect("a feed").onset_s;
+        let clean = onset(&p[..], &x, &vol, DT).expect("a feed").onset_s;
         let mut state = 0x2545_f491_4f6c_dd1du64;
         let mut uniform = || {
             state ^= state << 13;
@@ -512,7 +524,7 @@ mod tests {
                 .iter()
                 .map(|&v| v + 500.0 * ((0..12).map(|_| uniform()).sum::<f32>() - 6.0))
                 .collect();
-            if let Some(o) = onset(&noisy, &x, &vol, DT) {
+            if let Some(o) = onset(&noisy[..], &x, &vol, DT) {
                 sum += (o.onset_s - clean) / DT;
                 runs += 1;
             }
@@ -531,11 +543,11 @@ mod tests {
         let assumed = |x: f32| 20e-6 + 7e-4 * (0.052 - x);
         let actual = |x: f32| assumed(x) + 3e-6;
         let (x, p) = compressed_then_fed::<1300>(&actual, 0.020, 1.05e5, 1.35, 1100, 2e5);
-        let o = onset(&p, &x, &actual, DT).expect("a feed");
-        let none = dead_volume_offset(&p, &x, &actual, DT, &o).expect("identifiable");
+        let o = onset(&p[..], &x, &actual, DT).expect("a feed");
+        let none = dead_volume_offset(&p[..], &x, &actual, DT, &o).expect("identifiable");
         assert!(none.abs() < 0.1e-6, "δ = {none} with the right volume");
-        let o = onset(&p, &x, &assumed, DT).expect("a feed");
-        let d = dead_volume_offset(&p, &x, &assumed, DT, &o).expect("identifiable");
+        let o = onset(&p[..], &x, &assumed, DT).expect("a feed");
+        let d = dead_volume_offset(&p[..], &x, &assumed, DT, &o).expect("identifiable");
         assert!((d - 3e-6).abs() < 0.09e-6, "δ = {d}, 3e-6 hidden");
     }
 
@@ -546,10 +558,10 @@ mod tests {
         let vol = |x: f32| 20e-6 + 7e-4 * (0.052 - x);
         let (x, p) = compressed_then_fed::<1000>(&vol, 0.025, 2e5, 1.35, 640, 3e4);
         let mut room = [0.0f32; 2000];
-        let kept = Cached::fill(&p, &x, &vol, &mut room).expect("room for 1000 samples");
-        assert_eq!(onset_of(&kept, DT), onset(&p, &x, &vol, DT));
-        assert!(onset(&p, &x, &vol, DT).is_some());
-        assert!(Cached::fill(&p, &x, &vol, &mut room[..1999]).is_none());
+        let kept = Cached::fill(&p[..], &x, &vol, &mut room).expect("room for 1000 samples");
+        assert_eq!(onset_of(&kept, DT), onset(&p[..], &x, &vol, DT));
+        assert!(onset(&p[..], &x, &vol, DT).is_some());
+        assert!(Cached::fill(&p[..], &x, &vol, &mut room[..1999]).is_none());
     }
 
     /// No feed: no onset (the chamber stays closed).
@@ -562,6 +574,6 @@ mod tests {
             .iter()
             .map(|&x| math::exp(c - 1.3 * math::ln(vol(x))) - P_ATM_PA)
             .collect();
-        assert_eq!(onset(&p, &x, &vol, 1e-5), None);
+        assert_eq!(onset(&p[..], &x, &vol, 1e-5), None);
     }
 }

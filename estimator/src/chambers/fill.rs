@@ -10,6 +10,7 @@
 //! pressure scales every area alike, and cancels against a reference record).
 
 use super::closed::P_ATM_PA;
+use super::Series;
 use crate::math;
 
 /// How long after the onset the fill is read.
@@ -55,7 +56,7 @@ pub(super) fn psi(ratio: f32) -> f32 {
 /// The area over [`FILL_S`] from `onset_s` (from the slice's start);
 /// `noise_ln` is the pressure's noise in ln p (the closed fit's residual).
 pub fn feed_area(
-    p: &[f32],
+    p: &(impl Series + ?Sized),
     x: &[f32],
     volume: &impl Fn(f32) -> f32,
     dt_s: f32,
@@ -74,7 +75,7 @@ pub fn feed_area(
     if i1 + half >= len {
         return NONE;
     }
-    let p_abs = |i: usize| p[i] + P_ATM_PA;
+    let p_abs = |i: usize| p.at(i) + P_ATM_PA;
     let m = (2 * half + 1) as f32;
     // The end, averaged over ±`half` samples (a straight stretch's mean is its middle).
     let (mut p1, mut v1) = (0.0f32, 0.0f32);
@@ -134,11 +135,11 @@ mod tests {
             .map(|i| 1.5e5 + rate * dt * (i as f32 - 100.0).max(0.0) - P_ATM_PA)
             .collect();
         let x = [0.0f32; 400];
-        let a = feed_area(&p, &x, &|_| v, dt, 100.0 * dt, ps, 0.0);
+        let a = feed_area(&p[..], &x, &|_| v, dt, 100.0 * dt, ps, 0.0);
         assert!((a.area_m2 / area - 1.0).abs() < 0.01, "{} m²", a.area_m2);
         assert_eq!(a.sigma_m2, 0.0);
         // No supply given: no area.
-        assert!(feed_area(&p, &x, &|_| v, dt, 100.0 * dt, f32::NAN, 0.0)
+        assert!(feed_area(&p[..], &x, &|_| v, dt, 100.0 * dt, f32::NAN, 0.0)
             .area_m2
             .is_nan());
     }

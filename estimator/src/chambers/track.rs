@@ -81,9 +81,9 @@ pub fn closed(dt_s: f32, impact_m: f32, open: usize, close: usize, x: &mut [f32]
 
 /// The force balance's acceleration: the pressure force less the cycle's
 /// friction per phase (backhaul before the turn, stroke after), over the mass.
-pub fn force_balance<'a>(
-    p_rear_pa: &'a [f32],
-    p_front_pa: &'a [f32],
+pub fn force_balance<'a, P: super::Series + ?Sized>(
+    p_rear_pa: &'a P,
+    p_front_pa: &'a P,
     piston: &'a Piston,
     friction: PhaseFriction,
 ) -> impl Fn(usize, usize) -> f32 + 'a {
@@ -98,7 +98,7 @@ pub fn force_balance<'a>(
         0.0
     };
     move |i, turn| {
-        let p = piston.rear_area_m2 * p_rear_pa[i] - piston.front_area_m2 * p_front_pa[i] + piston.gravity_n;
+        let p = piston.rear_area_m2 * p_rear_pa.at(i) - piston.front_area_m2 * p_front_pa.at(i) + piston.gravity_n;
         (p + if i < turn { f_bh } else { -f_st }) / piston.mass_kg
     }
 }
@@ -134,8 +134,8 @@ pub fn position(
 /// `tau_s`); before `blank_end` (the accelerometer still rings from the
 /// shock) `fallback`'s. It sees friction of any form, which the force
 /// balance's two constants only approximate.
-pub fn accelerometer<'a>(
-    accel_mps2: &'a [f32],
+pub fn accelerometer<'a, A: super::Series + ?Sized>(
+    accel_mps2: &'a A,
     zero_shift_mps2: f32,
     tau_s: f32,
     dt_s: f32,
@@ -157,7 +157,7 @@ pub fn accelerometer<'a>(
         if i < blank_end {
             fallback(i, turn)
         } else {
-            accel_mps2[i] - zs * crate::math::powi(q, (i - open) as u32)
+            accel_mps2.at(i) - zs * crate::math::powi(q, (i - open) as u32)
         }
     }
 }

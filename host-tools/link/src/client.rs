@@ -140,6 +140,11 @@ pub enum Incoming {
 /// The host's decoding core: frames and byte offsets. Knows nothing of ports or clocks.
 pub struct Inbound {
     dec: Decoder<MAX_FRAME>,
+    /// The protocol the bytes are read in: this host's, or an older one a
+    /// replayed recording's handshake named ([`Inbound::read_as`]).
+    protocol: u16,
+    /// The chambers an older protocol's configuration is read with.
+    chambers: hammer_wire::DeviceConfig,
     /// Bytes fed so far.
     bytes: u64,
     /// Stream offset just after the last delimiter: where the frame now being
@@ -157,9 +162,22 @@ impl Inbound {
     pub fn new() -> Self {
         Self {
             dec: Decoder::new(),
+            protocol: PROTOCOL_VERSION,
+            chambers: hammer_wire::DeviceConfig::from(&hammer_estimator::Config::default()),
             bytes: 0,
             frame_start: 0,
         }
+    }
+
+    /// Reads what follows as `protocol` sent it, if this host can
+    /// (`hammer_wire::legacy::READABLE_OLDER`); an older configuration
+    /// gets the default chambers (the paper's hammer). False: it cannot.
+    pub fn read_as(&mut self, protocol: u16) -> bool {
+        let readable = protocol == PROTOCOL_VERSION || hammer_wire::legacy::READABLE_OLDER.contains(&protocol);
+        if readable {
+            self.protocol = protocol;
+        }
+        readable
     }
 
     /// A new connection: a frame cut by the disconnect must not swallow the
@@ -188,7 +206,11 @@ impl Inbound {
         let first = self.bytes;
         self.bytes += bytes.len() as u64;
         for (i, &b) in bytes.iter().enumerate() {
-            match self.dec.push::<DeviceMsg>(b) {
+            let (protocol, chambers) = (self.protocol, &self.chambers);
+            match self
+                .dec
+                .push_with(b, |body| hammer_wire::legacy::device_msg(body, protocol, chambers))
+            {
                 None => {}
                 Some(Ok(m)) => out(Incoming::Msg(m)),
                 Some(Err(kind)) => out(Incoming::FrameError {

@@ -452,6 +452,110 @@ mod tests {
     }
     use crate::SimConfig;
 
+    /// The board's reading at a cycle's close (`chambers::at_close`, no_std
+    /// f32 from the codes) is the host's reading of the same cycle as a
+    /// one-cycle raw capture (its codes converted as `hammer capture` does,
+    /// read with a tail): every cycle read by one is read by the other, and
+    /// every value and uncertainty is the same, bit for bit (compared as
+    /// their shortest decimals, so the NaN of an unread dead volume matches),
+    /// with the closed fits' logarithms kept or computed where read; the
+    /// pressures and the acceleration read from the codes as needed.
+    #[test]
+    fn the_boards_reading_at_close_is_the_one_cycle_captures() {
+        use hammer_estimator::chambers::at_close::{characterise_cycle, window_samples, Work};
+        let mut cfg = SimConfig::nominal(5.0);
+        cfg.solver.duration_s = 1.0;
+        let config = cfg.estimator_config(Some(5.0)).expect("nominal config");
+        let trace = crate::simulate(&cfg).expect("simulation").trace();
+        let codes = crate::estimation::to_codes(&trace, &config);
+        let reports = crate::estimation::run(&codes, config).expect("estimator");
+        let value = |cal: &hammer_estimator::ChannelCal, c: u16| cal.value(c) as f64;
+        let p1: Vec<f64> = codes.iter().map(|s| value(&config.rear, s.rear)).collect();
+        let p2: Vec<f64> = codes.iter().map(|s| value(&config.front, s.front)).collect();
+        let acc: Vec<f64> = codes.iter().map(|s| value(&config.accel, s.accel)).collect();
+        let s = Signals {
+            dt_s: trace.dt_s,
+            p_rear_pa: &p1,
+            p_front_pa: &p2,
+            accel_mps2: &acc,
+            x_m: None,
+            pressure_lag_s: config.chambers.pressure_group_delay_s as f64,
+        };
+        let geo = ChamberGeometry::of(&config);
+        // The board's f32 chambers are the hammer's as the reading uses them
+        // (in f32; the areas computed in f32, within an ulp of the f64 ones).
+        let h = cfg.hammer.chambers();
+        let f32s = |g: &ChamberGeometry| {
+            [
+                g.rear_area_m2,
+                g.front_area_m2,
+                g.rear_dead_m3,
+                g.front_dead_m3,
+                g.impact_position_m,
+                g.rear_outlet_m,
+                g.front_outlet_m,
+            ]
+            .map(|v| v as f32)
+        };
+        for (k, (a, b)) in f32s(&geo).into_iter().zip(f32s(&h)).enumerate() {
+            assert!(if k < 2 { (a / b - 1.0).abs() < 2e-7 } else { a == b }, "{k}: {a} {b}");
+        }
+        let reading = Reading::of(&config);
+        let n = window_samples(6_000, config.dt_s());
+        let (mut x_buf, mut logs_buf) = (vec![0.0f32; n], vec![0.0f32; 2 * n]);
+        let mut work = Work {
+            x_m: &mut x_buf,
+            room: &mut logs_buf,
+        };
+        let (mut read, mut worst) = (0, [0.0f32; 3]);
+        for pair in reports.windows(2) {
+            let (prev, cur) = (&pair[0], &pair[1]);
+            if !(prev.is_valid() && cur.is_valid() && cur.seq == prev.seq + 1) {
+                continue;
+            }
+            let span = Span::between(prev, cur);
+            let host = characterise_spans(&s, &[span], &reading, &geo, true)[0];
+            let [open, close] = [span.open_s, span.close_s].map(|t| (t / trace.dt_s).round() as usize);
+            let board = characterise_cycle(&config, &geo, &codes[open..], close - open, cur, &mut work);
+            assert_eq!(board.is_some(), host.is_some(), "cycle {}", cur.seq);
+            let (Some(board), Some(host)) = (board, host) else {
+                continue;
+            };
+            assert_eq!(format!("{board:?}"), format!("{host:?}"), "cycle {}", cur.seq);
+            for (b, h) in [(board.front, host.front), (board.rear, host.rear)] {
+                assert_eq!(b.is_some(), h.is_some(), "cycle {}", cur.seq);
+                let (Some(b), Some(h)) = (b, h) else { continue };
+                read += 1;
+                let d = [
+                    (b.onset_s - h.onset_s).abs(),
+                    (b.closed_exponent / h.closed_exponent - 1.0).abs(),
+                    (b.feed_area_m2 / h.feed_area_m2 - 1.0).abs(),
+                ];
+                for k in 0..3 {
+                    worst[k] = worst[k].max(d[k]);
+                }
+                assert_eq!(b.x_m.is_finite(), h.x_m.is_finite());
+            }
+        }
+        // A window longer than the room lent is not read at all (never in part).
+        let (mut x_small, mut logs_small) = (vec![0.0f32; 2_000], vec![0.0f32; 2 * 2_000]);
+        let mut tight = Work {
+            x_m: &mut x_small,
+            room: &mut logs_small,
+        };
+        let cur = reports.iter().rposition(|r| r.is_valid()).expect("a valid cycle");
+        let close = (reports[cur].t_impact_s() / trace.dt_s).round() as usize;
+        let open = (reports[cur - 1].t_impact_s() / trace.dt_s).round() as usize;
+        assert!(close - open > 2_000);
+        assert!(characterise_cycle(&config, &geo, &codes[open..], close - open, &reports[cur], &mut tight).is_none());
+        println!(
+            "{read} feeds read; worst |Δ onset| {:.3e} s, |Δn/n| {:.2e}, |ΔA/A| {:.2e}",
+            worst[0], worst[1], worst[2]
+        );
+        assert!(read >= 20, "{read}");
+        assert_eq!(worst, [0.0; 3]);
+    }
+
     /// Without the track term (the diagnosis' reading) every value is the
     /// one read with it, bit for bit, and only the uncertainties are
     /// narrower or equal: the force balance's track widens them, it moves

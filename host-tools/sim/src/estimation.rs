@@ -36,6 +36,13 @@ pub fn estimator_config(
         front: sensors.front.calibration(),
         accel: sensors.accel.calibration(),
         supply_pressure_pa: supply_bar.map_or(f32::NAN, |b| (b * 1e5) as f32),
+        chambers: hammer_estimator::ChamberConfig {
+            rear_dead_m3: hammer.rear_dead_volume_m3 as f32,
+            front_dead_m3: hammer.front_dead_volume_m3 as f32,
+            rear_outlet_m: hammer.rear_outlet_opens_m as f32,
+            front_outlet_m: hammer.front_outlet_opens_m as f32,
+            pressure_group_delay_s: sensors.front.group_delay_s(1.0 / sample_rate_hz) as f32,
+        },
         ..Config::default()
     };
     p.apply(&mut c);
@@ -101,7 +108,16 @@ pub fn check_gauge(path: &Path, min_rear_pa: f64, min_front_pa: f64, duration_s:
 
 /// The config-file key each estimator field is built from in
 /// [`estimator_config`]; the estimator's own names mean nothing to a user.
-const ESTIMATOR_FIELD_KEYS: [(&str, &str); 23] = [
+const ESTIMATOR_FIELD_KEYS: [(&str, &str); 29] = [
+    ("geometry.travel_m", "hammer.impact_position_m"),
+    ("chambers.rear_dead_m3", "hammer.rear_dead_volume_m3"),
+    ("chambers.front_dead_m3", "hammer.front_dead_volume_m3"),
+    ("chambers.rear_outlet_m", "hammer.rear_outlet_opens_m"),
+    ("chambers.front_outlet_m", "hammer.front_outlet_opens_m"),
+    (
+        "chambers.pressure_group_delay_s",
+        "sensors.front.bandwidth_hz (its filter's group delay, s)",
+    ),
     ("geometry.piston_mass_kg", "hammer.piston_mass_kg"),
     ("geometry.bore_diameter_m", "hammer.bore_diameter_m"),
     ("geometry.rod_diameter_m", "hammer.rod_diameter_m"),
@@ -657,6 +673,32 @@ pub fn no_valid_message(path: &Path, reports: &[CycleReport], config: &Config) -
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The estimator's default chambers (what a board runs until it is
+    /// told its hammer, and what an old stored record is given) are the
+    /// default hammer's and its transducers' delay at 100 kS/s; a hammer's
+    /// own reach the board's configuration.
+    #[test]
+    fn the_default_chambers_are_the_default_hammers() {
+        let (h, s) = (HammerParams::default(), SensorModel::default());
+        let c = estimator_config(&h, &s, &EstimatorParams::default(), 1e5, None).unwrap();
+        let d = Config::default().chambers;
+        let (got, want) = (c.chambers, d);
+        assert_eq!(
+            (got.rear_dead_m3, got.front_dead_m3),
+            (want.rear_dead_m3, want.front_dead_m3)
+        );
+        assert_eq!(
+            (got.rear_outlet_m, got.front_outlet_m),
+            (want.rear_outlet_m, want.front_outlet_m)
+        );
+        assert_eq!(got.pressure_group_delay_s, want.pressure_group_delay_s);
+        assert_eq!(c.geometry.travel_m, Config::default().geometry.travel_m);
+        let mut other = h.clone();
+        other.front_dead_volume_m3 = 25e-6;
+        let c = estimator_config(&other, &s, &EstimatorParams::default(), 1e5, None).unwrap();
+        assert_eq!(c.chambers.front_dead_m3, 25e-6);
+    }
 
     /// Each refusal names the key of the config file it came from, never the
     /// estimator's internal field.

@@ -49,6 +49,9 @@ pub struct Ingest {
     seq: SeqCheck,
     lost_at_us: Option<u64>,
     opened_before: bool,
+    /// A replay reads a recording made in an older protocol this host can
+    /// still read (`hammer_wire::legacy`); a live link refuses the device.
+    older_readable: bool,
 }
 
 impl Default for Ingest {
@@ -68,6 +71,17 @@ impl Ingest {
             seq: SeqCheck::default(),
             lost_at_us: None,
             opened_before: false,
+            older_readable: false,
+        }
+    }
+
+    /// The core `hammer replay` uses: as [`Ingest::new`], and a recording
+    /// whose device spoke an older protocol this host can read
+    /// (`hammer_wire::legacy::READABLE_OLDER`) is read in it.
+    pub fn for_replay() -> Self {
+        Self {
+            older_readable: true,
+            ..Self::new()
         }
     }
 
@@ -94,6 +108,7 @@ impl Ingest {
     /// not swallow the first new one) and a new handshake; counters go on.
     pub fn opened(&mut self, t_us: u64, port: String, emit: &mut dyn FnMut(Stamped)) {
         self.inbound.reopen();
+        self.inbound.read_as(hammer_wire::PROTOCOL_VERSION);
         self.handshake = Handshake::Pending;
         self.held.clear();
         if self.opened_before {
@@ -170,7 +185,14 @@ impl Ingest {
     }
 
     fn message(&mut self, t_us: u64, m: DeviceMsg, emit: &mut dyn FnMut(Stamped)) {
-        match hello_reply(&m) {
+        // A recording of an older device: read in its own protocol.
+        let older = matches!(&m, DeviceMsg::Hello(i) if i.protocol_version != hammer_wire::PROTOCOL_VERSION
+            && self.older_readable && self.inbound.read_as(i.protocol_version));
+        let reply = match (&m, hello_reply(&m)) {
+            (DeviceMsg::Hello(info), Some(Err(_))) if older => Some(Ok(info)),
+            (_, r) => r,
+        };
+        match reply {
             Some(Err(device)) => {
                 self.held.clear();
                 if self.handshake != Handshake::Mismatch(device) {
@@ -523,6 +545,51 @@ mod tests {
         assert_eq!(ev[3], Event::SeqGap { expected: 2, got: 3 });
         assert_eq!(i.stats().seq_gaps, 1);
         assert_eq!(i.stats().lost_reports, 1);
+    }
+
+    /// A recording made with a protocol-4 board (before the chambers joined
+    /// the configuration) replays: its reports as they were, its `Config`
+    /// (the frame protocol 4 sent, pinned in `wire/tests/frames.rs` then)
+    /// with the default chambers; a live link refuses that board.
+    #[test]
+    fn a_replayed_protocol_4_recording_is_read_in_its_protocol() {
+        const V4_CONFIG: &str = "0002050450c347010b203fb81e053dcdcc4c3c010370c10420ba430a408643ff1f6f12033c01037a440420ba430a408643ff1f6f12033c01037a440ef0ff44e7fb793fff1f0ad7a33b0103803f010f7a4417b75139a69bc43a0ad7a33c0101023f0101023f010102400108c07f20bc3e4c320101023f0107204125d6285200";
+        let v4: Vec<u8> = (0..V4_CONFIG.len() / 2)
+            .map(|k| u8::from_str_radix(&V4_CONFIG[2 * k..2 * k + 2], 16).unwrap())
+            .collect();
+        let stream = |i: &mut Ingest| {
+            let mut out = vec![];
+            for bytes in [frame(&hello(4)), v4.clone(), frame(&report(0)), frame(&report(1))] {
+                i.feed(1, &bytes, &mut |e| out.push(e.event));
+            }
+            out.into_iter()
+                .filter(|e| !matches!(e, Event::Stats(_)))
+                .collect::<Vec<_>>()
+        };
+        let ev = stream(&mut Ingest::for_replay());
+        assert!(matches!(&ev[0], Event::Device(i) if i.protocol_version == 4), "{ev:?}");
+        let Event::Msg(DeviceMsg::Config(c)) = &ev[1] else {
+            panic!("{ev:?}")
+        };
+        // The recorded board's own settings, the default chambers added.
+        assert_eq!((c.piston_mass_kg, c.inclination_deg, c.cusum_h), (0.625, -15.0, 10.0));
+        let default = hammer_wire::DeviceConfig::from(&hammer_estimator::Config::default());
+        assert_eq!(
+            (c.front_dead_m3, c.pressure_group_delay_s),
+            (default.front_dead_m3, default.pressure_group_delay_s)
+        );
+        assert_eq!(&ev[2..], &[Event::Msg(report(0)), Event::Msg(report(1))]);
+        // Live, the same bytes are a board of another protocol: not read
+        // (its configuration does not even decode in this one).
+        let ev = stream(&mut Ingest::new());
+        assert!(
+            matches!(ev[..], [Event::VersionMismatch { device: 4 }, Event::FrameError { .. }]),
+            "{ev:?}"
+        );
+        // A protocol this host cannot read is not read in a replay either.
+        let mut i = Ingest::for_replay();
+        let ev = run(&mut i, &[hello(3), report(0)]);
+        assert_eq!(ev, vec![Event::VersionMismatch { device: 3 }]);
     }
 
     #[test]

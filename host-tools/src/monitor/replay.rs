@@ -158,7 +158,7 @@ fn play<R: std::io::Read>(
     tx: &SyncSender<Stamped>,
     stop: &AtomicBool,
 ) -> Damage {
-    let mut ingest = Ingest::new();
+    let mut ingest = Ingest::for_replay();
     let mut damage = Damage::default();
     let mut chunks = Chunks::default();
     let mut emit = |ev: Stamped| {

@@ -1,0 +1,311 @@
+//! One cycle's characteristics at its close, from the cycle's ADC codes and
+//! its report: what a board computes, no_std and f32 from the codes on.
+//!
+//! The reading is the host's reading of a one-cycle raw capture
+//! (`hammer_sim::characteristics::characterise_spans` with a tail), step for
+//! step: the pressures read back by their group delay; the piston's track
+//! closed between the cycle's two impacts, once from the accelerometer (the
+//! value) and once from the force balance (its spread widens the
+//! uncertainties); after the closing impact, where a front feed may start,
+//! the accelerometer integrated from the rebound the cycle's own opening
+//! impact gave (a steady hammer rebounds alike from each impact). Only the
+//! samples of the cycle and [`LOOK_AFTER_S`] after it are needed, so the
+//! report of a cycle can wait for them (`docs/estimator.md`).
+//!
+//! f32 throughout: the geometry comes from the configuration's f32 fields
+//! ([`ChamberGeometry::of`]) and the dead-volume fit, the chambers' one use
+//! of double precision, is not linked here (a hammer's record fits it, on
+//! the host).
+//!
+//! The caller lends the room ([`Work`]): one float a sample of the window
+//! for the position track (read once from each track, one after the
+//! other), and optionally room for the closed fits' logarithms (two floats
+//! a sample of a closed phase; shorter is allowed and only slower). The
+//! pressures and the acceleration are read from the codes where they are
+//! kept ([`Codes`]: a board's ring), through their calibration, as they are
+//! needed; nothing is allocated. A window longer than the room gives
+//! `None`, never a reading of part of it.
+
+use super::track::{self, PhaseFriction, Piston};
+use super::{characterise_with, ChamberGeometry, Characteristics, Part, Series, Window, LOOK_AFTER_S, P_ATM_PA};
+use crate::{ChannelCal, Config, CycleReport, RawSample};
+
+/// Samples kept after [`LOOK_AFTER_S`] past the closing impact (the host's
+/// capture reader reads as far).
+pub const AFTER_MARGIN: usize = 64;
+/// The longest a shock is looked for after its impact (a contact lasts
+/// tens of microseconds; the accelerometer's ringing a little longer).
+const MAX_SHOCK_S: f32 = 0.5e-3;
+/// How long after a shock the front chamber is taken as closed, to fit the
+/// rebound of the tail's track when the cycle's own gave none.
+const REBOUND_FIT_S: f32 = 0.5e-3;
+
+/// Samples the window of a cycle of `cycle` samples takes at `dt_s`: the
+/// cycle, both its impacts, and the look-after with its margin.
+pub fn window_samples(cycle: usize, dt_s: f32) -> usize {
+    cycle + 1 + look_after(dt_s) + AFTER_MARGIN
+}
+
+/// [`LOOK_AFTER_S`] in samples, rounded up.
+fn look_after(dt_s: f32) -> usize {
+    let x = LOOK_AFTER_S / dt_s;
+    let whole = x as usize;
+    if (whole as f32) < x {
+        whole + 1
+    } else {
+        whole
+    }
+}
+
+/// The room a reading works in: `x_m` at least as long as the window, the
+/// closed fits' cache `room` any length ([`characterise`](super::characterise)).
+pub struct Work<'a> {
+    pub x_m: &'a mut [f32],
+    pub room: &'a mut [f32],
+}
+
+/// A cycle's sample-sets where they are kept (a slice, a board's ring).
+pub trait Codes {
+    fn len(&self) -> usize;
+    fn get(&self, i: usize) -> RawSample;
+    fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+impl Codes for [RawSample] {
+    fn len(&self) -> usize {
+        <[RawSample]>::len(self)
+    }
+    fn get(&self, i: usize) -> RawSample {
+        self[i]
+    }
+}
+
+/// One channel of `codes` through its calibration, read `lag` samples
+/// later (linear interpolation; the last samples repeat the end): a delayed
+/// channel brought back in time, as the host's capture reading does it.
+struct Channel<'a, C: Codes + ?Sized> {
+    codes: &'a C,
+    n: usize,
+    cal: ChannelCal,
+    pick: fn(&RawSample) -> u16,
+    whole: usize,
+    frac: f32,
+    lagged: bool,
+}
+
+impl<'a, C: Codes + ?Sized> Channel<'a, C> {
+    fn new(codes: &'a C, n: usize, cal: ChannelCal, pick: fn(&RawSample) -> u16, lag: f32) -> Self {
+        let lagged = !(lag.is_nan() || lag <= 0.0);
+        let whole = if lagged { lag as usize } else { 0 };
+        Self {
+            codes,
+            n,
+            cal,
+            pick,
+            whole,
+            frac: if lagged { lag - whole as f32 } else { 0.0 },
+            lagged,
+        }
+    }
+
+    fn value(&self, i: usize) -> f32 {
+        self.cal.value((self.pick)(&self.codes.get(i)))
+    }
+}
+
+impl<C: Codes + ?Sized> Series for Channel<'_, C> {
+    fn len(&self) -> usize {
+        self.n
+    }
+    fn at(&self, i: usize) -> f32 {
+        if !self.lagged {
+            return self.value(i);
+        }
+        let a = self.value((i + self.whole).min(self.n - 1));
+        let b = self.value((i + self.whole + 1).min(self.n - 1));
+        a + self.frac * (b - a)
+    }
+}
+
+impl ChamberGeometry {
+    /// The chambers `c` describes: the piston's areas, the travel as the
+    /// impact position, the dead volumes and outlets of `c.chambers`. The
+    /// areas in the estimator's f32 arithmetic (a board has no double
+    /// precision; the readings use them in f32 in any case).
+    pub fn of(c: &Config) -> Self {
+        let ch = &c.chambers;
+        Self {
+            rear_area_m2: c.rear_area_m2() as f64,
+            front_area_m2: c.front_area_m2() as f64,
+            rear_dead_m3: ch.rear_dead_m3 as f64,
+            front_dead_m3: ch.front_dead_m3 as f64,
+            impact_position_m: c.geometry.travel_m as f64,
+            rear_outlet_m: ch.rear_outlet_m as f64,
+            front_outlet_m: ch.front_outlet_m as f64,
+        }
+    }
+}
+
+/// The characteristics of the cycle `report` closes. `codes` starts at the
+/// cycle's opening impact (its first shock sample, index 0) and holds the
+/// closing one at `close` and at least half the look-after past it (all of
+/// it and [`AFTER_MARGIN`] are read where there). `None` where the window
+/// does not fit `work`, the cycle is not a valid one, or the samples after
+/// it are too few.
+pub fn characterise_cycle<C: Codes + ?Sized>(
+    cfg: &Config,
+    geo: &ChamberGeometry,
+    codes: &C,
+    close: usize,
+    report: &CycleReport,
+    work: &mut Work,
+) -> Option<Characteristics> {
+    let dt = cfg.dt_s();
+    let look = look_after(dt);
+    let following = (close + look + AFTER_MARGIN).min(codes.len().checked_sub(1)?);
+    let n = following + 1;
+    if !(work.x_m.len() >= n && report.is_valid() && 0 < close && close + look / 2 <= following && geo.is_valid()) {
+        return None;
+    }
+    // The pressures, read back by the channels' group delay.
+    let lag = cfg.chambers.pressure_group_delay_s / dt;
+    let p1 = Channel::new(codes, n, cfg.rear, |s| s.rear, lag);
+    let p2 = Channel::new(codes, n, cfg.front, |s| s.front, lag);
+    let accel = Channel::new(codes, n, cfg.accel, |s| s.accel, 0.0);
+    let piston = Piston::of(cfg);
+    let friction = PhaseFriction {
+        backhaul_n: report.friction_backhaul_n,
+        stroke_n: report.friction_stroke_n,
+    };
+    let impact = geo.impact_position_m as f32;
+    let threshold = cfg.impact_threshold_mps2;
+    let blank = crate::math::round(cfg.blank_after_s / dt) as usize;
+    let a_end = shock_end(&accel, 0, threshold, dt).min(close - 1);
+    let tail_end = shock_end(&accel, close, threshold, dt);
+    let end = (close + look + AFTER_MARGIN).min(following);
+    let supply_abs = cfg.supply_pressure_pa + P_ATM_PA;
+    let balance = || track::force_balance(&p1, &p2, &piston, friction);
+    let tau = cfg.accel_zero_shift_tau_s;
+    // The accelerometer's source: the force balance while it still rings
+    // (friction's sign split at the turn), its own reading after.
+    let source = track::accelerometer(&accel, report.accel_zero_shift_mps2, tau, dt, 0, blank, balance());
+    let by_accel = |i: usize, turn: usize| {
+        if i < turn || i >= blank {
+            source(i, usize::MAX)
+        } else {
+            source(i, 0)
+        }
+    };
+    let x = &mut work.x_m[..n];
+    let room = &mut *work.room;
+    // Each track in turn in the one room: the force balance's first (its
+    // spread widens the uncertainties), then the accelerometer's (the value).
+    let mut read = |by_force: bool| {
+        x.fill(f32::NAN);
+        x[..a_end].fill(impact);
+        if by_force {
+            track::closed(dt, impact, a_end, close, x, balance());
+        } else {
+            track::closed(dt, impact, a_end, close, x, by_accel);
+        }
+        let rebound = if a_end + 1 < close {
+            Some((x[a_end + 1] - x[a_end]) / dt).filter(|v| v.is_finite())
+        } else {
+            None
+        };
+        // After the closing impact: the tail's track from the rebound.
+        tail(&accel, &p2, dt, geo, close, tail_end, rebound, x);
+        let w = Window {
+            dt_s: dt,
+            p_rear_pa: &Part::new(&p1, 0, end + 1),
+            p_front_pa: &Part::new(&p2, 0, end + 1),
+            x_m: &x[..=end],
+            open: 0,
+            close,
+            fit_dead_volume: false,
+        };
+        // No dead-volume fit (a record's, on the host): none of its
+        // double-precision sums in a board's image.
+        characterise_with::<false, _>(&w, geo, supply_abs, room)
+    };
+    let by_force = read(true);
+    Some(read(false).widened(&by_force))
+}
+
+/// The first sample after the impact at `i` where the accelerometer has
+/// left the impact region (`i` itself if it never does within the shock's
+/// longest).
+fn shock_end(accel: &impl Series, i: usize, threshold_mps2: f32, dt_s: f32) -> usize {
+    let last = (i + (MAX_SHOCK_S / dt_s) as usize).min(accel.len().saturating_sub(1));
+    (i + 1..=last)
+        .find(|&k| crate::math::abs(accel.at(k)) < threshold_mps2)
+        .unwrap_or(i)
+}
+
+/// The track after the closing impact, from the end of its shock: the
+/// accelerometer integrated from `rebound`; without one, the rebound fitted
+/// to the front chamber's first half millisecond, closed at the adiabatic
+/// exponent. The displacement is integrated as it is written (no room of
+/// its own), twice where the fit needs it first.
+#[allow(clippy::too_many_arguments)]
+fn tail(
+    accel: &impl Series,
+    p2: &impl Series,
+    dt: f32,
+    geo: &ChamberGeometry,
+    close: usize,
+    a_end: usize,
+    rebound: Option<f32>,
+    x: &mut [f32],
+) {
+    let n = accel.len().min(p2.len()).min(x.len());
+    let impact = geo.impact_position_m as f32;
+    let a_end = a_end.clamp(close, n);
+    x[close..a_end].fill(impact);
+    if a_end + 2 >= n {
+        return;
+    }
+    let len = n - a_end;
+    let v0 = match rebound {
+        Some(v0) => v0,
+        None => {
+            let (v_dead, a2) = (geo.front_dead_m3 as f32, geo.front_area_m2 as f32);
+            let p_abs = |i: usize| p2.at(i) + P_ATM_PA;
+            let fit = ((REBOUND_FIT_S / dt) as usize).clamp(2, len - 1);
+            let (mut num, mut den) = (0.0f32, 0.0f32);
+            displacement(accel, dt, a_end, len, |k, uk| {
+                if (1..=fit).contains(&k) {
+                    let ratio = p_abs(a_end) / p_abs(a_end + k);
+                    let x_closed = impact - v_dead * (crate::math::powf(ratio, 1.0 / 1.4) - 1.0) / a2;
+                    let tk = k as f32 * dt;
+                    num += (x_closed - impact - uk) * tk;
+                    den += tk * tk;
+                }
+            });
+            if den > 0.0 {
+                (num / den).min(0.0)
+            } else {
+                0.0
+            }
+        }
+    };
+    displacement(accel, dt, a_end, len, |k, uk| {
+        x[a_end + k] = (impact + v0 * k as f32 * dt + uk).min(impact);
+    });
+}
+
+/// `f(k, u)` for the `len` samples from `a_end`: u the displacement the
+/// accelerometer gives from rest at `a_end` (the trapezoid, twice).
+fn displacement(accel: &impl Series, dt: f32, a_end: usize, len: usize, mut f: impl FnMut(usize, f32)) {
+    let (mut u, mut v) = (0.0f32, 0.0f32);
+    f(0, 0.0);
+    for k in 1..len {
+        let i = a_end + k;
+        let v_next = v + 0.5 * dt * (accel.at(i - 1) + accel.at(i));
+        u += 0.5 * dt * (v + v_next);
+        v = v_next;
+        f(k, u);
+    }
+}

@@ -1,0 +1,172 @@
+//! The offset between the two readings of a cycle's chamber characteristics
+//! (issue 47): as the monitor reads them today, from the board's one-cycle
+//! raw captures (`hammer_host::drift`: the diagnosis' extractor, its own
+//! impacts and friction, the pressures as sampled), and as the board reads
+//! them at a cycle's close (`hammer_estimator::chambers::at_close`: the
+//! estimator's impacts and friction, the pressures read back by their
+//! group delay). A commissioning record read from captures and windows read
+//! from reports differ by this offset, not by any drift.
+//!
+//! The board's own monitor code (`hammer_app::Monitor`) makes the captures
+//! from the simulated hammer's codes, one cycle at a time as the monitor
+//! asks for them; every cycle of the same run is also read at its close.
+//! Printed per characteristic: each reading's median over the run, the
+//! offset (report − capture) and its standard uncertainty from the two
+//! medians' spreads.
+//!
+//! Then the same hammer with a hidden valve delay of 1.5 ms
+//! (`valve_delay:tau_s=0.0015`): the front feed's shift from the sound
+//! hammer as each reading sees it (the drift either would show).
+//!
+//! `cargo run --release -p hammer-host --example report_vs_capture -- [SECONDS] [BAR...]`
+//! (defaults: 20 s at 4 and 7 bar).
+
+use hammer_app::Monitor;
+use hammer_estimator::chambers::at_close::{characterise_cycle, window_samples, Work};
+use hammer_estimator::chambers::{ChamberGeometry, Characteristics};
+use hammer_host::diagnose::engine::extractor_for;
+use hammer_host::diagnose::features::{feature_name, ESTIMATOR_CHARACTERISTICS};
+use hammer_host::drift::{median, readings_of, robust_sd, N_CHARACTERISTICS};
+use hammer_sim::simulate::simulate;
+use hammer_sim::SimConfig;
+use hammer_wire::{DeviceMsg, HostMsg, BLOCK_SAMPLES};
+
+fn main() {
+    let args: Vec<f64> = std::env::args().skip(1).filter_map(|a| a.parse().ok()).collect();
+    let seconds = args.first().copied().unwrap_or(20.0);
+    let bars: Vec<f64> = if args.len() > 1 {
+        args[1..].to_vec()
+    } else {
+        vec![4.0, 7.0]
+    };
+    for bar in bars {
+        let sound = offsets(bar, seconds, None);
+        let delayed = offsets(bar, seconds, Some("valve_delay:tau_s=0.0015"));
+        println!(
+            "  valve delay 1.5 ms at {bar} bar: front feed moved {:+.3} ms read from captures, {:+.3} ms read at the close (difference {:+.3} ms)\n",
+            1e3 * (delayed[0] - sound[0]),
+            1e3 * (delayed[1] - sound[1]),
+            1e3 * ((delayed[1] - sound[1]) - (delayed[0] - sound[0]))
+        );
+    }
+}
+
+/// The characteristics in the drift's order, from a board's reading.
+fn as_reading(c: &Characteristics) -> [f64; N_CHARACTERISTICS] {
+    let f = |feed: Option<hammer_estimator::chambers::Feed>, k: usize| {
+        feed.map_or(f64::NAN, |f| [f.onset_s, f.closed_exponent, f.feed_area_m2][k] as f64)
+    };
+    [
+        f(c.front, 0),
+        f(c.rear, 0),
+        f(c.front, 1),
+        f(c.rear, 1),
+        f(c.front, 2),
+        f(c.rear, 2),
+    ]
+}
+
+/// Prints both readings' medians and their offset; returns the front
+/// feed's median as (capture, report).
+fn offsets(bar: f64, seconds: f64, effect: Option<&str>) -> [f64; 2] {
+    let mut cfg = SimConfig::nominal(bar);
+    cfg.effects.apply_spec("coulomb_friction").expect("known effect");
+    if let Some(e) = effect {
+        cfg.effects.apply_spec(e).expect("known effect");
+    }
+    cfg.solver.duration_s = seconds;
+    let config = cfg.estimator_config(Some(bar)).expect("nominal config");
+    let sim = simulate(&cfg).expect("the sound hammer simulates");
+    let codes = sim.measured.codes.clone();
+    let extractor = extractor_for(&cfg);
+
+    // The board's monitor: reports, and one capture at a time.
+    let mut monitor = Monitor::new(config, "offset").expect("config");
+    let mut reports = Vec::new();
+    let mut captured: Vec<Vec<[u16; 3]>> = Vec::new();
+    let mut chunks: Vec<[u16; 3]> = Vec::new();
+    let mut ignore = |_: DeviceMsg| {};
+    monitor.on_command(HostMsg::StartCapture { cycles: 1 }, 0, &mut ignore);
+    for block in codes.chunks(BLOCK_SAMPLES) {
+        monitor.on_samples(block, &mut |m| {
+            if let DeviceMsg::Report(r) = m {
+                reports.push(r);
+            }
+        });
+        let mut done = false;
+        while let Some(m) = monitor.next_capture_chunk() {
+            if let DeviceMsg::Capture(c) = m {
+                chunks.extend_from_slice(&c.samples);
+                done |= c.offset as usize + c.samples.len() == c.total as usize;
+            }
+        }
+        // The next capture once this one has streamed (the board is idle again).
+        if done {
+            captured.push(std::mem::take(&mut chunks));
+            monitor.on_command(HostMsg::StartCapture { cycles: 1 }, 0, &mut ignore);
+        }
+    }
+    let by_capture: Vec<[f64; N_CHARACTERISTICS]> = captured
+        .iter()
+        .flat_map(|c| {
+            let (trace, _) = hammer_host::capture::to_trace(c, &config, None);
+            readings_of(&extractor, &trace, bar)
+        })
+        .collect();
+
+    // Every valid cycle read at its close, as the board would.
+    let geo = ChamberGeometry::of(&config);
+    let dt = config.dt_s() as f64;
+    let n = window_samples((config.max_period_s as f64 / dt) as usize, config.dt_s());
+    let (mut x_room, mut logs_room) = (vec![0.0f32; n], vec![0.0f32; 2 * n]);
+    let mut work = Work {
+        x_m: &mut x_room,
+        room: &mut logs_room,
+    };
+    // The run's start-up dropped as a record's is: the second half's cycles.
+    let steady = reports.len() / 4;
+    let by_report: Vec<[f64; N_CHARACTERISTICS]> = reports
+        .windows(2)
+        .skip(steady)
+        .filter(|w| w[0].is_valid() && w[1].is_valid() && w[1].seq == w[0].seq + 1)
+        .filter_map(|w| {
+            let [open, close] = [&w[0], &w[1]].map(|r| (r.t_impact_s() / dt).round() as usize);
+            characterise_cycle(&config, &geo, &codes[open..], close - open, &w[1], &mut work)
+        })
+        .map(|c| as_reading(&c))
+        .collect();
+
+    println!(
+        "{bar} bar{}, {seconds} s: {} cycles read from {} captures, {} at their close",
+        effect.map_or(String::new(), |e| format!(" with {e}")),
+        by_capture.len(),
+        captured.len(),
+        by_report.len()
+    );
+    println!(
+        "  {:<16} {:>13} {:>13} {:>13} {:>11}",
+        "characteristic", "capture", "report", "offset", "u(offset)"
+    );
+    let mut front = [f64::NAN; 2];
+    for k in 0..N_CHARACTERISTICS {
+        let col = |rs: &[[f64; N_CHARACTERISTICS]]| -> Vec<f64> {
+            rs.iter().map(|r| r[k]).filter(|v| v.is_finite()).collect()
+        };
+        let (cap, rep) = (col(&by_capture), col(&by_report));
+        let (mc, mr) = (median(&cap), median(&rep));
+        if k == 0 {
+            front = [mc, mr];
+        }
+        // A median's standard error: 1.2533·σ/√n.
+        let se = |v: &[f64]| 1.2533 * robust_sd(v) / (v.len() as f64).sqrt();
+        let u = (se(&cap).powi(2) + se(&rep).powi(2)).sqrt();
+        let name = feature_name(ESTIMATOR_CHARACTERISTICS[k]);
+        println!(
+            "  {name:<16} {mc:>13.6e} {mr:>13.6e} {:>13.6e} {u:>11.2e}   ({} / {} cycles)",
+            mr - mc,
+            cap.len(),
+            rep.len()
+        );
+    }
+    front
+}
