@@ -10,21 +10,8 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-fn hammer(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_hammer")).args(args).output().unwrap();
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
-}
-
-fn tmp_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("hammer-bench-sheet-test-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
+mod common;
+use common::{hammer, tmp_dir};
 
 /// Mean friction and energy of the valid cycles `hammer estimate` prints.
 fn estimate_means(trace: &Path) -> (f64, f64) {

@@ -11,21 +11,8 @@ use std::time::Duration;
 
 use hammer_fmu::import::{cycling, FailKind, FmuModel, ModelMap, Options, Signals, WorkerCommand};
 
-fn hammer(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_hammer")).args(args).output().unwrap();
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
-}
-
-fn tmp_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("hammer-fmu-import-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
+mod common;
+use common::{hammer, tmp_dir};
 
 fn options(threads: usize, limit_s: f64) -> Options {
     Options {

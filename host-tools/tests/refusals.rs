@@ -5,23 +5,9 @@
 //! in absolute pressure) give no valid cycle.
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
-fn hammer(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_hammer")).args(args).output().unwrap();
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
-}
-
-fn tmp_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("hammer-refusals-test-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
+mod common;
+use common::{hammer, tmp_dir};
 
 /// The four signal columns of a simulated trace, each row through `row`.
 fn rewrite(from: &Path, to: &Path, mut row: impl FnMut(usize, [&str; 4]) -> Option<String>) {
