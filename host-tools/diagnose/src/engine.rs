@@ -126,32 +126,9 @@ pub fn diagnose_against(
             ..opts.clone()
         }
     };
-    let (fs, model_form) = nominal::fit_set(points, &nominal, &runner, &[], &fit_opts);
-    // Against the model alone the ranking's nuisance profile is linearised
-    // at the nominal model recalibrated first, not at the nominal values:
-    // at a real hammer's ±20 % the model is far from linear there, and a
-    // profile linearised at nominal left half the singles of the
-    // same-structure benchmark named wrong or beside an effect not hidden
-    // (issue 44). Against a record the record has cancelled the nominal
-    // values' error, so the ranking stays at them; from one supply
-    // pressure the recalibration takes an effect for the parameters' move
-    // (a valve delay of 1.5 ms at 5 bar went from named to explaining
-    // 26 %), so there it stays at them too.
-    let relinearise = references.is_empty() && fs.distinct >= 2;
-    let recal_nominal = relinearise.then(|| held_out::recalibrate_nominal(&fs, opts)).flatten();
-    let relinearised = match &recal_nominal {
-        Some(rc) => Some((nominal::nominal(points, &rc.runner, opts, &|_| {})?, rc)),
-        None => None,
-    };
-    let relinearised = relinearised
-        .as_ref()
-        .map(|(nom, rc)| nominal::fit_set(points, nom, &rc.runner, &rc.delta, &fit_opts));
-    let (rank_fs, model_form) = match &relinearised {
-        Some((f, form)) => (f, form.clone()),
-        None => (&fs, model_form),
-    };
-    let ranking = rank::rank(rank_fs, &fit_opts, &step);
-    let detection_floors = floor::floors(rank_fs, &ranking, &fit_opts);
+    let (fs, model_form) = nominal::fit_set(points, &nominal, &runner, &fit_opts);
+    let ranking = rank::rank(&fs, &fit_opts, &step);
+    let detection_floors = floor::floors(&fs, &ranking, &fit_opts);
     step("detection floors");
 
     // The check of the verdict's model runs on the hammer's own features,
@@ -167,38 +144,21 @@ pub fn diagnose_against(
     // record shares with the model alone gets the same check.
     let own_fs = own_points
         .as_ref()
-        .map(|p| nominal::fit_set(p, &nominal, &runner, &[], opts).0);
+        .map(|p| nominal::fit_set(p, &nominal, &runner, opts).0);
     let (check_fs, check_points) = match (&own_fs, &own_points) {
         (Some(f), Some(p)) => (f, p.as_slice()),
         _ => (&fs, points.as_slice()),
     };
-    let models = held_out::models(
-        check_fs,
-        &nominal.bars,
-        ranking.verdict.as_ref(),
-        recal_nominal.clone(),
-        opts,
-    );
+    let models = held_out::models(check_fs, &nominal.bars, ranking.verdict.as_ref(), opts);
     step("held-out check");
     let shrink = held_out::shrink(check_points, &nominal.features, &models);
     let located = where_::locate(inputs, &grouped, &nominal, &models, base, opts);
     let recalibration = held_out::recalibration(base, &models, opts.nominal_uncertainty);
     let chambers = chamber_table(&fs, &nominal.bars, &models, &baselines);
-    let (alternatives, alternative_sims) = close_call_group(
-        check_fs,
-        check_points,
-        &nominal,
-        &ranking,
-        &shrink,
-        recal_nominal.clone(),
-        opts,
-    );
+    let (alternatives, alternative_sims) = close_call_group(check_fs, check_points, &nominal, &ranking, &shrink, opts);
 
-    let simulations = fs.simulations()
-        + own_fs.as_ref().map_or(0, |f| f.simulations())
-        + relinearised.as_ref().map_or(0, |(f, _)| f.simulations())
-        + models.simulations()
-        + alternative_sims;
+    let simulations =
+        fs.simulations() + own_fs.as_ref().map_or(0, |f| f.simulations()) + models.simulations() + alternative_sims;
     Ok(Outcome {
         report: Report {
             tool: format!("hammer diagnose {}", env!("CARGO_PKG_VERSION")),
@@ -280,13 +240,12 @@ fn close_call_group(
     nominal: &nominal::Nominal,
     ranking: &rank::Ranking,
     shrink: &Shrink,
-    nominal_recalibrated: Option<crate::fitset::Recalibrated>,
     opts: &Options,
 ) -> (Vec<Alternative>, usize) {
     let (Some(named), Some(other)) = (&ranking.verdict, &ranking.close_call) else {
         return (Vec::new(), 0);
     };
-    let models = held_out::models(fs, &nominal.bars, Some(other), nominal_recalibrated, opts);
+    let models = held_out::models(fs, &nominal.bars, Some(other), opts);
     let other_shrink = held_out::shrink(points, &nominal.features, &models);
     let member = |e: &EffectResult, s: &Shrink| {
         let name = e.name.rsplit('+').next().unwrap_or_default().to_string();

@@ -40,11 +40,6 @@ pub(crate) struct FitSet<'a> {
     /// Each fit point's reference record variance per feature (empty
     /// without a record): the force balance's change carries it.
     pub(crate) reference_var: Vec<Vec<f64>>,
-    /// Where the nuisance profile is linearised, in prior standard
-    /// deviations from nominal (zeros: at nominal). A fit set re-linearised
-    /// at the recalibrated nominal model keeps the prior centred on the
-    /// nominal values ([`Self::profile`]).
-    pub(crate) prior_at: Vec<f64>,
 }
 
 /// A feature's change at a point since the nominal model (against a record:
@@ -164,7 +159,6 @@ impl<'a> FitSet<'a> {
             nuisance: Vec::new(),
             against_reference: self.against_reference,
             reference_var: self.reference_var.clone(),
-            prior_at: Vec::new(),
         }
     }
 
@@ -222,10 +216,8 @@ impl<'a> FitSet<'a> {
         if k == 0 {
             return r;
         }
-        let at: Vec<f64> = (0..k).map(|i| self.prior_at.get(i).copied().unwrap_or(0.0)).collect();
-        let (a, b) = prior_normal_equations(&self.nuisance, &r, &at);
+        let (a, b) = prior_normal_equations(&self.nuisance, &r, &vec![0.0; k]);
         let Some(delta) = super::fit::solve(a, b) else {
-            r.extend(at);
             return r;
         };
         for (i, col) in self.nuisance.iter().enumerate() {
@@ -233,7 +225,7 @@ impl<'a> FitSet<'a> {
                 *x += delta[i] * c;
             }
         }
-        r.extend(at.iter().zip(&delta).map(|(a, d)| a + d));
+        r.extend(delta);
         r
     }
 
@@ -466,7 +458,6 @@ pub(crate) fn prior_normal_equations(cols: &[Vec<f64>], r: &[f64], at: &[f64]) -
 }
 
 /// The nominal model recalibrated for a candidate.
-#[derive(Clone)]
 pub(crate) struct Recalibrated {
     pub(crate) runner: ModelRunner,
     /// Each nuisance parameter's move and standard deviation, in prior standard deviations.

@@ -93,12 +93,7 @@ pub struct Options {
     /// transfer, a supply restriction) has only the model-based features as
     /// evidence, and they carry the model's form error: it must explain at
     /// least this fraction of the nominal χ², because a smooth form error
-    /// lends any effect a little of its shape. Set above the best unseen
-    /// effect of every no-effect control on the structural calibration
-    /// seed (1): with the profile linearised at the recalibrated nominal
-    /// model the form error is all that is left of a control's gap, and
-    /// heat exchange explained up to 42 % of it (35 % before, when 40 %
-    /// was set); docs/diagnosis.md.
+    /// lends any effect a little of its shape.
     pub min_explained: f64,
     /// [`Options::min_explained`] against a reference record. There the
     /// form error has cancelled and nothing scores on a sound hammer (no
@@ -165,7 +160,7 @@ impl Default for Options {
             max_iterations: 12,
             min_score: 20.0,
             min_model_free_z: default_min_model_free_z(),
-            min_explained: 0.5,
+            min_explained: 0.4,
             min_explained_reference: default_min_explained_reference(),
             min_explained_pair: default_min_explained_pair(),
             close_call_margin: default_close_call_margin(),

@@ -160,7 +160,7 @@ mod tests {
         let grouped = group::group(&inputs, &runner.extractor).unwrap();
         let opts = options();
         let nom = nominal::nominal(&grouped.points, &runner, &opts, &quiet).unwrap();
-        let (fs, _) = nominal::fit_set(&grouped.points, &nom, &runner, &[], &opts);
+        let (fs, _) = nominal::fit_set(&grouped.points, &nom, &runner, &opts);
         let ranking = rank::rank(&fs, &opts, &quiet);
         let needed = chi2_needed(&fs, &ranking, &opts).unwrap();
         let floors = floors(&fs, &ranking, &opts);

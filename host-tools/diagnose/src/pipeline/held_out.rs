@@ -72,25 +72,9 @@ impl Models {
     }
 }
 
-/// The nominal model recalibrated alone on `fs` (`None` where the nominal
-/// values are trusted exactly, or it fails).
-pub(crate) fn recalibrate_nominal(fs: &FitSet, opts: &Options) -> Option<Recalibrated> {
-    let h = opts.nominal_uncertainty;
-    (h > 0.0)
-        .then(|| fs.recalibrate(&Candidate::default(), h, RECALIBRATION_STEPS, opts.threads, None))
-        .flatten()
-}
-
-/// Recalibrates the nominal model alone (unless `nominal_recalibrated`
-/// gives it, as the ranking did on the same fit set) and with the
-/// verdict's effects, and runs both at every point of `bars`.
-pub(crate) fn models(
-    fs: &FitSet,
-    bars: &[f64],
-    verdict: Option<&EffectResult>,
-    nominal_recalibrated: Option<Recalibrated>,
-    opts: &Options,
-) -> Models {
+/// Recalibrates the nominal model alone and with the verdict's effects, and
+/// runs both at every point of `bars`.
+pub(crate) fn models(fs: &FitSet, bars: &[f64], verdict: Option<&EffectResult>, opts: &Options) -> Models {
     let fitted_cand = verdict.map(|v| v.candidate.clone());
     let h = opts.nominal_uncertainty;
     let recalibrated = |cand: &Candidate, from: Option<&[f64]>| -> Option<Recalibrated> {
@@ -110,10 +94,7 @@ pub(crate) fn models(
     };
     let none = || bars.iter().map(|_| None).collect::<Vec<_>>();
     let nominal = Candidate::default();
-    let recal_nominal = match nominal_recalibrated {
-        Some(r) => Some(r),
-        None => recalibrated(&nominal, None),
-    };
+    let recal_nominal = recalibrated(&nominal, None);
     // The verdict's model starts where the nominal one got to (if that is
     // better than nominal for it): the effects move the nominal parameters
     // less than the hammer's form does.

@@ -56,15 +56,10 @@ pub(crate) fn nominal(
 }
 
 /// The fit set of the fit points, with the model-form factors it was weighed by.
-///
-/// `prior_at` is where `runner` stands from the nominal values, in prior
-/// standard deviations (empty: at them): the nuisance profile is
-/// linearised there and its prior kept on the nominal values.
 pub(crate) fn fit_set<'a>(
     points: &[Point],
     nominal: &Nominal,
     runner: &'a ModelRunner,
-    prior_at: &[f64],
     opts: &Options,
 ) -> (FitSet<'a>, Vec<ModelForm>) {
     let fit_idx: Vec<usize> = (0..points.len()).filter(|&i| points[i].is_fit_point).collect();
@@ -94,7 +89,6 @@ pub(crate) fn fit_set<'a>(
         nuisance: Vec::new(),
         against_reference: points.iter().any(|p| !p.reference_var.is_empty()),
         reference_var: fit_idx.iter().map(|&i| points[i].reference_var.clone()).collect(),
-        prior_at: prior_at.to_vec(),
     };
     if opts.nominal_uncertainty > 0.0 {
         let fit_features: Vec<&[f64]> = fit_idx.iter().map(|&i| nominal.features[i].as_slice()).collect();
@@ -129,10 +123,7 @@ fn nuisance_sensitivities(fs: &FitSet, nominal_features: &[&[f64]], opts: &Optio
     let runner = fs.runner;
     let cols = parallel(opts.threads, jobs.clone(), &|(p, k)| {
         let mut c = runner.config(fs.points[p].0, &Effects::default());
-        // One prior standard deviation of the nominal value, h·v₀, where
-        // the runner stands at v₀·(1 + h·at).
-        let at = fs.prior_at.get(k).copied().unwrap_or(0.0);
-        *(NUISANCE[k].1)(&mut c) *= 1.0 + h / (1.0 + h * at);
+        *(NUISANCE[k].1)(&mut c) *= 1.0 + h;
         simulate_truth(&c)
             .ok()
             .and_then(|run| runner.features_of_truth(&run.truth, &Effects::default(), fs.points[p].0))
@@ -172,7 +163,7 @@ mod tests {
         assert_eq!(nom.bars, [4.0, 7.0]);
         assert!(nom.features[1][ENERGY] > nom.features[0][ENERGY]);
         assert!(nom.features[1][PERIOD] < nom.features[0][PERIOD]);
-        let (fs, form) = fit_set(&g.points, &nom, &runner, &[], &opts);
+        let (fs, form) = fit_set(&g.points, &nom, &runner, &opts);
         assert_eq!(fs.bars(), [4.0]);
         assert_eq!(fs.pressures, (4.0, 4.0));
         let floor = opts.floors.period_rel * nom.features[0][PERIOD];

@@ -354,10 +354,17 @@ fn close_call<'e>(
     let last = |e: &EffectResult| e.name.rsplit('+').next().unwrap_or_default().to_string();
     let single = |name: &str| singles.iter().find(|s| s.name == name);
     let a = single(&last(named))?;
+    // A pair's second is weighed by what it adds to the first: the pair's
+    // score is mostly the first's, and a margin on the whole would group
+    // seconds that add nothing alike.
+    let base = match named.name.split_once('+') {
+        Some((first, _)) => single(first)?.score,
+        None => 0.0,
+    };
     candidates
         .iter()
         .filter(|e| e.name != named.name && last(e) != last(named))
-        .filter(|e| within_close_call(named.score, e.score, opts))
+        .filter(|e| within_close_call(named.score - base, e.score - base, opts))
         .filter(|e| single(&last(e)).is_some_and(|b| !parted(a, b, opts)))
         .max_by(|x, y| x.score.total_cmp(&y.score))
 }
@@ -394,7 +401,7 @@ fn close_call_reason(named: &EffectResult, other: &EffectResult, opts: &Options)
         .filter_map(|n| Some(format!("for {n}, {}", diagnosis(n)?.parting_test()?)))
         .collect();
     format!(
-        "one of {a} or {b}: {b} scores {:.0} against {:.0}, within {:.0} % (the close-call rule), and no model-free evidence parts them; what would: {}",
+        "one of {a} or {b}: {b} scores {:.0} against {:.0}, within {:.0} % (the close-call rule; for a pair, of what the second adds to the first), and no model-free evidence parts them; what would: {}",
         other.score,
         named.score,
         100.0 * opts.close_call_margin,
@@ -692,18 +699,32 @@ mod tests {
         let all = [heat.clone(), ruled_out];
         assert!(close_call(&heat, &all, &all, &opts).is_none());
         // A pair's second effect, against the pairs with the same first.
-        let singles = [heat.clone(), leak.clone(), friction.clone()];
+        // The first alone scores about 8000; heat adds about 1200, the
+        // leak within the margin of that, friction as much but the force
+        // balance parts it, a supply restriction beyond the margin.
+        let gain = result("pressure_gain_error", 2, 2000.0, 10000.0, ln_n);
+        let singles = [heat.clone(), leak.clone(), friction.clone(), gain];
         let pairs = [
             result("pressure_gain_error+heat_transfer", 3, 800.0, 10000.0, ln_n),
             result(
                 "pressure_gain_error+leakage",
                 3,
-                800.0 + 0.5 * margin * 9000.0,
+                800.0 + 0.5 * margin * 1200.0,
                 10000.0,
                 ln_n,
             ),
             result("pressure_gain_error+coulomb_friction", 4, 802.0, 10000.0, ln_n),
+            result(
+                "pressure_gain_error+supply_restriction",
+                3,
+                800.0 + 2.0 * margin * 1200.0,
+                10000.0,
+                ln_n,
+            ),
         ];
+        // Against the whole pair's score the supply restriction would be
+        // within the margin too: what the second adds decides.
+        assert!(within_close_call(pairs[0].score, pairs[3].score, &opts));
         let b = close_call(&pairs[0], &pairs, &singles, &opts).unwrap();
         assert_eq!(b.name, "pressure_gain_error+leakage");
         let reason = close_call_reason(&pairs[0], b, &opts);
