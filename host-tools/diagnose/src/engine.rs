@@ -69,24 +69,7 @@ pub fn diagnose_against(
     let front: Vec<&[f64]> = all().map(|i| i.trace.p_front_pa.as_slice()).collect();
     extractor.pressure_floor_pa = [pressure_floor(&rear), pressure_floor(&front)];
     let runner = ModelRunner::new(base.clone(), extractor);
-    // Against a reference the hammer's records are read through the dead
-    // volumes its reference shows; the model keeps its own.
-    let hammer = if references.is_empty() {
-        runner.extractor
-    } else {
-        let reading = Extractor {
-            read_dead_volume: true,
-            ..runner.extractor
-        };
-        let read = group::group(references, &reading)?;
-        let cycles: Vec<_> = read
-            .points
-            .iter()
-            .flat_map(|p| p.fit.iter().chain(&p.held))
-            .cloned()
-            .collect();
-        runner.extractor.calibrated(&cycles)
-    };
+    let hammer = hammer_extractor(references, &runner.extractor)?;
     let dead_volumes = if references.is_empty() {
         Vec::new()
     } else {
@@ -131,20 +114,7 @@ pub fn diagnose_against(
     let detection_floors = floor::floors(&fs, &ranking, &fit_opts);
     step("detection floors");
 
-    // The check of the verdict's model runs on the hammer's own features,
-    // in both modes: the verdict's effects with the nominal parameters
-    // refitted to what the hammer measured, weighed as against the model
-    // alone. Against a record, checked on the change instead, the refit
-    // read the effect's change through the model's law for it; on a hammer
-    // of another form that law's change missed the hammer's (a leak that
-    // took 56 % of the impact energy, seed 1 case 13 of the structural
-    // benchmark: 11 % off at the held-out point, 0.06 % without the
-    // record), so a record subtracted from the check what it added to
-    // the naming (issue 44). On the hammer's own features a verdict the
-    // record shares with the model alone gets the same check.
-    let own_fs = own_points
-        .as_ref()
-        .map(|p| nominal::fit_set(p, &nominal, &runner, opts).0);
+    let own_fs = own_points.as_ref().map(|p| own_fit_set(p, &nominal, &runner, opts));
     let (check_fs, check_points) = match (&own_fs, &own_points) {
         (Some(f), Some(p)) => (f, p.as_slice()),
         _ => (&fs, points.as_slice()),
@@ -229,6 +199,48 @@ fn chamber_table(
             ..stat
         })
         .collect()
+}
+
+/// The extractor the hammer's records are read with: against a reference,
+/// through the dead volumes its reference shows (the model keeps its own).
+fn hammer_extractor(references: &[MeasuredInput], model: &Extractor) -> Result<Extractor, DiagnoseError> {
+    if references.is_empty() {
+        return Ok(*model);
+    }
+    let reading = Extractor {
+        read_dead_volume: true,
+        ..*model
+    };
+    let read = group::group(references, &reading)?;
+    let cycles: Vec<_> = read
+        .points
+        .iter()
+        .flat_map(|p| p.fit.iter().chain(&p.held))
+        .cloned()
+        .collect();
+    Ok(model.calibrated(&cycles))
+}
+
+/// The fit set the check of the verdict's model runs on against a record:
+/// the hammer's own features (`own_points`, before the move onto the
+/// model), weighed as against the model alone, so the verdict's effects go
+/// in with the nominal parameters refitted to what the hammer measured.
+///
+/// Checked on the change instead, the refit read the effect's change
+/// through the model's law for it, and on a hammer of another form that
+/// law's change missed the hammer's: a leak that took 56 % of the impact
+/// energy (seed 1 case 13 of the structural benchmark) was 11 % off at the
+/// held-out point, 0.06 % without the record. A record subtracted from the
+/// check what it added to the naming (issue 44); on the hammer's own
+/// features a verdict the record shares with the model alone gets the
+/// same check.
+fn own_fit_set<'a>(
+    own_points: &[group::Point],
+    nominal: &nominal::Nominal,
+    runner: &'a ModelRunner,
+    opts: &Options,
+) -> crate::fitset::FitSet<'a> {
+    nominal::fit_set(own_points, nominal, runner, opts).0
 }
 
 /// The close call's group, the verdict's (last) effect first, each member

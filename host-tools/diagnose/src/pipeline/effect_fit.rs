@@ -256,7 +256,30 @@ pub(crate) fn at_measured_sizes(
         )?
     };
     let waveform_fit: Vec<FittedParam> = measured.iter().flat_map(|m| fitted_of(m.0)).collect();
-    let why = measured
+    let why = measured_sizes_reason(fs, &measured, &fitted_of);
+    let why = format!(
+        "{why}: reported at the measured size (it scores {:.0} there)",
+        sized.score
+    );
+    Some((
+        EffectResult {
+            // Named in the verdict's order (a pair's last is its second).
+            name: verdict.name.clone(),
+            waveform_fit,
+            ..sized
+        },
+        why,
+    ))
+}
+
+/// What [`at_measured_sizes`] put at a measured size, against the
+/// waveforms' fit (`fitted_of` an effect's fitted parameters), in words.
+fn measured_sizes_reason(
+    fs: &FitSet,
+    measured: &[(&str, Vec<f64>, Vec<f64>)],
+    fitted_of: &dyn Fn(&str) -> Vec<FittedParam>,
+) -> String {
+    measured
         .iter()
         .map(|(name, theta, sd)| {
             let keys = free_params(name, fs.distinct);
@@ -281,20 +304,7 @@ pub(crate) fn at_measured_sizes(
             )
         })
         .collect::<Vec<_>>()
-        .join("; ");
-    let why = format!(
-        "{why}: reported at the measured size (it scores {:.0} there)",
-        sized.score
-    );
-    Some((
-        EffectResult {
-            // Named in the verdict's order (a pair's last is its second).
-            name: verdict.name.clone(),
-            waveform_fit,
-            ..sized
-        },
-        why,
-    ))
+        .join("; ")
 }
 
 /// A candidate's χ² beside the nominal model's, and its BIC penalty.

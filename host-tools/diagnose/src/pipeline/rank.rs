@@ -179,16 +179,7 @@ pub(crate) fn rank(fs: &FitSet, opts: &Options, step: &(dyn Fn(&str) + Sync)) ->
         verdict = Some(v);
     }
     step("pairs");
-    let close = match &ranked {
-        Some(v) if v.name.contains('+') => close_call(v, &pairs, &effects, opts),
-        Some(v) => close_call(v, &effects, &effects, opts),
-        None => None,
-    };
-    let reason = match close {
-        None => reason,
-        Some(b) => format!("{reason}; {}", close_call_reason(ranked.as_ref().unwrap_or(b), b, opts)),
-    };
-    let close_call = close.cloned();
+    let (close_call, reason) = close_call_of(ranked.as_ref(), &pairs, &effects, reason, opts);
     Ranking {
         effects,
         pairs,
@@ -336,6 +327,28 @@ fn own_evidence(z: Option<f64>, score: f64, share: f64, min_share: f64, opts: &O
     match z {
         Some(z) => score > 0.0 && z >= opts.min_model_free_z,
         None => score > opts.min_score && share >= min_share,
+    }
+}
+
+/// The close call of the ranking's verdict `ranked` (see [`close_call`]),
+/// and the reason with it said.
+fn close_call_of(
+    ranked: Option<&EffectResult>,
+    pairs: &[EffectResult],
+    singles: &[EffectResult],
+    reason: String,
+    opts: &Options,
+) -> (Option<EffectResult>, String) {
+    let Some(named) = ranked else {
+        return (None, reason);
+    };
+    let candidates = if named.name.contains('+') { pairs } else { singles };
+    match close_call(named, candidates, singles, opts) {
+        Some(b) => (
+            Some(b.clone()),
+            format!("{reason}; {}", close_call_reason(named, b, opts)),
+        ),
+        None => (None, reason),
     }
 }
 

@@ -18,8 +18,10 @@ macro_rules! line {
     }};
 }
 
+mod close_call;
 mod evidence;
-use evidence::{chambers_md, model_free_md};
+use close_call::close_call_md;
+use evidence::{chambers_md, force_balance_md, model_free_md};
 
 /// Where cells listed in the Markdown report.
 const TOP_WHERE: usize = 10;
@@ -115,79 +117,6 @@ fn top_result(r: &Report) -> Option<&EffectResult> {
         .chain(&r.pairs)
         .find(|e| e.name == joined)
         .or_else(|| r.effects.first())
-}
-
-/// A close call: each member's size, score and held-out check, and what
-/// would part them.
-fn close_call_md(s: &mut String, report: &Report) {
-    for g in &report.verdict.alternatives {
-        line!(s, "### A close call: one of {}", g.len());
-        line!(s);
-        line!(
-            s,
-            "The signals cannot part these effects here: each fits within the close-call margin of the other and no model-free evidence tells them apart. Each member's held-out check is run with it in the model."
-        );
-        line!(s);
-        line!(
-            s,
-            "| effect | score (ΔBIC) | held-out energy error, % | held-out frequency error, % | parameters |"
-        );
-        line!(s, "|---|---:|---:|---:|---|");
-        for a in g {
-            line!(
-                s,
-                "| {} | {} | {} | {} | {} |",
-                cell(&a.effect),
-                num(a.score),
-                pct(a.impact_energy_error_after),
-                pct(a.frequency_error_after),
-                cell(&params_inline(&a.params))
-            );
-        }
-        line!(s);
-        line!(s, "What would part them:");
-        line!(s);
-        for a in g {
-            if let Some(t) = &a.parting_test {
-                line!(s, "- for {}: {t}", a.effect);
-            }
-        }
-        line!(s);
-    }
-}
-
-/// The force balance at every operating point, with U.
-fn force_balance_md(s: &mut String, report: &Report) {
-    let Some(first) = report.force_balance.first() else {
-        return;
-    };
-    line!(s, "### The force balance at every operating point");
-    line!(s);
-    line!(
-        s,
-        "Each quantity is the change since {} (value ± U, U = 2u: the cycles' scatter over their number{}). The force balance needs no valve or port law: the sizes of friction, viscous friction, a gain error and a zero shift are taken from it.",
-        if first.against_record { "the record" } else { "the nominal model" },
-        if first.against_record { " and the record's" } else { "" }
-    );
-    line!(s);
-    let keys: Vec<&str> = first.quantities.iter().map(|q| q.key.as_str()).collect();
-    line!(s, "| supply, bar | fitted | {} |", keys.join(" | "));
-    line!(s, "|---:|---|{}", "---:|".repeat(keys.len()));
-    for row in &report.force_balance {
-        let vals: Vec<String> = row
-            .quantities
-            .iter()
-            .map(|q| format!("{} ± {}", num(q.value), num(q.expanded_u)))
-            .collect();
-        line!(
-            s,
-            "| {} | {} | {} |",
-            fmt_bar(row.supply_bar),
-            if row.fit_point { "yes" } else { "held out" },
-            vals.join(" | ")
-        );
-    }
-    line!(s);
 }
 
 fn fitted_params(e: &EffectResult) -> String {

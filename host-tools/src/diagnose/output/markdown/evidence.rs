@@ -5,7 +5,7 @@ use std::fmt::Write as _;
 
 use crate::diagnose::engine::Report;
 use crate::diagnose::report::ModelFreeStat;
-use crate::numfmt::sig3 as num;
+use crate::numfmt::{bar as fmt_bar, sig3 as num};
 
 /// The force balance against the nominal model: the evidence no valve or
 /// port model stands behind.
@@ -110,6 +110,40 @@ fn stats_md(s: &mut String, title: &str, note: &str, measured: &str, stats: &[Mo
             num(m.nominal),
             num(m.se),
             num(m.z)
+        );
+    }
+    line!(s);
+}
+
+/// The force balance at every operating point, with U.
+pub(super) fn force_balance_md(s: &mut String, report: &Report) {
+    let Some(first) = report.force_balance.first() else {
+        return;
+    };
+    line!(s, "### The force balance at every operating point");
+    line!(s);
+    line!(
+        s,
+        "Each quantity is the change since {} (value ± U, U = 2u: the cycles' scatter over their number{}). The force balance needs no valve or port law: the sizes of friction, viscous friction, a gain error and a zero shift are taken from it.",
+        if first.against_record { "the record" } else { "the nominal model" },
+        if first.against_record { " and the record's" } else { "" }
+    );
+    line!(s);
+    let keys: Vec<&str> = first.quantities.iter().map(|q| q.key.as_str()).collect();
+    line!(s, "| supply, bar | fitted | {} |", keys.join(" | "));
+    line!(s, "|---:|---|{}", "---:|".repeat(keys.len()));
+    for row in &report.force_balance {
+        let vals: Vec<String> = row
+            .quantities
+            .iter()
+            .map(|q| format!("{} ± {}", num(q.value), num(q.expanded_u)))
+            .collect();
+        line!(
+            s,
+            "| {} | {} | {} |",
+            fmt_bar(row.supply_bar),
+            if row.fit_point { "yes" } else { "held out" },
+            vals.join(" | ")
         );
     }
     line!(s);
