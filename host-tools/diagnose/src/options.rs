@@ -120,14 +120,6 @@ pub struct Options {
     /// (docs/diagnosis.md).
     #[serde(default = "default_close_call_margin")]
     pub close_call_margin: f64,
-    /// And in BIC units, whichever is wider: a difference this small is
-    /// weak evidence at any score. Against the model alone scores run to
-    /// the hundreds, and there a relative margin says little: on the
-    /// structural calibration seed (1), five of six names of an effect
-    /// that was not hidden came within 20 of the hidden cluster-mate, of
-    /// the ten right names three (the margin `confusable_with` had).
-    #[serde(default = "default_close_call_margin_bic")]
-    pub close_call_margin_bic: f64,
     /// A significant effect with a model-free signature is named before a
     /// better-scoring one without, if its score is within this fraction of
     /// that one's: that close, the waveforms' scores part them no better
@@ -172,7 +164,6 @@ impl Default for Options {
             min_explained_reference: default_min_explained_reference(),
             min_explained_pair: default_min_explained_pair(),
             close_call_margin: default_close_call_margin(),
-            close_call_margin_bic: default_close_call_margin_bic(),
             seen_margin: default_seen_margin(),
             chamber_alone_z: default_chamber_alone_z(),
             pair_residual: 2.0,
@@ -190,10 +181,6 @@ fn default_min_model_free_z() -> f64 {
 
 fn default_close_call_margin() -> f64 {
     0.02
-}
-
-fn default_close_call_margin_bic() -> f64 {
-    20.0
 }
 
 fn default_seen_margin() -> f64 {

@@ -382,10 +382,9 @@ fn close_call<'e>(
         .max_by(|x, y| x.score.total_cmp(&y.score))
 }
 
-/// Whether `other` scores within [`Options::close_call_margin`] of `named`,
-/// or within [`Options::close_call_margin_bic`], whichever is wider.
+/// Whether `other` scores within [`Options::close_call_margin`] of `named`.
 fn within_close_call(named: f64, other: f64, opts: &Options) -> bool {
-    named > 0.0 && named - other <= (opts.close_call_margin * named).max(opts.close_call_margin_bic)
+    named > 0.0 && named - other <= opts.close_call_margin * named
 }
 
 /// Whether model-free evidence parts singles `a` and `b`: the force
@@ -415,11 +414,10 @@ fn close_call_reason(named: &EffectResult, other: &EffectResult, opts: &Options)
         .filter_map(|n| Some(format!("for {n}, {}", diagnosis(n)?.parting_test()?)))
         .collect();
     format!(
-        "one of {a} or {b}: {b} scores {:.0} against {:.0}, within {:.0} % or {:.0} BIC units (the close-call rule; for a pair, of what the second adds to the first), and no model-free evidence parts them; what would: {}",
+        "one of {a} or {b}: {b} scores {:.0} against {:.0}, within {:.0} % (the close-call rule; for a pair, of what the second adds to the first), and no model-free evidence parts them; what would: {}",
         other.score,
         named.score,
         100.0 * opts.close_call_margin,
-        opts.close_call_margin_bic,
         if tests.is_empty() { "no test of the catalogue".to_string() } else { tests.join("; ") }
     )
 }
