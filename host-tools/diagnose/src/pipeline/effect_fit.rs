@@ -196,6 +196,7 @@ pub(crate) fn at_measured_sizes(
             .collect()
     };
     let mut measured: Vec<(&str, Vec<f64>, Vec<f64>)> = Vec::new();
+    let mut kept: Vec<&str> = Vec::new();
     for &name in names.iter().filter(|n| stands(n)) {
         let Some(d) = diagnosis(name) else { continue };
         let Some((theta, sd)) = d.measured_size(fs) else {
@@ -210,6 +211,10 @@ pub(crate) fn at_measured_sizes(
             });
         if !d.seen_in_chambers() || disagree {
             measured.push((name, theta, sd));
+        } else {
+            // Its fit agrees with its signature (or the ranking put it at
+            // the measured size already): it stays as the verdict has it.
+            kept.push(name);
         }
     }
     if measured.is_empty() {
@@ -217,6 +222,12 @@ pub(crate) fn at_measured_sizes(
     }
     let mut cand = Candidate::default();
     let mut params = Vec::new();
+    for name in &kept {
+        let p = fitted_of(name);
+        let theta: Vec<f64> = p.iter().map(|f| f.value).collect();
+        apply(&mut cand.effects, name, &theta, fs.pressures);
+        params.extend(p);
+    }
     for (name, theta, sd) in &measured {
         apply(&mut cand.effects, name, theta, fs.pressures);
         params.extend(
@@ -233,7 +244,7 @@ pub(crate) fn at_measured_sizes(
     let rest: Vec<&str> = names
         .iter()
         .copied()
-        .filter(|n| !measured.iter().any(|m| m.0 == *n))
+        .filter(|n| !measured.iter().any(|m| m.0 == *n) && !kept.contains(n))
         .collect();
     let sized = if rest.is_empty() {
         let sims_before = fs.sims.load(Ordering::Relaxed);
