@@ -149,11 +149,9 @@ pub struct ForceBalanceQuantity {
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize)]
-/// One point's check, every value on the hammer's own scale: the hammer's
-/// measured energy and frequency, and each model's prediction of them.
-/// Against a record a model predicts the hammer as the record plus the
-/// model's change (the nominal model: the record itself), since the
-/// measurement was read as a change from it.
+/// One point's check, in both modes on the hammer's own measurements (not
+/// the change read against a record, `engine::own_fit_set`): its measured
+/// energy and frequency, and each model's prediction of them.
 pub struct PointShrink {
     pub supply_bar: f64,
     pub held_out_point: bool,

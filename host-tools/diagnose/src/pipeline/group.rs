@@ -21,10 +21,6 @@ pub(crate) struct Point {
     /// Variance of the reference record's mean per feature, added to the
     /// fit's (empty without a reference: [`super::reference`]).
     pub(crate) reference_var: Vec<f64>,
-    /// What [`super::reference::transplant`] added to every cycle's
-    /// features (nominal − record), empty without a record: subtracted
-    /// again, a model's feature is a prediction of the hammer's own.
-    pub(crate) moved_by: Vec<f64>,
 }
 
 pub(crate) struct Grouped {
@@ -72,7 +68,6 @@ pub(crate) fn group(inputs: &[MeasuredInput], extractor: &Extractor) -> Result<G
                 is_fit_point: split.is_fit,
                 inputs: vec![k],
                 reference_var: Vec::new(),
-                moved_by: Vec::new(),
             }),
         }
     }

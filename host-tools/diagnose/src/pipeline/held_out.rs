@@ -188,23 +188,18 @@ fn point_shrink(i: usize, p: &Point, nom: &[f64], models: &Models) -> Option<Poi
             })
             .collect()
     };
-    // Back on the hammer's own scale: against a record the measurement was
-    // moved onto the model, so a model's feature less that move is its
-    // prediction of the hammer (the nominal model's is the record itself:
-    // nothing changed). Without a record the move is nil.
-    let back = |m: &[f64], j: usize| m[j] - p.moved_by.get(j).copied().unwrap_or(0.0);
     Some(PointShrink {
         supply_bar: p.supply_bar,
         held_out_point: !p.is_fit_point,
         cycles: s.cycles,
-        impact_energy_measured_j: back(&s.mean, ENERGY),
-        impact_energy_nominal_j: back(nom, ENERGY),
-        impact_energy_fitted_j: back(&fitted, ENERGY),
-        impact_energy_recalibrated_j: back(&recal, ENERGY),
-        impact_energy_effects_only_j: back(&effects_only, ENERGY),
-        frequency_measured_hz: 1.0 / back(&s.mean, PERIOD),
-        frequency_nominal_hz: 1.0 / back(nom, PERIOD),
-        frequency_fitted_hz: 1.0 / back(&fitted, PERIOD),
+        impact_energy_measured_j: s.mean[ENERGY],
+        impact_energy_nominal_j: nom[ENERGY],
+        impact_energy_fitted_j: fitted[ENERGY],
+        impact_energy_recalibrated_j: recal[ENERGY],
+        impact_energy_effects_only_j: effects_only[ENERGY],
+        frequency_measured_hz: 1.0 / s.mean[PERIOD],
+        frequency_nominal_hz: 1.0 / nom[PERIOD],
+        frequency_fitted_hz: 1.0 / fitted[PERIOD],
         rms_before: rms(nom),
         rms_after: rms(&fitted),
     })

@@ -76,7 +76,6 @@ pub(crate) fn transplant(
             }
         }
         p.reference_var = b.var_of_mean.clone();
-        p.moved_by = shift;
     }
     Ok(())
 }
