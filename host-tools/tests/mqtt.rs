@@ -303,8 +303,12 @@ fn through_an_outage(tls: bool) {
         historical.len() >= 150,
         "10 s of outage is ~210 reports, replayed: {historical:?}\n{stderr}"
     );
-    // The first reports went out live.
-    assert!(received[..10].iter().all(|v| v["historical"] == false));
+    // Live, then the outage's replay, then live: one run of historical
+    // reports after a live one. (Reports made before the first connection,
+    // on a machine slow to shake hands, may open the run as historical too.)
+    let flags: Vec<bool> = received.iter().map(|v| v["historical"] == true).collect();
+    let outages = flags.windows(2).filter(|w| !w[0] && w[1]).count();
+    assert_eq!(outages, 1, "live and replayed reports interleaved: {flags:?}");
     // Birth on connect, and the clean end says offline.
     let states = of("state");
     assert!(
@@ -409,13 +413,20 @@ fn assert_each_board_delivered(stdout: &str, seen_text: &str) {
             printed.keys().copied().collect::<Vec<_>>(),
             "{device}: once each, in order"
         );
+        // Reports made before the first connection (a slow TLS handshake
+        // on a loaded machine) wait in the outage buffer and arrive flagged
+        // historical; once live, none is: the flags are a run of true, then
+        // false to the end.
+        let mut live = false;
         for (_, v) in got.iter().filter(|(t, _)| *t == topic) {
             let seq = v["seq"].as_u64().unwrap();
             assert!(
                 (v["friction_n"].as_f64().unwrap() - printed[&seq]).abs() < 0.006,
                 "{device} #{seq}"
             );
-            assert_eq!(v["historical"], false);
+            let historical = v["historical"].as_bool().expect("historical is a bool");
+            assert!(!(live && historical), "{device} #{seq}: historical after a live report");
+            live |= !historical;
         }
         let birth = format!("hammer/lab/{device}/state");
         assert!(
