@@ -10,8 +10,7 @@
 //!
 //! `cargo run --release -p hammer-host --example valve_timing [-- --form]`
 
-use hammer_host::diagnose::engine::{diagnose, extractor_for, MeasuredInput, Options};
-use hammer_host::diagnose::model::{Candidate, ModelRunner};
+use hammer_host::diagnose::engine::{diagnose, MeasuredInput, Options};
 use hammer_host::diagnose::valve_timing::{front_feed_onset_ms, FrontChamberRun};
 use hammer_sim::effects::Effects;
 use hammer_sim::SimConfig;
@@ -42,16 +41,18 @@ fn timing() {
         "valve_delay:tau_s=0.0024",
     ];
     let base = SimConfig::default();
-    let extractor = extractor_for(&base);
     for bar in [4.0, 7.0] {
         for (who, damping) in [("model", 1.0), ("model, valve damping ×0.5", 0.5)] {
             let mut cfg = base.clone();
             cfg.valve.damping_n_s_per_m *= damping;
-            let runner = ModelRunner::new(cfg.clone(), extractor);
             for spec in delays {
-                let onset = runner
-                    .truth(bar, &Candidate { effects: effects(spec) })
-                    .and_then(|t| front_feed_onset_ms(&FrontChamberRun::of_model(&t, &cfg)));
+                let mut run = cfg.clone();
+                run.supply.pressure_bar = bar;
+                run.solver.duration_s = 0.45;
+                run.effects = effects(spec);
+                let onset = hammer_sim::simulate_truth(&run)
+                    .ok()
+                    .and_then(|r| front_feed_onset_ms(&FrontChamberRun::of_model(&r.truth, &cfg)));
                 show(bar, who, spec, onset);
             }
         }

@@ -256,15 +256,16 @@ fn a_name_within_the_unseen_cluster_is_right_or_a_close_call() {
 /// `valve_delay` (docs/diagnosis.md, `examples/valve_timing.rs`).
 #[test]
 fn the_second_familys_valve_is_earlier_than_the_models_even_when_delayed() {
-    use hammer_host::diagnose::engine::extractor_for;
-    use hammer_host::diagnose::model::{Candidate, ModelRunner};
+    use hammer_host::diagnose::model::{Builtin, Plant};
     use hammer_host::diagnose::valve_timing::{front_feed_onset_ms, FrontChamberRun};
 
     let base = SimConfig::default();
-    let runner = ModelRunner::new(base.clone(), extractor_for(&base));
+    let model = Builtin::new(base.clone());
     let p = VariantParams::default();
     for bar in [4.0, 7.0] {
-        let t = runner.truth(bar, &Candidate::default()).expect("the model runs");
+        let nominal: Vec<f64> = model.nuisance().iter().map(|p| p.nominal).collect();
+        let cfg = model.config(bar, &nominal, &Effects::default(), 0.45);
+        let t = hammer_sim::simulate_truth(&cfg).expect("the model runs").truth;
         let (model_ms, _) = front_feed_onset_ms(&FrontChamberRun::of_model(&t, &base))
             .expect("the model's valve feeds the front chamber");
         let variant = |spec: &str| {

@@ -27,7 +27,7 @@ fn gaps(effect: Option<&str>, bar: f64) -> Vec<GapCell> {
     let mut model = SimConfig::nominal(bar);
     model.solver.duration_s = 0.6;
     let sim = simulate_truth(&model).unwrap();
-    let (tpl, stages) = template(&sim, &model.hammer).unwrap();
+    let (tpl, stages) = template(&sim.into(), &model.hammer).unwrap();
     breakdown(&tpl, &stages, &measured_cycles(&trace, &impacts))
 }
 

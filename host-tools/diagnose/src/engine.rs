@@ -17,10 +17,11 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 use super::features::{pressure_floor, Extractor};
 pub use super::gap::PointWaves;
-use super::model::ModelRunner;
+use super::model::{Builtin, ModelRunner, Plant};
 use super::pipeline::{floor, force_balance, group, held_out, nominal, rank, reference, where_};
 use hammer_sim::effects::EFFECT_NAMES;
 use hammer_sim::SimConfig;
+use std::sync::Arc;
 
 pub use super::features::extractor_for;
 pub use super::input::{DiagnoseError, MeasuredInput, Progress};
@@ -59,16 +60,38 @@ pub fn diagnose_against(
     opts: &Options,
     progress: Progress,
 ) -> Result<Outcome, DiagnoseError> {
+    diagnose_with(
+        inputs,
+        references,
+        base,
+        Arc::new(Builtin::new(base.clone())),
+        opts,
+        progress,
+    )
+}
+
+/// [`diagnose_against`] with `plant` as the model: `hammer` is the measured
+/// hammer's config (geometry, sensors, the estimator's thresholds), what
+/// the traces are read with; `plant` is what is fitted to them, the
+/// built-in simulator of `hammer` or a model of the user's own.
+pub fn diagnose_with(
+    inputs: &[MeasuredInput],
+    references: &[MeasuredInput],
+    hammer: &SimConfig,
+    plant: Arc<dyn Plant>,
+    opts: &Options,
+    progress: Progress,
+) -> Result<Outcome, DiagnoseError> {
     let started = std::time::Instant::now();
     if inputs.is_empty() {
         return Err(DiagnoseError::NoInput);
     }
-    let mut extractor = extractor_for(base);
+    let mut extractor = extractor_for(hammer);
     let all = || inputs.iter().chain(references);
     let rear: Vec<&[f64]> = all().map(|i| i.trace.p_rear_pa.as_slice()).collect();
     let front: Vec<&[f64]> = all().map(|i| i.trace.p_front_pa.as_slice()).collect();
     extractor.pressure_floor_pa = [pressure_floor(&rear), pressure_floor(&front)];
-    let runner = ModelRunner::new(base.clone(), extractor);
+    let runner = ModelRunner::with_plant(plant, hammer.hammer.clone(), extractor);
     let hammer = hammer_extractor(references, &runner.extractor)?;
     let dead_volumes = if references.is_empty() {
         Vec::new()
@@ -122,8 +145,8 @@ pub fn diagnose_against(
     let models = held_out::models(check_fs, &nominal.bars, ranking.verdict.as_ref(), opts);
     step("held-out check");
     let shrink = held_out::shrink(check_points, &nominal.features, &models);
-    let located = where_::locate(inputs, &grouped, &nominal, &models, base, opts);
-    let recalibration = held_out::recalibration(base, &models, opts.nominal_uncertainty);
+    let located = where_::locate(inputs, &grouped, &nominal, &models, &runner.hammer, opts);
+    let recalibration = held_out::recalibration(&models, opts.nominal_uncertainty);
     let chambers = chamber_table(&fs, &nominal.bars, &models, &baselines);
     let (alternatives, alternative_sims) = close_call_group(check_fs, check_points, &nominal, &ranking, &shrink, opts);
 

@@ -765,11 +765,10 @@ mod tests {
     }
 
     /// The default model's runner and its noiseless run at `supply_bar`.
-    fn nominal_run(supply_bar: f64) -> (crate::model::ModelRunner, hammer_sim::TruthTrace) {
+    fn nominal_run(supply_bar: f64) -> (crate::model::ModelRunner, crate::model::ModelTrace) {
         let base = hammer_sim::SimConfig::default();
         let runner = crate::model::ModelRunner::new(base.clone(), extractor_for(&base));
-        let config = runner.config(supply_bar, &hammer_sim::effects::Effects::default());
-        let truth = hammer_sim::simulate_truth(&config).unwrap().truth;
+        let truth = runner.truth(supply_bar, &Default::default()).unwrap();
         (runner, truth)
     }
 

@@ -13,17 +13,16 @@ use super::features::{
     FRONT_FLOOR, F_BACKHAUL, F_STROKE, GAIN_FRONT, GAIN_REAR, N_FEATURES, PERIOD, REAR_AREA, REAR_EXPONENT, REAR_FEED,
     VISCOUS, WAVE_SIGNALS, ZERO_SHIFT_SQ,
 };
-use super::model::{Candidate, ModelRunner, NUISANCE};
+use super::model::{Candidate, ModelRunner, ModelTrace};
 use super::options::Floors;
 use super::parallel::parallel;
 use super::report::ModelFreeStat;
-use hammer_sim::run::TruthTrace;
 
 /// The fit set's data and its weights, shared by every effect's fit.
 pub(crate) struct FitSet<'a> {
     pub(crate) runner: &'a ModelRunner,
     pub(crate) points: Vec<(f64, Summary, Vec<f64>)>, // bar, summary, sigma
-    pub(crate) nominal_truth: Vec<TruthTrace>,
+    pub(crate) nominal_truth: Vec<ModelTrace>,
     /// The nominal model's features at each fit point.
     pub(crate) nominal_features: Vec<Vec<f64>>,
     /// Lowest and highest supply pressure of the fit set, bar.
@@ -279,11 +278,12 @@ impl<'a> FitSet<'a> {
         threads: usize,
         from: Option<&[f64]>,
     ) -> Option<Recalibrated> {
-        let k = NUISANCE.len();
+        let k = self.runner.nuisance.len();
+        let h = self.runner.prior_sds(h);
         let runner_at = |d: &[f64]| {
             let mut r = self.runner.clone();
             for (i, x) in d.iter().enumerate() {
-                *(NUISANCE[i].1)(&mut r.base) *= 1.0 + h * x;
+                r.nuisance[i] *= 1.0 + h[i] * x;
             }
             r
         };

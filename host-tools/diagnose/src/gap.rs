@@ -5,8 +5,8 @@
 use serde::{Deserialize, Serialize};
 
 use super::stages::{stage_of, Edges, Stage, STAGES};
+use crate::model::ModelTrace;
 use hammer_sim::params::HammerParams;
-use hammer_sim::run::SimRun;
 use hammer_trace::trace::Trace;
 
 /// The compared signals, in the order of [`CycleSignals::get`].
@@ -67,11 +67,14 @@ pub fn velocity_from_accel(accel_mps2: &[f64], dt_s: f64) -> Vec<f64> {
 
 /// The simulated reference cycle: the last complete cycle of a steady run,
 /// its ideal signals and the stage of every sample.
-pub fn template(run: &SimRun, hammer: &HammerParams) -> Option<(CycleSignals, Vec<Stage>)> {
-    let c = run.cycles.last()?;
-    let t = &run.truth;
+pub fn template(run: &ModelTrace, hammer: &HammerParams) -> Option<(CycleSignals, Vec<Stage>)> {
+    let c = run.impacts.last()?;
+    let t = run;
+    let motion = t.motion.as_ref()?;
     let i0 = ((c.t_impact_s - c.period_s) / t.dt_s).ceil() as usize;
-    let i1 = ((c.t_impact_s / t.dt_s).ceil() as usize).min(t.len());
+    let i1 = ((c.t_impact_s / t.dt_s).ceil() as usize)
+        .min(t.len())
+        .min(motion.v_mps.len());
     if i1 <= i0 + 10 {
         return None;
     }
@@ -80,9 +83,17 @@ pub fn template(run: &SimRun, hammer: &HammerParams) -> Option<(CycleSignals, Ve
         rear_outlet_m: hammer.rear_outlet_opens_m,
     };
     let stages = (i0..i1)
-        .map(|i| stage_of(&edges, t.x_m[i], t.v_mps[i], (i - i0) as f64 * t.dt_s, IMPACT_WINDOW_S))
+        .map(|i| {
+            stage_of(
+                &edges,
+                motion.x_m[i],
+                motion.v_mps[i],
+                (i - i0) as f64 * t.dt_s,
+                IMPACT_WINDOW_S,
+            )
+        })
         .collect();
-    let mut v = t.v_mps[i0..i1].to_vec();
+    let mut v = motion.v_mps[i0..i1].to_vec();
     let w = (IMPACT_WINDOW_S / t.dt_s).round() as usize;
     for x in v.iter_mut().take(w) {
         *x = f64::NAN;

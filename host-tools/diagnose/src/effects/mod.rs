@@ -13,10 +13,12 @@ use std::marker::PhantomData;
 use super::features::Extractor;
 use super::fit::ParamSpec;
 use super::fitset::FitSet;
-use super::model::{ModelRunner, SensorReads};
+use super::model::{Builtin, ModelRunner, Plant, SensorReads};
 use hammer_sim::effects::{Effect, Effects, N_EFFECTS};
+use hammer_sim::params::HammerParams;
 use hammer_sim::sensor::Rng;
 use hammer_sim::SimConfig;
+use std::sync::Arc;
 
 /// One module per effect (`NAME.rs`, an `impl Diagnosed`), and [`DIAGNOSIS`],
 /// from the simulator's catalogue list.
@@ -65,11 +67,20 @@ impl SensorReads for CatalogueReads {
 }
 
 impl ModelRunner {
-    /// The model `base`, read by `extractor` through the catalogue's
-    /// sensor effects.
+    /// The built-in model of `base`, read by `extractor` through the
+    /// catalogue's sensor effects.
     pub fn new(base: SimConfig, extractor: Extractor) -> Self {
+        let hammer = base.hammer.clone();
+        Self::with_plant(Arc::new(Builtin::new(base)), hammer, extractor)
+    }
+
+    /// `plant` at its nominal values, for a hammer of geometry `hammer`,
+    /// read by `extractor` through the catalogue's sensor effects.
+    pub fn with_plant(plant: Arc<dyn Plant>, hammer: HammerParams, extractor: Extractor) -> Self {
         Self {
-            base,
+            nuisance: plant.nuisance().iter().map(|p| p.nominal).collect(),
+            plant,
+            hammer,
             extractor,
             reads: &CatalogueReads,
             duration_s: 0.45,

@@ -11,10 +11,10 @@ use crate::features::{feature_name, wave_of, Extractor, BINS, N_FEATURES, WAVE_S
 use crate::fit::{levenberg_marquardt, FitResult};
 use crate::fitset::{residual, FitSet};
 use crate::model::Candidate;
+use crate::model::ModelTrace;
 use crate::options::Options;
 use crate::report::{EffectResult, FittedParam};
 use crate::stages::Stage;
-use hammer_sim::run::TruthTrace;
 
 /// Start values from what the measurement shows directly.
 fn start_values(fs: &FitSet, name: &str) -> Vec<f64> {
@@ -387,7 +387,7 @@ fn evidence(fs: &FitSet, names: &[&str], cand: &Candidate) -> Vec<String> {
     let stages_of_bins = fs
         .nominal_truth
         .first()
-        .map(|t| bin_stages(t, &fs.runner.base.hammer, &fs.runner.extractor));
+        .map(|t| bin_stages(t, &fs.runner.hammer, &fs.runner.extractor));
     for ((bar, s, sigma), truth) in fs.points.iter().zip(&fs.nominal_truth) {
         let (Some(m0), Some(m1)) = (
             fs.runner.features(*bar, &nominal, Some(truth)),
@@ -420,7 +420,7 @@ fn evidence(fs: &FitSet, names: &[&str], cand: &Candidate) -> Vec<String> {
 }
 
 /// The dominant stage of each waveform bin of the nominal cycle.
-fn bin_stages(truth: &TruthTrace, hammer: &hammer_sim::params::HammerParams, extractor: &Extractor) -> Vec<Stage> {
+fn bin_stages(truth: &ModelTrace, hammer: &hammer_sim::params::HammerParams, extractor: &Extractor) -> Vec<Stage> {
     let edges = crate::stages::Edges {
         front_outlet_m: hammer.front_outlet_opens_m,
         rear_outlet_m: hammer.rear_outlet_opens_m,
@@ -438,8 +438,8 @@ fn bin_stages(truth: &TruthTrace, hammer: &hammer_sim::params::HammerParams, ext
         .iter()
         .map(|t| (t / truth.dt_s).ceil() as usize)
         .collect();
-    let (i0, i1) = match imps.len() {
-        n if n >= 2 => (imps[n - 2], imps[n - 1].min(truth.len())),
+    let (i0, i1, motion) = match (imps.len(), &truth.motion) {
+        (n, Some(m)) if n >= 2 => (imps[n - 2], imps[n - 1].min(truth.len()).min(m.v_mps.len()), m),
         _ => return vec![Stage::StrokeIntake; BINS],
     };
     let n = i1 - i0;
@@ -450,8 +450,8 @@ fn bin_stages(truth: &TruthTrace, hammer: &hammer_sim::params::HammerParams, ext
                 let i = i0 + k;
                 let st = crate::stages::stage_of(
                     &edges,
-                    truth.x_m[i],
-                    truth.v_mps[i],
+                    motion.x_m[i],
+                    motion.v_mps[i],
                     k as f64 * truth.dt_s,
                     crate::gap::IMPACT_WINDOW_S,
                 );
@@ -469,7 +469,6 @@ fn bin_stages(truth: &TruthTrace, hammer: &hammer_sim::params::HammerParams, ext
 mod tests {
     use super::*;
     use crate::pipeline::tests::nominal_runner;
-    use hammer_sim::simulate_truth;
 
     /// The nominal cycle's bins, from the impact on, run through the cycle
     /// in its physical order: the backhaul before the stroke, the stroke
@@ -477,8 +476,8 @@ mod tests {
     #[test]
     fn bins_follow_the_cycle() {
         let runner = nominal_runner();
-        let run = simulate_truth(&runner.config(4.0, &hammer_sim::effects::Effects::default())).unwrap();
-        let st = bin_stages(&run.truth, &runner.base.hammer, &runner.extractor);
+        let run = runner.truth(4.0, &Candidate::default()).unwrap();
+        let st = bin_stages(&run, &runner.hammer, &runner.extractor);
         assert_eq!(st.len(), BINS);
         let stroke = |s: &Stage| matches!(s, Stage::StrokeIntake | Stage::StrokeClosed | Stage::StrokeVenting);
         assert!(!stroke(&st[0]), "{st:?}");

@@ -12,11 +12,10 @@ use super::group::Point;
 use crate::features::{summarize, wave_index, BINS, ENERGY, PERIOD, WAVE_SIGNALS};
 use crate::fitset::{FitSet, Recalibrated, RECALIBRATION_STEPS};
 use crate::gap::CycleSignals;
-use crate::model::{Candidate, ModelRunner, NUISANCE};
+use crate::model::{Candidate, Keep, ModelRunner, ModelTrace};
 use crate::options::Options;
 use crate::parallel::parallel;
 use crate::report::{EffectResult, PointShrink, Recalibration, Shrink};
-use hammer_sim::{simulate_truth, SimConfig, SimRun};
 
 /// The models the check compares, each run at every operating point.
 pub(crate) struct Models {
@@ -24,13 +23,13 @@ pub(crate) struct Models {
     pub(crate) fitted_cand: Option<Candidate>,
     pub(crate) fitted_runner: ModelRunner,
     /// None everywhere when no effect was named.
-    pub(crate) fitted_runs: Vec<Option<SimRun>>,
+    pub(crate) fitted_runs: Vec<Option<ModelTrace>>,
     /// The nominal model recalibrated alone (the control).
     pub(crate) recal_runner: ModelRunner,
-    pub(crate) recal_runs: Vec<Option<SimRun>>,
+    pub(crate) recal_runs: Vec<Option<ModelTrace>>,
     /// The verdict's effects in the nominal model, nothing refitted; None
     /// everywhere when no effect was named.
-    pub(crate) effects_only_runs: Vec<Option<SimRun>>,
+    pub(crate) effects_only_runs: Vec<Option<ModelTrace>>,
     pub(crate) recal_nominal: Option<Recalibrated>,
     pub(crate) recal_verdict: Option<Recalibrated>,
 }
@@ -45,7 +44,7 @@ impl Models {
 
     /// The verdict's model at point `i`: the fitted one, or with no effect
     /// named, the recalibrated nominal one.
-    pub(crate) fn verdict_run(&self, i: usize) -> Option<&SimRun> {
+    pub(crate) fn verdict_run(&self, i: usize) -> Option<&ModelTrace> {
         if self.fitted_cand.is_some() {
             self.fitted_runs[i].as_ref()
         } else {
@@ -84,11 +83,10 @@ pub(crate) fn models(fs: &FitSet, bars: &[f64], verdict: Option<&EffectResult>, 
             None
         }
     };
-    let model_runs = |recal: &Option<Recalibrated>, cand: &Candidate| -> (ModelRunner, Vec<Option<SimRun>>) {
+    let model_runs = |recal: &Option<Recalibrated>, cand: &Candidate| -> (ModelRunner, Vec<Option<ModelTrace>>) {
         let r = recal.as_ref().map_or_else(|| fs.runner.clone(), |x| x.runner.clone());
-        let physics = cand.physics();
         let runs = parallel(opts.threads, bars.to_vec(), &|bar| {
-            simulate_truth(&r.config(bar, &physics)).ok()
+            r.run(bar, &cand.effects, Keep::All).ok()
         });
         (r, runs)
     };
@@ -125,7 +123,7 @@ pub(crate) fn recalibrated_features(models: &Models, i: usize, bar: f64) -> Opti
     let run = models.recal_runs.get(i)?.as_ref()?;
     models
         .recal_runner
-        .features_of_truth(&run.truth, &Candidate::default().effects, bar)
+        .features_of_truth(run, &Candidate::default().effects, bar)
 }
 
 /// The shrink at every point with held-out cycles, judged on the held-out points.
@@ -151,9 +149,7 @@ fn point_shrink(i: usize, p: &Point, nom: &[f64], models: &Models) -> Option<Poi
     }
     let nominal = Candidate::default();
     let fitted = match (&models.fitted_cand, &models.fitted_runs[i]) {
-        (Some(c), Some(run)) => models
-            .fitted_runner
-            .features_of_truth(&run.truth, &c.effects, p.supply_bar),
+        (Some(c), Some(run)) => models.fitted_runner.features_of_truth(run, &c.effects, p.supply_bar),
         _ => None,
     };
     let recal = models.recal_runs[i]
@@ -161,14 +157,12 @@ fn point_shrink(i: usize, p: &Point, nom: &[f64], models: &Models) -> Option<Poi
         .and_then(|run| {
             models
                 .recal_runner
-                .features_of_truth(&run.truth, &nominal.effects, p.supply_bar)
+                .features_of_truth(run, &nominal.effects, p.supply_bar)
         })
         .unwrap_or_else(|| nom.to_vec());
     // Any runner reads a solution alike (one extractor, one settling time).
     let effects_only = match (&models.fitted_cand, &models.effects_only_runs[i]) {
-        (Some(c), Some(run)) => models
-            .recal_runner
-            .features_of_truth(&run.truth, &c.effects, p.supply_bar),
+        (Some(c), Some(run)) => models.recal_runner.features_of_truth(run, &c.effects, p.supply_bar),
         _ => None,
     }
     .unwrap_or_else(|| nom.to_vec());
@@ -236,21 +230,24 @@ fn judged(shrink_points: Vec<PointShrink>, held_out_points: Vec<f64>) -> Shrink 
 }
 
 /// The nominal parameters as the verdict's fit left them.
-pub(crate) fn recalibration(base: &SimConfig, models: &Models, h: f64) -> Vec<Recalibration> {
+pub(crate) fn recalibration(models: &Models, h: f64) -> Vec<Recalibration> {
     models
         .verdict_recalibration()
-        .map_or_else(Vec::new, |rc| recalibration_table(base, rc, h))
+        .map_or_else(Vec::new, |rc| recalibration_table(rc, h))
 }
 
-fn recalibration_table(base: &SimConfig, rc: &Recalibrated, h: f64) -> Vec<Recalibration> {
-    let mut nominal_cfg = base.clone();
-    NUISANCE
+fn recalibration_table(rc: &Recalibrated, h: f64) -> Vec<Recalibration> {
+    let h = rc.runner.prior_sds(h);
+    rc.runner
+        .plant
+        .nuisance()
         .iter()
+        .zip(h)
         .zip(rc.delta.iter().zip(&rc.sd))
-        .map(|((name, field), (&d, &sd))| {
-            let v0 = *field(&mut nominal_cfg);
+        .map(|((p, h), (&d, &sd))| {
+            let v0 = p.nominal;
             Recalibration {
-                parameter: name.to_string(),
+                parameter: p.name.clone(),
                 nominal: v0,
                 value: v0 * (1.0 + h * d),
                 sd: (v0 * h * sd).abs(),
@@ -303,17 +300,18 @@ mod tests {
     /// half a standard deviation down is not.
     #[test]
     fn recalibration_in_the_parameters_units() {
-        let base = SimConfig::default();
-        let mut delta = vec![0.0; NUISANCE.len()];
+        let base = hammer_sim::SimConfig::default();
+        let n = crate::model::NUISANCE.len();
+        let mut delta = vec![0.0; n];
         delta[0] = 1.5;
         delta[1] = -0.5;
         let rc = Recalibrated {
             runner: ModelRunner::new(base.clone(), crate::features::extractor_for(&base)),
             delta,
-            sd: vec![0.5; NUISANCE.len()],
+            sd: vec![0.5; n],
         };
-        let t = recalibration_table(&base, &rc, 0.2);
-        assert_eq!(t.len(), NUISANCE.len());
+        let t = recalibration_table(&rc, 0.2);
+        assert_eq!(t.len(), n);
         assert!(t[0].beyond_prior && !t[1].beyond_prior);
         assert!((t[0].value / t[0].nominal - 1.3).abs() < 1e-12);
         assert!(t[1].value < t[1].nominal);

@@ -12,17 +12,16 @@ use super::group::Point;
 use crate::features::{summarize, N_FEATURES};
 use crate::fitset::{in_fit, model_form_group_name, sigmas, FitSet};
 use crate::input::DiagnoseError;
-use crate::model::{Candidate, ModelRunner, NUISANCE};
+use crate::model::{Candidate, Keep, ModelRunner, ModelTrace};
 use crate::options::Options;
 use crate::parallel::parallel;
 use crate::report::ModelForm;
 use hammer_sim::effects::Effects;
-use hammer_sim::{simulate_truth, SimRun};
 
 /// The nominal model at every operating point, in the points' order.
 pub(crate) struct Nominal {
     pub(crate) bars: Vec<f64>,
-    pub(crate) runs: Vec<SimRun>,
+    pub(crate) runs: Vec<ModelTrace>,
     pub(crate) features: Vec<Vec<f64>>,
 }
 
@@ -35,20 +34,20 @@ pub(crate) fn nominal(
 ) -> Result<Nominal, DiagnoseError> {
     let bars: Vec<f64> = points.iter().map(|p| p.supply_bar).collect();
     let results = parallel(opts.threads, bars.clone(), &|bar| {
-        let r = simulate_truth(&runner.config(bar, &Effects::default()));
+        let r = runner.run(bar, &Effects::default(), Keep::All);
         step(&format!("nominal model at {bar} bar"));
         r
     });
     let mut runs = Vec::new();
     for (bar, r) in bars.iter().zip(results) {
-        runs.push(r.map_err(|e| DiagnoseError::Model(*bar, e.to_string()))?);
+        runs.push(r.map_err(|e| DiagnoseError::Model(*bar, e))?);
     }
     let nominal = Candidate::default();
     let mut features = Vec::new();
     for (bar, run) in bars.iter().zip(&runs) {
         features.push(
             runner
-                .features_of_truth(&run.truth, &nominal.effects, *bar)
+                .features_of_truth(run, &nominal.effects, *bar)
                 .ok_or_else(|| DiagnoseError::Model(*bar, "no steady impact cycle".into()))?,
         );
     }
@@ -81,7 +80,7 @@ pub(crate) fn fit_set<'a>(
                 (points[i].supply_bar, s, sig)
             })
             .collect(),
-        nominal_truth: fit_idx.iter().map(|&i| nominal.runs[i].truth.clone()).collect(),
+        nominal_truth: fit_idx.iter().map(|&i| nominal.runs[i].clone()).collect(),
         nominal_features: fit_idx.iter().map(|&i| nominal.features[i].clone()).collect(),
         pressures,
         distinct: fit_bars.len(),
@@ -93,7 +92,8 @@ pub(crate) fn fit_set<'a>(
     if opts.nominal_uncertainty > 0.0 {
         let fit_features: Vec<&[f64]> = fit_idx.iter().map(|&i| nominal.features[i].as_slice()).collect();
         fs.nuisance = nuisance_sensitivities(&fs, &fit_features, opts);
-        fs.sims.fetch_add(fs.points.len() * NUISANCE.len(), Ordering::Relaxed);
+        fs.sims
+            .fetch_add(fs.points.len() * runner.nuisance.len(), Ordering::Relaxed);
     }
     let model_form = if opts.model_form {
         let factors = fs.model_form_factors(&Candidate::default());
@@ -116,19 +116,19 @@ pub(crate) fn fit_set<'a>(
 /// by one prior standard deviation (one column per parameter, concatenated
 /// over the fit points); a feature the moved model loses counts as no change.
 fn nuisance_sensitivities(fs: &FitSet, nominal_features: &[&[f64]], opts: &Options) -> Vec<Vec<f64>> {
-    let h = opts.nominal_uncertainty;
-    let jobs: Vec<(usize, usize)> = (0..fs.points.len())
-        .flat_map(|p| (0..NUISANCE.len()).map(move |k| (p, k)))
-        .collect();
+    let h = fs.runner.prior_sds(opts.nominal_uncertainty);
+    let n = h.len();
+    let jobs: Vec<(usize, usize)> = (0..fs.points.len()).flat_map(|p| (0..n).map(move |k| (p, k))).collect();
     let runner = fs.runner;
     let cols = parallel(opts.threads, jobs.clone(), &|(p, k)| {
-        let mut c = runner.config(fs.points[p].0, &Effects::default());
-        *(NUISANCE[k].1)(&mut c) *= 1.0 + h;
-        simulate_truth(&c)
-            .ok()
-            .and_then(|run| runner.features_of_truth(&run.truth, &Effects::default(), fs.points[p].0))
+        let bar = fs.points[p].0;
+        let run = runner
+            .moved(k, 1.0 + h[k])
+            .run(bar, &Effects::default(), Keep::Signals)
+            .ok()?;
+        runner.features_of_truth(&run, &Effects::default(), bar)
     });
-    let mut nuisance = vec![Vec::with_capacity(fs.points.len() * N_FEATURES); NUISANCE.len()];
+    let mut nuisance = vec![Vec::with_capacity(fs.points.len() * N_FEATURES); n];
     for ((p, k), col) in jobs.into_iter().zip(cols) {
         let nom = nominal_features[p];
         let sigma = &fs.points[p].2;
@@ -168,9 +168,9 @@ mod tests {
         assert_eq!(fs.pressures, (4.0, 4.0));
         let floor = opts.floors.period_rel * nom.features[0][PERIOD];
         assert!(fs.points[0].2[PERIOD] >= floor);
-        assert_eq!(fs.nuisance.len(), NUISANCE.len());
+        assert_eq!(fs.nuisance.len(), crate::model::NUISANCE.len());
         assert!(fs.nuisance.iter().all(|c| c.len() == N_FEATURES));
         assert!(!form.is_empty() && form.iter().all(|m| m.factor >= 1.0));
-        assert_eq!(fs.simulations(), 2 + NUISANCE.len());
+        assert_eq!(fs.simulations(), 2 + crate::model::NUISANCE.len());
     }
 }

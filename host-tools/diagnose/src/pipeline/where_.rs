@@ -16,7 +16,6 @@ use crate::options::Options;
 use crate::parallel::parallel;
 use crate::report::{Remainder, WhereCell};
 use hammer_sim::params::HammerParams;
-use hammer_sim::SimConfig;
 
 /// A cell's residual below this share of the signal's RMS is not reported as a remainder.
 const REMAINDER_MIN: f64 = 0.1;
@@ -38,14 +37,14 @@ pub(crate) fn locate(
     grouped: &Grouped,
     nominal: &Nominal,
     models: &Models,
-    base: &SimConfig,
+    hammer: &HammerParams,
     opts: &Options,
 ) -> Located {
     // Each point on its own (the cycles' alignment is most of the stage),
     // gathered in point order.
     let jobs: Vec<usize> = (0..grouped.points.len()).collect();
     let per_point = parallel(opts.threads, jobs, &|i| {
-        locate_point(i, inputs, grouped, nominal, models, base, opts)
+        locate_point(i, inputs, grouped, nominal, models, hammer, opts)
     });
     let mut out = Located::default();
     for p in per_point.into_iter().flatten() {
@@ -66,19 +65,19 @@ fn locate_point(
     grouped: &Grouped,
     nominal: &Nominal,
     models: &Models,
-    base: &SimConfig,
+    hammer: &HammerParams,
     opts: &Options,
 ) -> Option<Located> {
     let p = &grouped.points[i];
     let mut out = Located::default();
-    let (mut tpl, stages) = template(&nominal.runs[i], &base.hammer)?;
+    let (mut tpl, stages) = template(&nominal.runs[i], hammer)?;
     models.read(&mut tpl, None);
     let mut meas = Vec::new();
     for &k in &p.inputs {
         meas.extend(measured_cycles(&inputs[k].trace, &grouped.steady_impacts[k]));
     }
     let nominal_cells = breakdown(&tpl, &stages, &meas);
-    if let Some((mut after, after_stages)) = models.verdict_run(i).and_then(|r| template(r, &base.hammer)) {
+    if let Some((mut after, after_stages)) = models.verdict_run(i).and_then(|r| template(r, hammer)) {
         models.read(&mut after, models.fitted_cand.as_ref());
         let after_cells = breakdown(&after, &after_stages, &meas);
         out.remainder
@@ -94,7 +93,7 @@ fn locate_point(
         timing_shift_s: c.timing_shift_s,
     }));
     if opts.figures && !meas.is_empty() {
-        let fitted = fitted_cycle(models, i, &base.hammer);
+        let fitted = fitted_cycle(models, i, hammer);
         out.waves.push(PointWaves {
             supply_bar: p.supply_bar,
             t_s: (0..tpl.len()).map(|k| k as f64 * tpl.dt_s).collect(),

@@ -1,30 +1,29 @@
-//! The model side of the diagnosis: the nominal simulator plus candidate
-//! effects, read by the same feature extractor as the measurement.
+//! The model side of the diagnosis: a plant plus candidate effects, read by
+//! the same feature extractor as the measurement.
+//!
+//! Module map:
+//! - [`plant`]: the seam, [`Plant`]: what the diagnosis asks of any model
+//!   (run at a point with nuisance values and effects; name its nuisance
+//!   parameters and the effects it carries) and the [`ModelTrace`] it returns;
+//! - [`builtin`]: the built-in simulator behind that seam;
+//! - here, [`ModelRunner`]: a plant at given nuisance values, read like a
+//!   measurement (sensor effects, transducer floors, features).
+
+use std::sync::Arc;
 
 use super::features::{summarize, Extractor, Signals, N_FEATURES};
 pub use super::report::Candidate;
 use hammer_sim::effects::Effects;
-use hammer_sim::run::{output_len, run_model, TruthSample, TruthSink, TruthTrace};
-use hammer_sim::{simulate_truth, SimConfig};
+use hammer_sim::params::HammerParams;
+
+pub mod builtin;
+pub mod plant;
+
+pub use builtin::{Builtin, NUISANCE};
+pub use plant::{Impact, Keep, ModelTrace, Motion, NuisanceParam, Plant};
 
 /// E[u²] of the zero-shift magnitude factor u ~ U(0.5, 1.5) (`sim::sensor`).
 pub const ZERO_SHIFT_SQ_FACTOR: f64 = 1.0 + 1.0 / 12.0;
-
-/// The nominal parameters a modeller knows only to a few percent (calibrated
-/// or estimated in docs/model.md): the diagnosis lets each of them move
-/// within a Gaussian prior rather than blame an effect for what they explain.
-/// Mass and piston areas are not among them: they are measured.
-pub const NUISANCE: [(&str, fn(&mut SimConfig) -> &mut f64); 9] = [
-    ("valve.full_open_area_m2", |c| &mut c.valve.full_open_area_m2),
-    ("valve.cd", |c| &mut c.valve.cd),
-    ("valve.damping_n_s_per_m", |c| &mut c.valve.damping_n_s_per_m),
-    ("valve.pilot_area_rear_m2", |c| &mut c.valve.pilot_area_rear_m2),
-    ("valve.pilot_area_front_m2", |c| &mut c.valve.pilot_area_front_m2),
-    ("hammer.outlet_cd", |c| &mut c.hammer.outlet_cd),
-    ("hammer.rear_dead_volume_m3", |c| &mut c.hammer.rear_dead_volume_m3),
-    ("hammer.front_dead_volume_m3", |c| &mut c.hammer.front_dead_volume_m3),
-    ("contact.restitution", |c| &mut c.contact.restitution),
-];
 
 /// How a candidate's sensor effects read a model: the factors on the
 /// pressure readings and the expected shift of the mean features (what
@@ -47,7 +46,12 @@ pub const SETTLE_S: f64 = 0.27;
 /// catalogue's sensor effects).
 #[derive(Debug, Clone)]
 pub struct ModelRunner {
-    pub base: SimConfig,
+    pub plant: Arc<dyn Plant>,
+    /// The nuisance parameters' values this runner runs the plant at (its
+    /// nominal ones, or where a recalibration moved them).
+    pub nuisance: Vec<f64>,
+    /// The measured hammer's geometry: what the stages are read with.
+    pub hammer: HammerParams,
     pub extractor: Extractor,
     /// How the candidate's sensor effects read the model.
     pub reads: &'static dyn SensorReads,
@@ -57,47 +61,53 @@ pub struct ModelRunner {
 }
 
 impl ModelRunner {
-    pub fn config(&self, supply_bar: f64, effects: &Effects) -> SimConfig {
-        let mut c = self.base.clone();
-        c.supply.pressure_bar = supply_bar;
-        c.solver.duration_s = self.duration_s;
-        c.effects = effects.clone();
-        c
+    /// One run of the plant at `supply_bar` with `effects`' physics.
+    pub fn run(&self, supply_bar: f64, effects: &Effects, keep: Keep) -> Result<ModelTrace, String> {
+        self.plant
+            .run(supply_bar, &self.nuisance, &effects.physics(), self.duration_s, keep)
     }
 
-    /// The ideal (noiseless) solution of the physical part of a candidate.
-    pub fn truth(&self, supply_bar: f64, cand: &Candidate) -> Option<TruthTrace> {
-        simulate_truth(&self.config(supply_bar, &cand.physics()))
-            .ok()
-            .map(|r| r.truth)
+    /// Each nuisance parameter's prior relative standard deviation: the
+    /// plant's own, or `h` (the diagnosis' `nominal_uncertainty`).
+    pub fn prior_sds(&self, h: f64) -> Vec<f64> {
+        self.plant
+            .nuisance()
+            .iter()
+            .map(|p| p.relative_uncertainty.unwrap_or(h))
+            .collect()
+    }
+
+    /// This runner with nuisance parameter `k` at `factor` × its value.
+    pub fn moved(&self, k: usize, factor: f64) -> Self {
+        let mut r = self.clone();
+        r.nuisance[k] *= factor;
+        r
+    }
+
+    /// The ideal (noiseless) solution of the physical part of a candidate,
+    /// with everything the plant offers.
+    pub fn truth(&self, supply_bar: f64, cand: &Candidate) -> Option<ModelTrace> {
+        self.run(supply_bar, &cand.effects, Keep::All).ok()
     }
 
     /// Mean steady features of the candidate at `supply_bar`; `nominal_truth`
     /// is reused when the candidate has no physical effect. A run of its
     /// own keeps only the three signals the extractor reads.
-    pub fn features(&self, supply_bar: f64, cand: &Candidate, nominal_truth: Option<&TruthTrace>) -> Option<Vec<f64>> {
+    pub fn features(&self, supply_bar: f64, cand: &Candidate, nominal_truth: Option<&ModelTrace>) -> Option<Vec<f64>> {
         if let Some(t) = nominal_truth.filter(|_| !cand.has_physics()) {
             return self.features_of_truth(t, &cand.effects, supply_bar);
         }
-        let cfg = self.config(supply_bar, &cand.physics());
-        let mut read = Measured::with_capacity(output_len(&cfg));
-        run_model(&cfg, &mut read).ok()?;
-        let Measured {
+        let ModelTrace {
+            dt_s,
             mut p_rear_pa,
             mut p_front_pa,
             accel_mps2,
-        } = read;
+            ..
+        } = self.run(supply_bar, &cand.effects, Keep::Signals).ok()?;
         if !self.reads_as_is(&cand.effects) {
             self.read_pressures(&cand.effects, &mut p_rear_pa, &mut p_front_pa);
         }
-        self.features_of(
-            cfg.solver.output_step_s,
-            &p_rear_pa,
-            &p_front_pa,
-            &accel_mps2,
-            &cand.effects,
-            supply_bar,
-        )
+        self.features_of(dt_s, &p_rear_pa, &p_front_pa, &accel_mps2, &cand.effects, supply_bar)
     }
 
     /// Whether the measurement's transducers read the model's pressures as
@@ -119,7 +129,7 @@ impl ModelRunner {
 
     /// Features of a simulated solution at `supply_bar` seen through the
     /// candidate's sensor effects.
-    pub fn features_of_truth(&self, truth: &TruthTrace, effects: &Effects, supply_bar: f64) -> Option<Vec<f64>> {
+    pub fn features_of_truth(&self, truth: &ModelTrace, effects: &Effects, supply_bar: f64) -> Option<Vec<f64>> {
         let mut read;
         let (p1, p2): (&[f64], &[f64]) = if self.reads_as_is(effects) {
             (&truth.p_rear_pa, &truth.p_front_pa)
@@ -156,35 +166,6 @@ impl ModelRunner {
         self.reads.shift_expected_features(effects, &mut mean);
         debug_assert_eq!(mean.len(), N_FEATURES);
         Some(mean)
-    }
-}
-
-/// A model run's signals as the extractor reads them, and nothing else: a
-/// candidate's run is read once, for its features (a third of the stores
-/// a whole truth trace makes).
-struct Measured {
-    p_rear_pa: Vec<f64>,
-    p_front_pa: Vec<f64>,
-    accel_mps2: Vec<f64>,
-}
-
-impl Measured {
-    fn with_capacity(n: usize) -> Self {
-        Self {
-            p_rear_pa: Vec::with_capacity(n),
-            p_front_pa: Vec::with_capacity(n),
-            accel_mps2: Vec::with_capacity(n),
-        }
-    }
-}
-
-impl TruthSink for Measured {
-    type Error = std::convert::Infallible;
-    fn sample(&mut self, s: &TruthSample) -> Result<(), Self::Error> {
-        self.p_rear_pa.push(s.p_rear_pa);
-        self.p_front_pa.push(s.p_front_pa);
-        self.accel_mps2.push(s.accel_mps2);
-        Ok(())
     }
 }
 
