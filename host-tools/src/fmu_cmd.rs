@@ -133,21 +133,36 @@ fn export(args: &FmuArgs) -> Result<()> {
 /// The FMU opened with its map (the given one, else the one beside it;
 /// with neither it is opened without a map: loaded and instantiated, not run).
 fn open(a: &RunArgs, threads: usize) -> Result<(FmuModel, PathBuf)> {
-    let map_path = a.model_map.clone().unwrap_or_else(|| hammer_fmu::map_path(&a.fmu));
-    let map = if a.model_map.is_none() && !map_path.is_file() {
+    if !(a.duration > 0.0 && a.duration.is_finite()) {
+        anyhow::bail!("--duration must be positive seconds");
+    }
+    open_model(&a.fmu, a.model_map.as_deref(), threads, a.time_limit)
+}
+
+/// `fmu` opened with `model_map` (default: `X.map.toml` beside `X.fmu`,
+/// if there is one) in at most `threads` worker processes, each call
+/// limited to `time_limit_s`: what `fmu check` and `diagnose --model` share.
+pub(crate) fn open_model(
+    fmu: &std::path::Path,
+    model_map: Option<&std::path::Path>,
+    threads: usize,
+    time_limit_s: f64,
+) -> Result<(FmuModel, PathBuf)> {
+    let map_path = model_map.map_or_else(|| hammer_fmu::map_path(fmu), std::path::Path::to_path_buf);
+    let map = if model_map.is_none() && !map_path.is_file() {
         None
     } else {
         Some(ModelMap::read(&map_path).map_err(anyhow::Error::msg)?)
     };
-    if !(a.time_limit > 0.0 && a.time_limit.is_finite()) || !(a.duration > 0.0 && a.duration.is_finite()) {
-        anyhow::bail!("--time-limit and --duration must be positive seconds");
+    if !(time_limit_s > 0.0 && time_limit_s.is_finite()) {
+        anyhow::bail!("the time limit must be positive seconds");
     }
     let opts = Options {
         threads,
-        time_limit: Duration::from_secs_f64(a.time_limit),
+        time_limit: Duration::from_secs_f64(time_limit_s),
         worker: WorkerCommand::this_program().map_err(anyhow::Error::msg)?,
     };
-    Ok((FmuModel::open(&a.fmu, map, opts)?, map_path))
+    Ok((FmuModel::open(fmu, map, opts)?, map_path))
 }
 
 /// The map of an FMU opened with one, else the error that says how to give it.

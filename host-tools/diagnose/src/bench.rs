@@ -8,8 +8,8 @@ use std::collections::BTreeMap;
 use serde::{Deserialize, Serialize};
 
 use super::effects::diagnosis;
-use super::engine::{diagnose_against, MeasuredInput, Options};
-use super::model::SETTLE_S;
+use super::engine::{diagnose_with, MeasuredInput, Options};
+use super::model::{Builtin, Plant, SETTLE_S};
 use super::valve_timing::{front_port_opening_of_model, front_port_opening_of_variant};
 use hammer_sim::effects::{EffectSlot, Effects, ValveDelay, EFFECT_NAMES};
 use hammer_sim::sensor::Rng;
@@ -17,6 +17,7 @@ use hammer_sim::simulate::simulate;
 use hammer_sim::SimConfig;
 use hammer_trace::trace::Trace;
 use hammer_variants::{generate, Structure, VariantParams};
+use std::sync::Arc;
 
 mod ceiling;
 mod outcome;
@@ -49,6 +50,10 @@ pub struct BenchOptions {
     /// one case need not pay for it.
     #[serde(default)]
     pub alone_beside: bool,
+    /// The model diagnosed with, when not the built-in one: the FMU's
+    /// identity (`report.json`'s `model`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub model: Option<serde_json::Value>,
 }
 
 impl Default for BenchOptions {
@@ -62,6 +67,7 @@ impl Default for BenchOptions {
             structural: false,
             reference: false,
             alone_beside: false,
+            model: None,
         }
     }
 }
@@ -481,8 +487,19 @@ pub fn draw_case(opts: &BenchOptions, index: usize) -> anyhow::Result<DrawnCase>
     })
 }
 
-/// Runs case `index` of the plan.
+/// Runs case `index` of the plan against the built-in model.
 pub fn run_case(opts: &BenchOptions, index: usize, diag: &Options) -> anyhow::Result<CaseResult> {
+    run_case_with(opts, index, diag, None)
+}
+
+/// Runs case `index` of the plan against `plant` (None: the built-in model
+/// of the default config).
+pub fn run_case_with(
+    opts: &BenchOptions,
+    index: usize,
+    diag: &Options,
+    plant: Option<&Arc<dyn Plant>>,
+) -> anyhow::Result<CaseResult> {
     let DrawnCase {
         hidden,
         gen,
@@ -492,15 +509,18 @@ pub fn run_case(opts: &BenchOptions, index: usize, diag: &Options) -> anyhow::Re
         true_port_delay_s,
     } = draw_case(opts, index)?;
     let base = SimConfig::default();
+    let builtin = plant.is_none();
+    let plant = plant.cloned().unwrap_or_else(|| Arc::new(Builtin::new(base.clone())));
     let t = std::time::Instant::now();
-    let out = diagnose_against(&inputs, &references, &base, diag, &|_, _, _| {})?;
+    let out = diagnose_with(&inputs, &references, &base, plant.clone(), diag, &|_, _, _| {})?;
     let diagnose_s = t.elapsed().as_secs_f64();
     let r = &out.report;
     let j = judge(r, &hidden, &gen.effects, &opts.points);
     let friction = hammer_sim::effects::CoulombFriction::NAME;
     let friction_within_u =
         friction_within_u(r, j.named.params.get(friction)).filter(|_| hidden.names().iter().any(|n| n == friction));
-    let port_shift_error = true_port_delay_s.and_then(|truth| {
+    // The port's shift is read off the built-in model at the named delay.
+    let port_shift_error = true_port_delay_s.filter(|_| builtin).and_then(|truth| {
         let named = j.named.params.get(ValveDelay::NAME)?;
         let tau = named.get("tau_s")?.as_f64()?;
         Some((model_port_shift_s(&base, tau, &opts.points)? - truth).abs() / truth)
@@ -509,7 +529,7 @@ pub fn run_case(opts: &BenchOptions, index: usize, diag: &Options) -> anyhow::Re
         None
     } else {
         let t = std::time::Instant::now();
-        let out = diagnose_against(&inputs, &[], &base, diag, &|_, _, _| {})?;
+        let out = diagnose_with(&inputs, &[], &base, plant.clone(), diag, &|_, _, _| {})?;
         let diagnose_s = t.elapsed().as_secs_f64();
         let a = judge(&out.report, &hidden, &gen.effects, &opts.points);
         Some(Alone {

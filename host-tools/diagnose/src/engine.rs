@@ -106,7 +106,9 @@ pub fn diagnose_with(
         progress(d.min(total_steps), total_steps, what);
     };
     progress(0, total_steps, "nominal model");
-    let nominal = nominal::nominal(&grouped.points, &runner, opts, &step)?;
+    let nominal = nominal::nominal(&grouped.points, &runner, opts, &step);
+    plant_ok(&runner)?;
+    let nominal = nominal?;
     let mut reference_infos = Vec::new();
     let mut baselines = Vec::new();
     // The hammer's own features, kept before the move onto the model: the
@@ -134,6 +136,7 @@ pub fn diagnose_with(
     };
     let (fs, model_form) = nominal::fit_set(points, &nominal, &runner, &fit_opts);
     let ranking = rank::rank(&fs, &fit_opts, &step);
+    plant_ok(&runner)?;
     let detection_floors = floor::floors(&fs, &ranking, &fit_opts);
     step("detection floors");
 
@@ -150,11 +153,13 @@ pub fn diagnose_with(
     let chambers = chamber_table(&fs, &nominal.bars, &models, &baselines);
     let (alternatives, alternative_sims) = close_call_group(check_fs, check_points, &nominal, &ranking, &shrink, opts);
 
+    plant_ok(&runner)?;
     let simulations =
         fs.simulations() + own_fs.as_ref().map_or(0, |f| f.simulations()) + models.simulations() + alternative_sims;
     Ok(Outcome {
         report: Report {
             tool: format!("hammer diagnose {}", env!("CARGO_PKG_VERSION")),
+            model: runner.plant.identity(),
             inputs: grouped.infos,
             references: reference_infos,
             dead_volumes,
@@ -180,6 +185,12 @@ pub fn diagnose_with(
         },
         waves: located.waves,
     })
+}
+
+/// The plant's failure that ends the diagnosis, if any (a foreign model
+/// that crashed or hung: every number after it would be one short).
+fn plant_ok(runner: &ModelRunner) -> Result<(), DiagnoseError> {
+    runner.plant.fatal().map_or(Ok(()), |e| Err(DiagnoseError::Plant(e)))
 }
 
 /// The chamber characteristics against the nominal model (with references:

@@ -35,6 +35,10 @@ pub enum DiagnoseError {
     Model(f64, String),
     #[error("no reference record at {0} bar: with references, every operating point needs one")]
     NoReference(f64),
+    /// The model failed in a way that ends the diagnosis (a foreign model
+    /// that crashed, hung or could not be loaded): the plant's own message.
+    #[error("{0}")]
+    Plant(String),
 }
 
 impl DiagnoseError {

@@ -326,6 +326,10 @@ pub struct DetectionFloor {
     /// Found from the force balance's standard errors, not the waveforms.
     #[serde(default)]
     pub model_free: bool,
+    /// The model cannot carry the effect (a user's model whose map gives
+    /// it no parameter): it was not ranked, and no floor is known.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub not_modelled: bool,
     pub statement: String,
 }
 
@@ -345,6 +349,10 @@ pub struct DeadVolume {
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Report {
     pub tool: String,
+    /// The model fitted when it is not the built-in simulator: a user's
+    /// FMU's name, GUID, FMI version, generation tool and the map's hash.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub model: Option<serde_json::Value>,
     pub inputs: Vec<InputInfo>,
     /// Records of the same hammer the inputs were read against, as changes
     /// from them (empty: against the model alone).

@@ -8,10 +8,12 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
-use super::bench::{render, run_case, summarize, BenchOptions, CaseResult};
-use super::engine::{diagnose_against, Options};
+use super::bench::{render, run_case_with, summarize, BenchOptions, CaseResult};
+use super::engine::{diagnose_with, Options};
 use super::input::{read_request, DiagnoseError, Request};
+use super::model::{Builtin, FmuPlant, Plant};
 use super::output::{summary, write_all};
+use std::sync::Arc;
 
 #[derive(Args, Debug)]
 pub struct DiagnoseArgs {
@@ -51,6 +53,17 @@ pub struct DiagnoseArgs {
     /// Directory for report.json, report.md and the figures.
     #[arg(long)]
     pub out: PathBuf,
+    /// Fit a model of your own instead of the built-in simulator: an FMI
+    /// 2.0 co-simulation FMU with a linux64 binary (docs/your-model.md).
+    /// `--config` still describes the measured hammer (geometry, sensors).
+    #[arg(long, value_name = "FMU")]
+    pub model: Option<PathBuf>,
+    /// The FMU's model map (default: `X.map.toml` beside `X.fmu`, as `hammer fmu` writes it).
+    #[arg(long, value_name = "MAP", requires = "model")]
+    pub model_map: Option<PathBuf>,
+    /// The longest one run of the FMU may take, s (then its process is stopped and the diagnosis ends).
+    #[arg(long, value_name = "S", default_value_t = 60.0, requires = "model")]
+    pub model_time_limit: f64,
 }
 
 #[derive(Args, Debug)]
@@ -86,6 +99,16 @@ pub struct BenchArgs {
     /// every point, and diagnose the change from it (`diagnose --reference`).
     #[arg(long, conflicts_with = "isolability")]
     pub reference: bool,
+    /// Diagnose every case with this FMU instead of the built-in model
+    /// (`diagnose --model`); the cases are generated as without it.
+    #[arg(long, value_name = "FMU", conflicts_with = "isolability")]
+    pub model: Option<PathBuf>,
+    /// The FMU's model map (default: `X.map.toml` beside `X.fmu`).
+    #[arg(long, value_name = "MAP", requires = "model")]
+    pub model_map: Option<PathBuf>,
+    /// The longest one run of the FMU may take, s.
+    #[arg(long, value_name = "S", default_value_t = 60.0, requires = "model")]
+    pub model_time_limit: f64,
 }
 
 /// Pairs every `--supply-bar` of the raw command line with the `--measured`
@@ -164,7 +187,11 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
         ..Options::default()
     };
     let pb = progress_bar(1, "{spinner} diagnose [{bar:30}] {pos}/{len} {msg} ({elapsed})");
-    let outcome = diagnose_against(&inputs, &references, &base, &opts, &|done, total, what| {
+    let plant: Arc<dyn Plant> = match &args.model {
+        Some(fmu) => open_plant(fmu, args.model_map.as_deref(), opts.threads, args.model_time_limit)?,
+        None => Arc::new(Builtin::new(base.clone())),
+    };
+    let outcome = diagnose_with(&inputs, &references, &base, plant, &opts, &|done, total, what| {
         pb.set_length(total as u64);
         pb.set_position(done as u64);
         pb.set_message(what.to_string());
@@ -183,6 +210,15 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
         outcome.report.elapsed_s
     );
     Ok(())
+}
+
+/// A user's FMU with its map as the diagnosis' model, in at most
+/// `threads` worker processes.
+fn open_plant(fmu: &Path, model_map: Option<&Path>, threads: usize, time_limit_s: f64) -> Result<Arc<dyn Plant>> {
+    let (model, _) = crate::fmu_cmd::open_model(fmu, model_map, threads, time_limit_s)?;
+    Ok(Arc::new(
+        FmuPlant::new(model).map_err(|e| anyhow::anyhow!("FMU {}: {e}", fmu.display()))?,
+    ))
 }
 
 pub fn bench(args: &BenchArgs) -> Result<()> {
@@ -209,10 +245,25 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         // A record must add evidence, never subtract it: the benchmark
         // shows every case beside its diagnosis against the model alone.
         alone_beside: args.reference,
+        model: None,
     };
     let diag = Options {
         figures: false,
         ..Options::default()
+    };
+    let workers = diag.threads.clamp(1, args.cases.max(1));
+    let plant = match &args.model {
+        Some(fmu) => Some(open_plant(
+            fmu,
+            args.model_map.as_deref(),
+            workers,
+            args.model_time_limit,
+        )?),
+        None => None,
+    };
+    let opts = BenchOptions {
+        model: plant.as_ref().and_then(|p| p.identity()),
+        ..opts
     };
     let pb = progress_bar(
         args.cases as u64,
@@ -221,7 +272,6 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
     // Cases side by side, one thread each: a case's diagnosis is the same
     // on any number of threads, and one thread a case keeps every core
     // busy where a case's own stages would leave one idle between them.
-    let workers = diag.threads.clamp(1, args.cases.max(1));
     let one = Options {
         threads: 1,
         ..diag.clone()
@@ -238,7 +288,7 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
                         if i >= args.cases {
                             break done;
                         }
-                        let r = run_case(&opts, i, &one);
+                        let r = run_case_with(&opts, i, &one, plant.as_ref());
                         if let Ok(c) = &r {
                             right.fetch_add(usize::from(c.correct), Ordering::Relaxed);
                         }

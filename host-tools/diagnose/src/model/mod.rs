@@ -6,6 +6,7 @@
 //!   (run at a point with nuisance values and effects; name its nuisance
 //!   parameters and the effects it carries) and the [`ModelTrace`] it returns;
 //! - [`builtin`]: the built-in simulator behind that seam;
+//! - [`fmu`]: a user's FMU behind it, through its model map (issue 46);
 //! - here, [`ModelRunner`]: a plant at given nuisance values, read like a
 //!   measurement (sensor effects, transducer floors, features).
 
@@ -17,9 +18,11 @@ use hammer_sim::effects::Effects;
 use hammer_sim::params::HammerParams;
 
 pub mod builtin;
+pub mod fmu;
 pub mod plant;
 
 pub use builtin::{Builtin, NUISANCE};
+pub use fmu::FmuPlant;
 pub use plant::{Impact, Keep, ModelTrace, Motion, NuisanceParam, Plant};
 
 /// E[u²] of the zero-shift magnitude factor u ~ U(0.5, 1.5) (`sim::sensor`).

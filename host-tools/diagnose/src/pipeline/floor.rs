@@ -21,6 +21,22 @@ use crate::parallel::parallel;
 use crate::report::DetectionFloor;
 use hammer_sim::effects::EFFECT_NAMES;
 
+/// The floor of an effect the model cannot carry: none is known.
+fn not_modelled(name: &str) -> DetectionFloor {
+    DetectionFloor {
+        effect: name.to_string(),
+        parameter: String::new(),
+        value: None,
+        stronger_above: true,
+        chi2_needed: 0.0,
+        model_free: false,
+        not_modelled: true,
+        statement: format!(
+            "{name}: not modelled: the model's map gives it no parameter, so it was not ranked and could hide in the gap at any size"
+        ),
+    }
+}
+
 /// Bisection steps on the parameter's (log) scale: the catalogue's ranges
 /// span up to five decades, 2⁻⁸ of that is a few percent.
 const STEPS: usize = 8;
@@ -37,7 +53,7 @@ pub(crate) fn floors(fs: &FitSet, ranking: &Ranking, opts: &Options) -> Vec<Dete
     };
     let needed = chi2_needed(fs, ranking, opts);
     let names: Vec<&str> = EFFECT_NAMES.iter().copied().filter(|n| seen(n).is_some()).collect();
-    parallel(opts.threads, names, &|name| match seen(name) {
+    let mut floors: Vec<DetectionFloor> = parallel(opts.threads, names, &|name| match seen(name) {
         // A chamber characteristic's change has no magnitude law: the
         // model's floor stands for it.
         Some(true) => model_free_floor(fs, name, opts.min_model_free_z)
@@ -46,7 +62,14 @@ pub(crate) fn floors(fs: &FitSet, ranking: &Ranking, opts: &Options) -> Vec<Dete
     })
     .into_iter()
     .flatten()
-    .collect()
+    .collect();
+    floors.extend(
+        EFFECT_NAMES
+            .iter()
+            .filter(|n| !fs.runner.plant.carries(n))
+            .map(|n| not_modelled(n)),
+    );
+    floors
 }
 
 /// A force-balance effect's floor: its signature at `z_min` standard errors.
@@ -59,6 +82,7 @@ fn model_free_floor(fs: &FitSet, name: &str, z_min: f64) -> Option<DetectionFloo
         stronger_above: true,
         chi2_needed: z_min * z_min,
         model_free: true,
+        not_modelled: false,
         statement: format!(
             "{name} with {key} ≥ {value:.3e} would have been named (its model-free signature, the force balance's or against a reference the chamber characteristics', at {z_min:.0} standard errors); below that it is within that signature's uncertainty"
         ),
@@ -122,6 +146,7 @@ fn floor_of(fs: &FitSet, name: &str, needed: f64) -> Option<DetectionFloor> {
         stronger_above,
         chi2_needed: needed,
         model_free: false,
+        not_modelled: false,
         statement: statement(name, spec.key, value, stronger_above, (spec.lo, spec.hi)),
     })
 }

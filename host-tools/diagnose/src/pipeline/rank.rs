@@ -78,7 +78,12 @@ impl Ranking {
 pub(crate) fn rank(fs: &FitSet, opts: &Options, step: &(dyn Fn(&str) + Sync)) -> Ranking {
     let ln_n = fs.ln_cycles();
     let chi2_nominal = fs.chi2(&Candidate::default()).unwrap_or(f64::INFINITY);
-    let mut effects: Vec<EffectResult> = parallel(opts.threads, EFFECT_NAMES.to_vec(), &|name| {
+    let carried: Vec<&str> = EFFECT_NAMES
+        .iter()
+        .copied()
+        .filter(|n| fs.runner.plant.carries(n))
+        .collect();
+    let mut effects: Vec<EffectResult> = parallel(opts.threads, carried, &|name| {
         let r = fit_effects(fs, &[name], &[], chi2_nominal, ln_n, opts);
         step(&format!("fitted {name}"));
         r

@@ -53,9 +53,15 @@ impl CoulombFriction {
 }
 
 impl Effect for CoulombFriction {
+    // The law is the line through the friction at two supply pressures, as
+    // the diagnosis measures it: on a hammer whose friction barely moves
+    // with the pressure either coefficient may come out below zero while
+    // the force stays positive over the whole supply range (a fit at 4 and
+    // 7 bar gave k = -0.017 N/bar), so neither is bounded at zero. An FMU
+    // refusing such a value refused what the built-in model runs.
     const PARAMS: &'static [Param] = &[
-        Param::new("f0_n", "N", 0.0, 1e3),
-        Param::new("k_n_per_bar", "N/bar", 0.0, 1e3),
+        Param::new("f0_n", "N", -1e3, 1e3),
+        Param::new("k_n_per_bar", "N/bar", -1e3, 1e3),
         Param::new("smoothing_mps", "m/s", 1e-6, 0.1),
         Param::new("growth_per_s", "1/s", 0.0, 10.0),
         Param::new("step_at_s", "s", 0.0, 1e6),

@@ -89,6 +89,7 @@ mod tests {
     fn report() -> Report {
         let rms = |x: f64| -> BTreeMap<String, f64> { SIGNALS.iter().map(|s| (s.to_string(), x)).collect() };
         Report {
+            model: None,
             tool: "hammer diagnose test".into(),
             inputs: vec![InputInfo {
                 label: "run-4bar.trace".into(),
@@ -147,6 +148,7 @@ mod tests {
                     stronger_above: true,
                     chi2_needed: 41.0,
                     model_free: false,
+                    not_modelled: false,
                     statement: "leakage with gap_m ≥ 2.400e-5 would have been named".into(),
                 },
                 DetectionFloor {
@@ -156,6 +158,7 @@ mod tests {
                     stronger_above: true,
                     chi2_needed: 41.0,
                     model_free: false,
+                    not_modelled: false,
                     statement: "valve_delay could not be named".into(),
                 },
             ],
