@@ -124,7 +124,7 @@ fn nuisance_sensitivities(fs: &FitSet, nominal_features: &[&[f64]], opts: &Optio
         let bar = fs.points[p].0;
         let run = runner
             .moved(k, 1.0 + h[k])
-            .run(bar, &Effects::default(), Keep::Signals)
+            .run(bar, &Effects::default(), Keep::All)
             .ok()?;
         runner.features_of_truth(&run, &Effects::default(), bar)
     });
