@@ -319,6 +319,45 @@ fn bad_fmus_exit_2_naming_the_fmu_and_what_failed() {
             "{what}: never quotes the file: {err}"
         );
     }
+    // The diagnosis with a crashing or hanging FMU: exit 2, the FMU named,
+    // what failed said; never a panic of the host.
+    let traces = friction_traces(&dir);
+    for (what, map, extra, says) in [
+        ("crash", map_with("d4", "mode = 0", "mode = 4"), vec![], "SIGSEGV"),
+        (
+            "time-out",
+            map_with("d3", "mode = 0", "mode = 3"),
+            vec!["--model-time-limit", "1"],
+            "time limit of 1.000 s",
+        ),
+    ] {
+        let out = dir.join(format!("diagnose-{what}"));
+        let mut args = vec![
+            "diagnose",
+            "--measured",
+            &traces[0],
+            "--measured",
+            &traces[1],
+            "--model",
+            good.to_str().unwrap(),
+            "--model-map",
+            map.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        args.extend(extra.iter().copied());
+        let (code, stdout, err) = hammer(&args);
+        assert_eq!(code, 2, "diagnose, {what}: {stdout}{err}");
+        assert!(
+            err.contains("mock.fmu") && err.contains(says),
+            "diagnose, {what}: {err}"
+        );
+        assert!(!err.contains("panicked"), "diagnose, {what}: {err}");
+        assert!(
+            !out.join("report.json").exists(),
+            "diagnose, {what}: no report of a failed model"
+        );
+    }
     // Through the API: the kinds are typed, and the pool recovers from a
     // crash (the next run starts a fresh worker).
     let m = ModelMap::read(&good_map).unwrap();
@@ -490,4 +529,111 @@ piston_force = {{ input = "f_ext_n", unit = "N" }}
     let no_input = FmuModel::open(&fmu, Some((ModelMap::parse(&text).unwrap(), text)), options(1, 60.0)).unwrap();
     let refused = no_input.run_with_friction(5e5, &[], &outside, 0.3).unwrap_err();
     assert_eq!(refused.kind, FailKind::Map, "{refused}");
+}
+
+/// Two measured traces of the built-in hammer with friction, at 4 and 7 bar.
+fn friction_traces(dir: &Path) -> Vec<String> {
+    [4, 7]
+        .iter()
+        .map(|bar| {
+            let out = dir.join(format!("m{bar}.csv"));
+            let (code, _, err) = hammer(&[
+                "simulate",
+                "--supply-bar",
+                &bar.to_string(),
+                "--duration",
+                "0.6",
+                "--effect",
+                "coulomb_friction",
+                "--seed",
+                &bar.to_string(),
+                "--out",
+                out.to_str().unwrap(),
+            ]);
+            assert_eq!(code, 0, "{err}");
+            out.to_string_lossy().into_owned()
+        })
+        .collect()
+}
+
+/// Every number of `a` against `b`'s, relative to the larger; the keys
+/// that count work or time (`simulations`, `elapsed_s`) and the model's
+/// own identity are left out. Non-numbers must be equal.
+fn largest_difference(a: &serde_json::Value, b: &serde_json::Value, path: &str, worst: &mut (f64, String)) {
+    use serde_json::Value;
+    match (a, b) {
+        (Value::Object(x), Value::Object(y)) => {
+            for (k, v) in x {
+                if ["simulations", "elapsed_s", "model", "tool"].contains(&k.as_str()) {
+                    continue;
+                }
+                let w = y.get(k).unwrap_or_else(|| panic!("{path}/{k} missing"));
+                largest_difference(v, w, &format!("{path}/{k}"), worst);
+            }
+        }
+        (Value::Array(x), Value::Array(y)) => {
+            assert_eq!(x.len(), y.len(), "{path}");
+            for (i, (v, w)) in x.iter().zip(y).enumerate() {
+                largest_difference(v, w, &format!("{path}[{i}]"), worst);
+            }
+        }
+        (Value::Number(x), Value::Number(y)) => {
+            let (x, y) = (x.as_f64().unwrap(), y.as_f64().unwrap());
+            let d = (x - y).abs() / x.abs().max(y.abs()).max(f64::MIN_POSITIVE);
+            if d > worst.0 {
+                *worst = (d, path.to_string());
+            }
+        }
+        _ => assert_eq!(a, b, "{path}"),
+    }
+}
+
+/// The built-in model through its own FMU is the built-in path:
+/// `hammer diagnose --model hammer.fmu` names what the built-in model
+/// names, with every number of report.json within 1e-6 relative (the
+/// import runs the same solver, so in fact bit for bit), and the report
+/// carries the FMU's identity: name, GUID, FMI version, tool, map hash.
+#[test]
+fn diagnose_through_the_projects_fmu_is_the_built_in_path() {
+    let dir = tmp_dir("diagnose-own");
+    let fmu = dir.join("hammer.fmu");
+    let (code, _, err) = hammer(&["fmu", "--out", fmu.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    let traces = friction_traces(&dir);
+    let diagnose = |out: &str, model: Option<&Path>| -> serde_json::Value {
+        let out = dir.join(out);
+        let mut args = vec!["diagnose", "--measured", &traces[0], "--measured", &traces[1]];
+        let fmu_arg;
+        if let Some(m) = model {
+            fmu_arg = m.to_string_lossy().into_owned();
+            args.extend(["--model", &fmu_arg]);
+        }
+        let out_arg = out.to_string_lossy().into_owned();
+        args.extend(["--out", &out_arg]);
+        let (code, stdout, err) = hammer(&args);
+        assert_eq!(code, 0, "{stdout}{err}");
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap()
+    };
+    let builtin = diagnose("builtin", None);
+    let through = diagnose("fmu", Some(&fmu));
+    assert_eq!(through["verdict"]["effects"], builtin["verdict"]["effects"]);
+    assert!(
+        builtin["verdict"]["effects"].to_string().contains("coulomb_friction"),
+        "{}",
+        builtin["verdict"]
+    );
+    let mut worst = (0.0, String::new());
+    largest_difference(&builtin, &through, "", &mut worst);
+    eprintln!("largest relative difference: {:e} at {}", worst.0, worst.1);
+    assert!(worst.0 <= 1e-6, "{worst:?}");
+    assert!(builtin.get("model").is_none(), "the built-in path names no model");
+    let id = &through["model"];
+    assert_eq!(id["name"], "hammer");
+    assert_eq!(id["fmi_version"], "2.0");
+    assert!(id["guid"].as_str().is_some_and(|g| g.starts_with('{')), "{id}");
+    let map_text = std::fs::read_to_string(hammer_fmu::map_path(&fmu)).unwrap();
+    assert_eq!(
+        id["map_hash"].as_str(),
+        Some(hammer_fmu::import::map::map_hash(&map_text).as_str())
+    );
 }

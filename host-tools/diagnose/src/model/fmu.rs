@@ -138,12 +138,7 @@ impl Plant for FmuPlant {
         let s = self
             .model
             .run_with_friction(supply_bar * 1e5, &settings, &outside, duration_s)
-            .inspect_err(|e| {
-                if std::env::var_os("HAMMER_DEBUG").is_some() {
-                    eprintln!("DEBUG {e} at {supply_bar} bar: {settings:?} {outside:?}");
-                }
-                self.note(e)
-            })
+            .inspect_err(|e| self.note(e))
             .map_err(|e| e.to_string())?;
         Ok(trace(s, keep))
     }
