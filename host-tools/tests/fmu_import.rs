@@ -782,3 +782,93 @@ law = {{ parameter = "friction_n", unit = "N", off = 0.0 }}
     );
     assert_eq!(json["model"]["generation_tool"], "PythonFMU 0.7.0");
 }
+
+/// The second family's structure is a parameter of its FMU: each law's
+/// other form is a Boolean `structure.<variant>`, named as
+/// `hammer_variants` names it. Through the import, each single variant
+/// set so impacts when the family run with that structure does (within the
+/// communication step), and differently from the base structure, which is
+/// what lets a benchmark give each case's drawn structure to one FMU.
+#[test]
+fn the_variants_fmus_structure_is_set_per_run() {
+    let dir = tmp_dir("variants-structure");
+    let fmu = dir.join("variants.fmu");
+    let (code, _, err) = hammer(&["fmu", "--family", "variants", "--out", fmu.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    let model = open(&fmu, &hammer_fmu::map_path(&fmu), 2);
+    let cfg = hammer_fmu::VariantsConfig::default();
+    let duration_s = 0.5;
+    let impacts_of = |s: &Signals| -> Vec<f64> {
+        let count = s.impacts.as_ref().unwrap();
+        (1..count.len())
+            .filter(|&i| count[i] > count[i - 1])
+            .map(|i| i as f64 * s.dt_s)
+            .collect()
+    };
+    let base = impacts_of(&model.run(5e5, &[], duration_s).unwrap());
+    let family_base: Vec<f64> = hammer_variants::generate(
+        &cfg.params,
+        hammer_variants::Structure::BASE,
+        &hammer_sim::Effects::default(),
+        5.0,
+        duration_s,
+        cfg.seed,
+    )
+    .truth
+    .cycles
+    .iter()
+    .map(|c| c.t_impact_s)
+    .collect();
+    // The base run's first impact opens no cycle of the family's truth.
+    let base = base[1..].to_vec();
+    let singles = hammer_variants::Structure::singles();
+    for single in singles {
+        let name = single.variants()[0];
+        let settings: Vec<(String, f64)> = singles
+            .iter()
+            .map(|s| {
+                (
+                    format!("structure.{}", s.variants()[0]),
+                    f64::from(u8::from(s == &single)),
+                )
+            })
+            .collect();
+        let run = model
+            .run(5e5, &settings, duration_s)
+            .unwrap_or_else(|e| panic!("{name}: {e}"));
+        let got = impacts_of(&run)[1..].to_vec();
+        let own = hammer_variants::generate(
+            &cfg.params,
+            single,
+            &hammer_sim::Effects::default(),
+            5.0,
+            duration_s,
+            cfg.seed,
+        );
+        let want: Vec<f64> = own.truth.cycles.iter().map(|c| c.t_impact_s).collect();
+        assert!(want.len() >= 5, "{name}: {} impacts", want.len());
+        // The counter rises at a communication point beside the impact.
+        let matched = want
+            .iter()
+            .filter(|t| got.iter().any(|g| (*g - **t).abs() <= run.dt_s))
+            .count();
+        assert_eq!(
+            matched,
+            want.len(),
+            "{name}: the FMU's impacts {got:?}, the family's {want:?}"
+        );
+        // Moved from the base structure's impacts as far as the family's
+        // own run moved (a sensor front end does not move the piston).
+        let largest = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max);
+        let (moved, family_moved) = (largest(&got, &base), largest(&want, &family_base));
+        eprintln!(
+            "{name}: {} impacts as the family's own run; {moved:.2e} s from the base structure's ({family_moved:.2e} s in the family)",
+            want.len()
+        );
+        assert_eq!(moved > 2.0 * run.dt_s, family_moved > 2.0 * run.dt_s, "{name}");
+    }
+    let bad = model
+        .run(5e5, &[("structure.no_such_law".into(), 1.0)], duration_s)
+        .unwrap_err();
+    assert_eq!(bad.kind, FailKind::Map, "{bad}");
+}

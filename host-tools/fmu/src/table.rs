@@ -39,6 +39,9 @@ pub enum Binding {
     EffectParam(usize, String),
     /// An output, by its place in [`OUTPUTS`].
     Output(usize),
+    /// A law of the configuration's that has two forms (a string leaf at
+    /// the path): the form `.2` when true, `.1` when false.
+    Choice(Vec<String>, String, String),
 }
 
 #[derive(Debug, Clone, PartialEq)]
@@ -141,6 +144,20 @@ pub struct Family<'a> {
     /// Subtrees (dotted) that are not parameters.
     pub skip: &'a [&'a str],
     pub outputs: &'static [Output],
+    /// Laws with two forms, each a Boolean parameter (the family's
+    /// structure: set per run, as a benchmark's drawn structure is).
+    pub choices: Vec<Choice>,
+}
+
+/// A Boolean parameter `name` that puts `off` or `on` at the
+/// configuration's string leaf `path`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Choice {
+    pub name: String,
+    pub path: Vec<String>,
+    pub off: String,
+    pub on: String,
+    pub description: String,
 }
 
 /// The unit a configuration key's suffix names (`docs`: units in names).
@@ -191,6 +208,7 @@ impl Table {
     pub fn new(base: &SimConfig) -> Result<Self, String> {
         let json = serde_json::to_value(base).map_err(|e| e.to_string())?;
         Self::of(Family {
+            choices: Vec::new(),
             json,
             skip: &NOT_PARAMETERS,
             outputs: &OUTPUTS,
@@ -207,6 +225,25 @@ impl Table {
         };
         let mut vars = Vec::new();
         leaves(&json, &mut Vec::new(), family.skip, &mut vars);
+        for c in family.choices {
+            let mut at = &json;
+            for key in &c.path {
+                at = &at[key.as_str()];
+            }
+            let on = match at.as_str() {
+                Some(v) if v == c.on => true,
+                Some(v) if v == c.off => false,
+                _ => return Err(format!("{}: neither {} nor {}", c.path.join("."), c.off, c.on)),
+            };
+            vars.push(Variable {
+                name: c.name,
+                kind: Kind::Boolean,
+                unit: None,
+                description: c.description,
+                binding: Binding::Choice(c.path, c.off, c.on),
+                start: Val::Boolean(on),
+            });
+        }
         for (k, e) in REGISTRY.iter().enumerate() {
             let on = e.is_on(&effects);
             vars.push(Variable {
@@ -288,6 +325,13 @@ impl Table {
                         at = &mut at[key.as_str()];
                     }
                     *at = leaf;
+                }
+                Binding::Choice(path, off, on) => {
+                    let mut at = &mut json;
+                    for key in path {
+                        at = &mut at[key.as_str()];
+                    }
+                    *at = Value::String(if leaf == Value::Bool(true) { on } else { off }.clone());
                 }
                 Binding::Switch(k) if leaf == Value::Bool(true) => {
                     effects.insert(REGISTRY[*k].name().to_string(), Value::Object(Map::new()));

@@ -21,7 +21,7 @@ use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
 use crate::instance::Runner;
-use crate::table::{outputs, Family, Output, Table, Val};
+use crate::table::{outputs, Choice, Family, Output, Table, Val};
 
 /// The second family's outputs: its valve is a spool position, 0 feeds the
 /// front, 1 the rear.
@@ -101,7 +101,46 @@ pub fn table(cfg: &VariantsConfig) -> Result<Table, String> {
         json,
         skip: &["duration_s", "structure"],
         outputs: &VARIANT_OUTPUTS,
+        choices: structure_choices()?,
     })
+}
+
+/// The family's structure as parameters: each law with its two forms a
+/// Boolean `structure.<variant>` (`structure.position_latched_valve`, …),
+/// named and valued as `hammer_variants` names them, so a benchmark sets
+/// each case's drawn structure by the names its cases carry.
+fn structure_choices() -> Result<Vec<Choice>, String> {
+    let form = |s: &Structure| serde_json::to_value(s).map_err(|e| e.to_string());
+    let base = form(&Structure::BASE)?;
+    let mut out = Vec::new();
+    for single in Structure::singles() {
+        let name = single
+            .variants()
+            .first()
+            .copied()
+            .ok_or("a single structure names no variant")?;
+        let other = form(&single)?;
+        let (Value::Object(b), Value::Object(o)) = (&base, &other) else {
+            return Err("the structure is not a table".into());
+        };
+        for (law, off) in b {
+            let on = &o[law];
+            if on != off {
+                out.push(Choice {
+                    name: format!("structure.{name}"),
+                    path: vec!["structure".into(), law.clone()],
+                    off: off.as_str().unwrap_or_default().to_string(),
+                    on: on.as_str().unwrap_or_default().to_string(),
+                    description: format!(
+                        "the {law} law: {} when true, else {}",
+                        on.as_str().unwrap_or("?"),
+                        off.as_str().unwrap_or("?")
+                    ),
+                });
+            }
+        }
+    }
+    Ok(out)
 }
 
 /// A run of the second family, to `duration_s`, not yet at its start.
