@@ -492,13 +492,17 @@ pub fn run_case(opts: &BenchOptions, index: usize, diag: &Options) -> anyhow::Re
     run_case_with(opts, index, diag, None)
 }
 
-/// Runs case `index` of the plan against `plant` (None: the built-in model
-/// of the default config).
+/// The model a case is diagnosed with, given the case's drawn structure
+/// (None: a hammer of the diagnosis' own family).
+pub type PlantFor<'a> = &'a (dyn Fn(Option<&Structure>) -> Arc<dyn Plant> + Sync);
+
+/// Runs case `index` of the plan against the model `plant` gives for its
+/// structure (None: the built-in model of the default config).
 pub fn run_case_with(
     opts: &BenchOptions,
     index: usize,
     diag: &Options,
-    plant: Option<&Arc<dyn Plant>>,
+    plant: Option<PlantFor>,
 ) -> anyhow::Result<CaseResult> {
     let DrawnCase {
         hidden,
@@ -510,7 +514,10 @@ pub fn run_case_with(
     } = draw_case(opts, index)?;
     let base = SimConfig::default();
     let builtin = plant.is_none();
-    let plant = plant.cloned().unwrap_or_else(|| Arc::new(Builtin::new(base.clone())));
+    let plant = match plant {
+        Some(f) => f(structural.as_ref().map(|(s, _)| s)),
+        None => Arc::new(Builtin::new(base.clone())),
+    };
     let t = std::time::Instant::now();
     let out = diagnose_with(&inputs, &references, &base, plant.clone(), diag, &|_, _, _| {})?;
     let diagnose_s = t.elapsed().as_secs_f64();

@@ -8,11 +8,13 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
-use super::bench::{render, run_case_with, summarize, BenchOptions, CaseResult};
+use super::bench::{render, run_case_with, summarize, BenchOptions, CaseResult, PlantFor};
 use super::engine::{diagnose_with, Options};
 use super::input::{read_request, DiagnoseError, Request};
 use super::model::{Builtin, FmuPlant, Plant};
 use super::output::{summary, write_all};
+use hammer_sim::SimConfig;
+use hammer_variants::Structure;
 use std::sync::Arc;
 
 #[derive(Args, Debug)]
@@ -188,9 +190,15 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
     };
     let pb = progress_bar(1, "{spinner} diagnose [{bar:30}] {pos}/{len} {msg} ({elapsed})");
     let plant: Arc<dyn Plant> = match &args.model {
-        Some(fmu) => open_plant(fmu, args.model_map.as_deref(), opts.threads, args.model_time_limit)?,
+        Some(fmu) => Arc::new(open_plant(
+            fmu,
+            args.model_map.as_deref(),
+            opts.threads,
+            args.model_time_limit,
+        )?),
         None => Arc::new(Builtin::new(base.clone())),
     };
+
     let outcome = diagnose_with(&inputs, &references, &base, plant, &opts, &|done, total, what| {
         pb.set_length(total as u64);
         pb.set_position(done as u64);
@@ -214,11 +222,9 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
 
 /// A user's FMU with its map as the diagnosis' model, in at most
 /// `threads` worker processes.
-fn open_plant(fmu: &Path, model_map: Option<&Path>, threads: usize, time_limit_s: f64) -> Result<Arc<dyn Plant>> {
+fn open_plant(fmu: &Path, model_map: Option<&Path>, threads: usize, time_limit_s: f64) -> Result<FmuPlant> {
     let (model, _) = crate::fmu_cmd::open_model(fmu, model_map, threads, time_limit_s)?;
-    Ok(Arc::new(
-        FmuPlant::new(model).map_err(|e| anyhow::anyhow!("FMU {}: {e}", fmu.display()))?,
-    ))
+    FmuPlant::new(model).map_err(|e| anyhow::anyhow!("FMU {}: {e}", fmu.display()))
 }
 
 pub fn bench(args: &BenchArgs) -> Result<()> {
@@ -252,7 +258,7 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         ..Options::default()
     };
     let workers = diag.threads.clamp(1, args.cases.max(1));
-    let plant = match &args.model {
+    let fmu = match &args.model {
         Some(fmu) => Some(open_plant(
             fmu,
             args.model_map.as_deref(),
@@ -262,9 +268,19 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         None => None,
     };
     let opts = BenchOptions {
-        model: plant.as_ref().and_then(|p| p.identity()),
+        model: fmu.as_ref().and_then(|p| p.identity()),
         ..opts
     };
+    // Each case's drawn structure goes to an FMU that takes it as
+    // parameters (the second family's); any other FMU runs as it is.
+    let plant_for = |structure: Option<&Structure>| -> Arc<dyn Plant> {
+        match (&fmu, structure) {
+            (Some(f), Some(s)) => Arc::new(f.with_fixed(f.structure_settings(s))),
+            (Some(f), None) => Arc::new(f.with_fixed(Vec::new())),
+            (None, _) => Arc::new(Builtin::new(SimConfig::default())),
+        }
+    };
+    let plant_for: Option<PlantFor> = fmu.as_ref().map(|_| &plant_for as PlantFor);
     let pb = progress_bar(
         args.cases as u64,
         "diagnose-bench [{bar:30}] {pos}/{len} {msg} ({elapsed}, eta {eta})",
@@ -288,7 +304,7 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
                         if i >= args.cases {
                             break done;
                         }
-                        let r = run_case_with(&opts, i, &one, plant.as_ref());
+                        let r = run_case_with(&opts, i, &one, plant_for);
                         if let Ok(c) = &r {
                             right.fetch_add(usize::from(c.correct), Ordering::Relaxed);
                         }

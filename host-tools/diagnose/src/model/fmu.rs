@@ -4,7 +4,7 @@
 //! a time limit, so a crash or a hang costs an error, never the diagnosis'
 //! process.
 
-use std::sync::Mutex;
+use std::sync::{Arc, Mutex};
 
 use super::plant::{Impact, Keep, ModelTrace, Motion, NuisanceParam, Plant};
 use hammer_fmu::import::map::Coverage;
@@ -13,7 +13,10 @@ use hammer_sim::effects::{entry, Effects};
 
 /// An opened FMU with its map, fitted by the diagnosis.
 pub struct FmuPlant {
-    model: FmuModel,
+    model: Arc<FmuModel>,
+    /// Set before every run, after the map's own fixed values: a
+    /// benchmark case's drawn structure ([`FmuPlant::with_fixed`]).
+    fixed: Vec<(String, f64)>,
     nuisance: Vec<NuisanceParam>,
     coverage: Vec<(&'static str, Coverage)>,
     /// The first failure that ends the diagnosis.
@@ -45,11 +48,38 @@ impl FmuPlant {
             .collect();
         let coverage = map.coverage();
         Ok(Self {
-            model,
+            model: Arc::new(model),
+            fixed: Vec::new(),
             nuisance,
             coverage,
             fatal: Mutex::new(None),
         })
+    }
+
+    /// The same FMU (its worker processes shared) with `fixed` set before
+    /// every run: parameters a case sets and the diagnosis does not fit.
+    pub fn with_fixed(&self, fixed: Vec<(String, f64)>) -> Self {
+        Self {
+            model: Arc::clone(&self.model),
+            fixed,
+            nuisance: self.nuisance.clone(),
+            coverage: self.coverage.clone(),
+            fatal: Mutex::new(None),
+        }
+    }
+
+    /// The settings that give the FMU the second family's `structure`:
+    /// each `structure.<variant>` parameter it has (`hammer fmu --family
+    /// variants` exports them), 1 where the structure has the variant.
+    /// None of them on an FMU of another form: it stays as it is.
+    pub fn structure_settings(&self, structure: &hammer_variants::Structure) -> Vec<(String, f64)> {
+        let has = structure.variants();
+        hammer_variants::Structure::singles()
+            .iter()
+            .filter_map(|s| s.variants().first().copied())
+            .map(|v| (format!("structure.{v}"), f64::from(u8::from(has.contains(&v)))))
+            .filter(|(name, _)| self.model.description().variable(name).is_some())
+            .collect()
     }
 
     pub fn model(&self) -> &FmuModel {
@@ -72,12 +102,8 @@ impl FmuPlant {
         supply_bar: f64,
     ) -> Result<(Vec<(String, f64)>, Effects), String> {
         let map = self.model.map().ok_or("no model map")?;
-        let mut settings: Vec<(String, f64)> = self
-            .nuisance
-            .iter()
-            .zip(nuisance)
-            .map(|(p, v)| (p.name.clone(), *v))
-            .collect();
+        let mut settings: Vec<(String, f64)> = self.fixed.clone();
+        settings.extend(self.nuisance.iter().zip(nuisance).map(|(p, v)| (p.name.clone(), *v)));
         let mut outside = Effects::default();
         let table = serde_json::to_value(effects).map_err(|e| e.to_string())?;
         for name in effects.active() {
