@@ -285,43 +285,7 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         args.cases as u64,
         "diagnose-bench [{bar:30}] {pos}/{len} {msg} ({elapsed}, eta {eta})",
     );
-    // Cases side by side, one thread each: a case's diagnosis is the same
-    // on any number of threads, and one thread a case keeps every core
-    // busy where a case's own stages would leave one idle between them.
-    let one = Options {
-        threads: 1,
-        ..diag.clone()
-    };
-    let next = AtomicUsize::new(0);
-    let right = AtomicUsize::new(0);
-    let results: Vec<(usize, Result<CaseResult>)> = std::thread::scope(|scope| {
-        let workers: Vec<_> = (0..workers)
-            .map(|_| {
-                scope.spawn(|| {
-                    let mut done = Vec::new();
-                    loop {
-                        let i = next.fetch_add(1, Ordering::Relaxed);
-                        if i >= args.cases {
-                            break done;
-                        }
-                        let r = run_case_with(&opts, i, &one, plant_for);
-                        if let Ok(c) = &r {
-                            right.fetch_add(usize::from(c.correct), Ordering::Relaxed);
-                        }
-                        pb.set_message(format!("{} named right", right.load(Ordering::Relaxed)));
-                        pb.inc(1);
-                        done.push((i, r));
-                    }
-                })
-            })
-            .collect();
-        let mut all: Vec<_> = workers
-            .into_iter()
-            .flat_map(|w| w.join().unwrap_or_else(|p| std::panic::resume_unwind(p)))
-            .collect();
-        all.sort_by_key(|(i, _)| *i);
-        all
-    });
+    let results = run_cases(args.cases, &opts, &diag, workers, plant_for, &pb);
     let mut cases = Vec::new();
     let mut not_run = Vec::new();
     for (i, r) in results {
@@ -355,6 +319,54 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         write_result(dir, "bench", &s, &text)?;
     }
     Ok(())
+}
+
+/// Every case of `opts`, `workers` of them side by side, in case order.
+fn run_cases(
+    n: usize,
+    opts: &BenchOptions,
+    diag: &Options,
+    workers: usize,
+    plant_for: Option<PlantFor>,
+    pb: &ProgressBar,
+) -> Vec<(usize, Result<CaseResult>)> {
+    // Cases side by side, one thread each: a case's diagnosis is the same
+    // on any number of threads, and one thread a case keeps every core
+    // busy where a case's own stages would leave one idle between them.
+    let one = Options {
+        threads: 1,
+        ..diag.clone()
+    };
+    let next = AtomicUsize::new(0);
+    let right = AtomicUsize::new(0);
+    std::thread::scope(|scope| {
+        let workers: Vec<_> = (0..workers)
+            .map(|_| {
+                scope.spawn(|| {
+                    let mut done = Vec::new();
+                    loop {
+                        let i = next.fetch_add(1, Ordering::Relaxed);
+                        if i >= n {
+                            break done;
+                        }
+                        let r = run_case_with(opts, i, &one, plant_for);
+                        if let Ok(c) = &r {
+                            right.fetch_add(usize::from(c.correct), Ordering::Relaxed);
+                        }
+                        pb.set_message(format!("{} named right", right.load(Ordering::Relaxed)));
+                        pb.inc(1);
+                        done.push((i, r));
+                    }
+                })
+            })
+            .collect();
+        let mut all: Vec<_> = workers
+            .into_iter()
+            .flat_map(|w| w.join().unwrap_or_else(|p| std::panic::resume_unwind(p)))
+            .collect();
+        all.sort_by_key(|(i, _)| *i);
+        all
+    })
 }
 
 /// `DIR/NAME.json` (every figure) and `DIR/NAME.txt` (what was printed).
