@@ -414,6 +414,26 @@ fn pythonfmu() -> bool {
     ok
 }
 
+/// tests/fmu/pyhammer.py built into `dir/PyHammer.fmu`, and the catalogue's
+/// friction effect with a supply-pressure law (what its map carries).
+fn pyhammer(dir: &Path) -> (PathBuf, &'static dyn hammer_sim::effects::EffectEntry) {
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fmu/pyhammer.py");
+    let built = Command::new("python3")
+        .args(["-m", "pythonfmu", "build", "-f"])
+        .arg(&script)
+        .arg("-d")
+        .arg(dir)
+        .output()
+        .unwrap();
+    assert!(built.status.success(), "{}", String::from_utf8_lossy(&built.stderr));
+    let friction = hammer_sim::effects::REGISTRY
+        .iter()
+        .find(|e| hammer_fmu::import::map::law_force_n(**e, e.default_params(), 1.0).is_some())
+        .copied()
+        .unwrap();
+    (dir.join("PyHammer.fmu"), friction)
+}
+
 fn peak(v: &[f64]) -> f64 {
     v[v.len() / 2..].iter().fold(f64::NEG_INFINITY, |m, x| m.max(*x))
 }
@@ -428,20 +448,7 @@ fn a_pythonfmu_fmu_loads_takes_its_parameters_and_runs() {
         return;
     }
     let dir = tmp_dir("pythonfmu");
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fmu/pyhammer.py");
-    let built = Command::new("python3")
-        .args(["-m", "pythonfmu", "build", "-f"])
-        .arg(&script)
-        .arg("-d")
-        .arg(&dir)
-        .output()
-        .unwrap();
-    assert!(built.status.success(), "{}", String::from_utf8_lossy(&built.stderr));
-    let fmu = dir.join("PyHammer.fmu");
-    let friction = hammer_sim::effects::REGISTRY
-        .iter()
-        .find(|e| hammer_fmu::import::map::law_force_n(**e, e.default_params(), 1.0).is_some())
-        .unwrap();
+    let (fmu, friction) = pyhammer(&dir);
     let map_text = format!(
         r#"step_s = 1e-4
 [signals]
@@ -486,7 +493,7 @@ piston_force = {{ input = "f_ext_n", unit = "N" }}
     assert!(c.cycles >= 3, "{c:?}");
     // The friction law at 5 bar: the catalogue's force, and a slower piston.
     let settings = map.effect_settings(friction.name(), &[], 5.0).unwrap();
-    let f = hammer_fmu::import::map::law_force_n(*friction, friction.default_params(), 5.0).unwrap();
+    let f = hammer_fmu::import::map::law_force_n(friction, friction.default_params(), 5.0).unwrap();
     assert_eq!(settings, vec![("friction_n".to_string(), f)]);
     let rubbed = run(5.0, &settings);
     let (v0, v1) = (
@@ -658,22 +665,9 @@ fn a_pythonfmu_model_is_diagnosed_end_to_end() {
         return;
     }
     let dir = tmp_dir("pythonfmu-diagnose");
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fmu/pyhammer.py");
-    let built = Command::new("python3")
-        .args(["-m", "pythonfmu", "build", "-f"])
-        .arg(&script)
-        .arg("-d")
-        .arg(&dir)
-        .output()
-        .unwrap();
-    assert!(built.status.success(), "{}", String::from_utf8_lossy(&built.stderr));
-    let fmu = dir.join("PyHammer.fmu");
+    let (fmu, friction) = pyhammer(&dir);
     let cfg = hammer_sim::SimConfig::default();
     let g = cfg.hammer.geometry();
-    let friction = hammer_sim::effects::REGISTRY
-        .iter()
-        .find(|e| hammer_fmu::import::map::law_force_n(**e, e.default_params(), 1.0).is_some())
-        .unwrap();
     let map_text = format!(
         r#"step_s = 1e-4
 [signals]
@@ -708,7 +702,7 @@ law = {{ parameter = "friction_n", unit = "N", off = 0.0 }}
     let map = ModelMap::parse(&map_text).unwrap();
     let model = FmuModel::open(&fmu, Some((map.clone(), map_text)), options(2, 60.0)).unwrap_or_else(|e| panic!("{e}"));
     // The measured hammer: the FMU itself with the catalogue's friction on.
-    let law = |bar: f64| hammer_fmu::import::map::law_force_n(*friction, friction.default_params(), bar).unwrap();
+    let law = |bar: f64| hammer_fmu::import::map::law_force_n(friction, friction.default_params(), bar).unwrap();
     let inputs: Vec<MeasuredInput> = [(5.0, true), (6.0, false)]
         .iter()
         .map(|&(bar, fit)| {
