@@ -210,6 +210,13 @@ pub trait Series {
     fn is_empty(&self) -> bool {
         self.len() == 0
     }
+    /// `out[k] = self.at(start + k)`, read in order: where a sample costs
+    /// a reading of codes, a series can carry what the next one shares.
+    fn read_into(&self, start: usize, out: &mut [f32]) {
+        for (k, v) in out.iter_mut().enumerate() {
+            *v = self.at(start + k);
+        }
+    }
 }
 
 impl Series for [f32] {
@@ -245,6 +252,9 @@ impl<S: Series + ?Sized> Series for Part<'_, S> {
     }
     fn at(&self, i: usize) -> f32 {
         self.inner.at(self.start + i)
+    }
+    fn read_into(&self, start: usize, out: &mut [f32]) {
+        self.inner.read_into(self.start + start, out)
     }
 }
 

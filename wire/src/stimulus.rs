@@ -74,9 +74,9 @@ pub const BENCH_CONFIG: usize = 4;
 /// read (u32), then per cycle [`BENCH_RECORD_WORDS`] little-endian u32:
 /// the report's sequence number, the opening and closing impact's sample
 /// index, which readings were found (bit 0 any, 1 front, 2 rear, 3 charge,
-/// 8 the reading without the log cache differed), the core cycles of the
-/// reading with the log cache, without it, and with one track (the
-/// accelerometer's, no widening), a spare word; then the reading's 22
+/// 8 the reading in the smaller room differed), the core cycles of the
+/// reading with the log cache, with a room as long as the window, and so
+/// with one track (the accelerometer's, no widening), a spare word; then the reading's 22
 /// values as f32 bits: per feed (front, rear) its ten fields in
 /// declaration order, then the charge's two.
 pub const BENCH_OUTPUT: usize = 4096;

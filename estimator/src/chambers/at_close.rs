@@ -147,6 +147,23 @@ impl<C: Codes + ?Sized> Series for Channel<'_, C> {
         let b = self.value((i + self.whole + 1).min(self.n - 1));
         a + self.frac * (b - a)
     }
+    /// As [`Series::at`] sample by sample, each code read once: a sample's
+    /// later neighbour is the next one's earlier.
+    fn read_into(&self, start: usize, out: &mut [f32]) {
+        if !self.lagged || out.is_empty() {
+            for (k, v) in out.iter_mut().enumerate() {
+                *v = self.at(start + k);
+            }
+            return;
+        }
+        let last = self.n - 1;
+        let mut a = self.value((start + self.whole).min(last));
+        for (k, v) in out.iter_mut().enumerate() {
+            let b = self.value((start + k + self.whole + 1).min(last));
+            *v = a + self.frac * (b - a);
+            a = b;
+        }
+    }
 }
 
 impl ChamberGeometry {
@@ -217,7 +234,7 @@ pub fn characterise_cycle<C: Codes + ?Sized>(
     let end = (close + look + AFTER_MARGIN).min(following);
     let supply_abs = cfg.supply_pressure_pa + P_ATM_PA;
     let tau = cfg.accel_zero_shift_tau_s;
-    let with_friction = track::with_friction(&piston, friction);
+    let with_friction = track::WithFriction::new(&piston, friction);
     let x = &mut work.x_m[..n];
     let room = &mut *work.room;
     // Each track in turn in the one room: the force balance's (its spread
@@ -256,7 +273,7 @@ pub fn characterise_cycle<C: Codes + ?Sized>(
             let source = &*source;
             let acc = |i: usize, turn: usize| {
                 if i < balanced {
-                    with_friction(source[i], i, turn)
+                    with_friction.acceleration(source[i], i, turn)
                 } else {
                     source[i]
                 }
@@ -355,11 +372,14 @@ fn tail(
 fn displacement(accel: &impl Series, dt: f32, a_end: usize, len: usize, mut f: impl FnMut(usize, f32)) {
     let (mut u, mut v) = (0.0f32, 0.0f32);
     f(0, 0.0);
+    let mut a_prev = if len > 1 { accel.at(a_end) } else { 0.0 };
     for k in 1..len {
-        let i = a_end + k;
-        let v_next = v + 0.5 * dt * (accel.at(i - 1) + accel.at(i));
+        // Each sample read once, carried to the next step.
+        let a = accel.at(a_end + k);
+        let v_next = v + 0.5 * dt * (a_prev + a);
         u += 0.5 * dt * (v + v_next);
         v = v_next;
+        a_prev = a;
         f(k, u);
     }
 }

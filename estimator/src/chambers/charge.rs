@@ -52,12 +52,20 @@ impl<P: Series + ?Sized> Chamber<'_, P> {
             a.max(0.0) as usize,
             (b.max(0.0) as usize).min(self.p.len().saturating_sub(1)),
         );
-        (a..b)
-            .map(|i| {
-                let pm = 0.5 * (self.p.at(i) + self.p.at(i + 1)) + P_ATM_PA;
-                pm * ((self.volume)(self.x[i + 1]) - (self.volume)(self.x[i]))
-            })
-            .sum()
+        // Each sample's pressure and volume read once, carried to the next
+        // step (a board reads the pressure from its codes).
+        if a >= b {
+            return 0.0;
+        }
+        let (mut p0, mut v0) = (self.p.at(a), (self.volume)(self.x[a]));
+        let mut sum = 0.0f32;
+        for i in a..b {
+            let (p1, v1) = (self.p.at(i + 1), (self.volume)(self.x[i + 1]));
+            let pm = 0.5 * (p0 + p1) + P_ATM_PA;
+            sum += pm * (v1 - v0);
+            (p0, v0) = (p1, v1);
+        }
+        sum
     }
 
     /// What blows through the feed of area `area_m2` from `a` to `b`.

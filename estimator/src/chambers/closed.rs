@@ -98,8 +98,10 @@ impl<'a> Cached<'a> {
         let (ln_p, rest) = room.split_at_mut_checked(len)?;
         let ln_v = rest.get_mut(..len)?;
         let mut valid = true;
+        // The pressures first, in order (a board's from its codes).
+        p.read_into(0, ln_p);
         for i in 0..len {
-            let (pa, v) = (p.at(i) + P_ATM_PA, volume(x[i]));
+            let (pa, v) = (ln_p[i] + P_ATM_PA, volume(x[i]));
             valid &= pa > 0.0 && v > 0.0;
             ln_p[i] = math::ln(pa);
             ln_v[i] = math::ln(v);
@@ -300,7 +302,9 @@ fn read(logs: &impl Logs, dt_s: f32, base_end: usize) -> Option<Onset> {
     let hi = if hi - lo < 3 { (hi + 1).min(len) } else { hi };
     // A port opened by a moving spool grows in area from zero, so the
     // rise starts as (t − t0)²: its square root is the straight line.
-    let g = |i: usize| math::sqrt(if r(i) > 0.0 { r(i) } else { 0.0 });
+    let root = |i: usize| math::sqrt(if r(i) > 0.0 { r(i) } else { 0.0 });
+    let kept = Roots::around(lo, root);
+    let g = |i: usize| kept.at(i);
     let first = Line::fit((lo..hi).map(|i| (i as f32, g(i))))?;
     if !(first.slope > 0.0) {
         return None;
@@ -346,6 +350,44 @@ fn read(logs: &impl Logs, dt_s: f32, base_end: usize) -> Option<Onset> {
         noise_ln: rms,
         rise_s: lo as f32 * dt_s,
     })
+}
+
+/// Samples of the rise whose square roots are kept: the band's fits read
+/// each five times (two lines of two passes, the χ²), and a board's square
+/// root is software (~120 instructions).
+const KEPT_ROOTS: usize = 512;
+
+/// √r of the rise's samples from `base` on, each computed once when first
+/// read (the same value as computed each time); outside the kept span, as read.
+struct Roots<F: Fn(usize) -> f32> {
+    base: usize,
+    kept: [core::cell::Cell<f32>; KEPT_ROOTS],
+    root: F,
+}
+
+impl<F: Fn(usize) -> f32> Roots<F> {
+    /// Kept from a little before `lo` (the band chosen again by the line
+    /// can start earlier). NaN marks a root not yet computed: √ of a
+    /// non-negative float is never NaN.
+    fn around(lo: usize, root: F) -> Self {
+        Self {
+            base: lo.saturating_sub(KEPT_ROOTS / 4),
+            kept: core::array::from_fn(|_| core::cell::Cell::new(f32::NAN)),
+            root,
+        }
+    }
+
+    fn at(&self, i: usize) -> f32 {
+        match i.checked_sub(self.base).and_then(|k| self.kept.get(k)) {
+            Some(c) if !c.get().is_nan() => c.get(),
+            Some(c) => {
+                let v = (self.root)(i);
+                c.set(v);
+                v
+            }
+            None => (self.root)(i),
+        }
+    }
 }
 
 /// The samples whose line value lies in the band [`low`, `high`] of the

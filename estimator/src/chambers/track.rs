@@ -81,23 +81,37 @@ pub fn closed(dt_s: f32, impact_m: f32, open: usize, close: usize, x: &mut [f32]
 
 /// The pressure force on the piston at sample `i` (and gravity's share),
 /// N: the force balance's sum before friction and the mass, which a
-/// reading may keep a sample at a time ([`with_friction`]).
+/// reading may keep a sample at a time ([`WithFriction`]).
 #[inline]
 pub fn pressure_force<P: super::Series + ?Sized>(p_rear_pa: &P, p_front_pa: &P, piston: &Piston, i: usize) -> f32 {
     piston.rear_area_m2 * p_rear_pa.at(i) - piston.front_area_m2 * p_front_pa.at(i) + piston.gravity_n
 }
 
-/// The friction per phase with NaN read as none.
-fn finite_friction(friction: PhaseFriction) -> (f32, f32) {
-    let f = |v: f32| if v.is_finite() { v } else { 0.0 };
-    (f(friction.backhaul_n), f(friction.stroke_n))
+/// The force balance's acceleration from a kept [`pressure_force`]:
+/// friction per phase (NaN read as none: backhaul before the turn, stroke
+/// after), over the mass. A struct, not a closure, so that a reading's
+/// track passes inline it.
+#[derive(Debug, Clone, Copy)]
+pub struct WithFriction {
+    backhaul_n: f32,
+    stroke_n: f32,
+    mass_kg: f32,
 }
 
-/// The force balance's acceleration from a kept [`pressure_force`]:
-/// friction per phase (backhaul before the turn, stroke after), over the mass.
-pub fn with_friction(piston: &Piston, friction: PhaseFriction) -> impl Fn(f32, usize, usize) -> f32 + '_ {
-    let (f_bh, f_st) = finite_friction(friction);
-    move |force, i, turn| (force + if i < turn { f_bh } else { -f_st }) / piston.mass_kg
+impl WithFriction {
+    pub fn new(piston: &Piston, friction: PhaseFriction) -> Self {
+        let f = |v: f32| if v.is_finite() { v } else { 0.0 };
+        Self {
+            backhaul_n: f(friction.backhaul_n),
+            stroke_n: f(friction.stroke_n),
+            mass_kg: piston.mass_kg,
+        }
+    }
+
+    #[inline(always)]
+    pub fn acceleration(&self, force_n: f32, i: usize, turn: usize) -> f32 {
+        (force_n + if i < turn { self.backhaul_n } else { -self.stroke_n }) / self.mass_kg
+    }
 }
 
 /// The force balance's acceleration: the pressure force less the cycle's
@@ -108,8 +122,8 @@ pub fn force_balance<'a, P: super::Series + ?Sized>(
     piston: &'a Piston,
     friction: PhaseFriction,
 ) -> impl Fn(usize, usize) -> f32 + 'a {
-    let acc = with_friction(piston, friction);
-    move |i, turn| acc(pressure_force(p_rear_pa, p_front_pa, piston, i), i, turn)
+    let acc = WithFriction::new(piston, friction);
+    move |i, turn| acc.acceleration(pressure_force(p_rear_pa, p_front_pa, piston, i), i, turn)
 }
 
 /// The track of [`force_balance`] (what the estimator's velocity integral assumes).

@@ -10,7 +10,7 @@
 //! over the codes as the board's sampling loop would, and at each cycle's
 //! close reads the cycle's characteristics from the codes where they lie
 //! (`chambers::at_close`), timed on SysTick: with the closed fits' log
-//! cache, in the least room (the track's source over the cycle), and with
+//! cache of 12 000 floats, with a room as long as the window, and so with
 //! one track. It writes the counts and the
 //! reading to the exchange for the host, which checks the reading against
 //! its own, and ends QEMU.
@@ -188,10 +188,12 @@ fn main() -> ! {
             (c, elapsed(t0, now()))
         };
         let (cached, t_cached) = time(&mut room[..], true);
-        // The least room: the track's source over the cycle, where the
-        // logarithms of a closed phase longer than half of it do not fit.
-        let (direct, t_direct) = time(&mut room[..=close], true);
-        let (_, t_one) = time(&mut room[..], false);
+        // The room a board would lend: as long as the window (the track's
+        // source over the cycle, then the logarithms of a closed phase up
+        // to half the window long).
+        let window = window_samples(close, cfg.dt_s()).min(LOG_CACHE);
+        let (direct, t_direct) = time(&mut room[..window], true);
+        let (_, t_one) = time(&mut room[..window], false);
         let c = cached.unwrap_or_default();
         let present = u32::from(cached.is_some())
             | u32::from(c.front.is_some()) << 1
