@@ -228,6 +228,23 @@ impl Series for [f32] {
     }
 }
 
+/// `f(i, s[i])` for `i` in `a..b`, in order, the series read a block at a
+/// time ([`Series::read_into`]: a board's channels from its codes, each
+/// code once).
+pub(crate) fn each<S: Series + ?Sized>(s: &S, a: usize, b: usize, mut f: impl FnMut(usize, f32)) {
+    const BLOCK: usize = 64;
+    let mut buf = [0.0f32; BLOCK];
+    let mut i = a;
+    while i < b {
+        let m = (b - i).min(BLOCK);
+        s.read_into(i, &mut buf[..m]);
+        for (k, &v) in buf[..m].iter().enumerate() {
+            f(i + k, v);
+        }
+        i += m;
+    }
+}
+
 /// `inner[start..end]`, of any series.
 pub struct Part<'a, S: Series + ?Sized> {
     inner: &'a S,

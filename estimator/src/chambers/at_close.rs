@@ -28,7 +28,7 @@
 //! longer than the room gives `None`, never a reading of part of it.
 
 use super::track::{self, PhaseFriction, Piston};
-use super::{characterise_with, ChamberGeometry, Characteristics, Part, Series, Window, LOOK_AFTER_S, P_ATM_PA};
+use super::{characterise_with, each, ChamberGeometry, Characteristics, Part, Series, Window, LOOK_AFTER_S, P_ATM_PA};
 use crate::{ChannelCal, Config, CycleReport, RawSample};
 
 /// Samples kept after [`LOOK_AFTER_S`] past the closing impact (the host's
@@ -152,7 +152,7 @@ impl<C: Codes + ?Sized> Series for Channel<'_, C> {
     fn read_into(&self, start: usize, out: &mut [f32]) {
         if !self.lagged || out.is_empty() {
             for (k, v) in out.iter_mut().enumerate() {
-                *v = self.at(start + k);
+                *v = self.value(start + k);
             }
             return;
         }
@@ -271,11 +271,13 @@ pub fn characterise_cycle<C: Codes + ?Sized>(
                 *f = track::pressure_force(&p1, &p2, &piston, i);
             }
             let source = &*source;
+            // (No panic path: `closed` reads `..=close`, all in `source`.)
             let acc = |i: usize, turn: usize| {
+                let s = source.get(i).copied().unwrap_or(f32::NAN);
                 if i < balanced {
-                    with_friction.acceleration(source[i], i, turn)
+                    with_friction.acceleration(s, i, turn)
                 } else {
-                    source[i]
+                    s
                 }
             };
             track::closed(dt, impact, a_end, close, x, acc);
@@ -372,14 +374,15 @@ fn tail(
 fn displacement(accel: &impl Series, dt: f32, a_end: usize, len: usize, mut f: impl FnMut(usize, f32)) {
     let (mut u, mut v) = (0.0f32, 0.0f32);
     f(0, 0.0);
-    let mut a_prev = if len > 1 { accel.at(a_end) } else { 0.0 };
-    for k in 1..len {
-        // Each sample read once, carried to the next step.
-        let a = accel.at(a_end + k);
-        let v_next = v + 0.5 * dt * (a_prev + a);
-        u += 0.5 * dt * (v + v_next);
-        v = v_next;
+    let mut a_prev = f32::NAN;
+    // Each sample read once, carried to the next step.
+    each(accel, a_end, a_end + len, |i, a| {
+        if i > a_end {
+            let v_next = v + 0.5 * dt * (a_prev + a);
+            u += 0.5 * dt * (v + v_next);
+            v = v_next;
+            f(i - a_end, u);
+        }
         a_prev = a;
-        f(k, u);
-    }
+    });
 }

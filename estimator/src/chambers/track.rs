@@ -39,6 +39,7 @@ pub struct PhaseFriction {
 /// piston's acceleration `accel(i, turn)` (`turn`: the turning point's
 /// index, which splits friction's sign): `x[open] = x[close] = impact_m`,
 /// the start velocity set by the closure. Other samples are left as they are.
+#[inline(always)]
 pub fn closed(dt_s: f32, impact_m: f32, open: usize, close: usize, x: &mut [f32], accel: impl Fn(usize, usize) -> f32) {
     if !(open < close && close < x.len() && dt_s > 0.0) {
         return;
@@ -180,8 +181,9 @@ pub fn accelerometer<A: super::Series + ?Sized>(
         0.0
     };
     let mut shift = zs * crate::math::powi(q, from.saturating_sub(open) as u32);
-    for (k, v) in out.iter_mut().enumerate() {
-        *v = accel_mps2.at(from + k) - shift;
+    accel_mps2.read_into(from, out);
+    for v in out.iter_mut() {
+        *v -= shift;
         shift *= q;
     }
 }
