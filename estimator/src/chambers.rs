@@ -210,6 +210,13 @@ pub trait Series {
     fn is_empty(&self) -> bool {
         self.len() == 0
     }
+    /// `out[k] = self.at(start + k)`, read in order: where a sample costs
+    /// a reading of codes, a series can carry what the next one shares.
+    fn read_into(&self, start: usize, out: &mut [f32]) {
+        for (k, v) in out.iter_mut().enumerate() {
+            *v = self.at(start + k);
+        }
+    }
 }
 
 impl Series for [f32] {
@@ -218,6 +225,23 @@ impl Series for [f32] {
     }
     fn at(&self, i: usize) -> f32 {
         self[i]
+    }
+}
+
+/// `f(i, s[i])` for `i` in `a..b`, in order, the series read a block at a
+/// time ([`Series::read_into`]: a board's channels from its codes, each
+/// code once).
+pub(crate) fn each<S: Series + ?Sized>(s: &S, a: usize, b: usize, mut f: impl FnMut(usize, f32)) {
+    const BLOCK: usize = 64;
+    let mut buf = [0.0f32; BLOCK];
+    let mut i = a;
+    while i < b {
+        let m = (b - i).min(BLOCK);
+        s.read_into(i, &mut buf[..m]);
+        for (k, &v) in buf[..m].iter().enumerate() {
+            f(i + k, v);
+        }
+        i += m;
     }
 }
 
@@ -245,6 +269,9 @@ impl<S: Series + ?Sized> Series for Part<'_, S> {
     }
     fn at(&self, i: usize) -> f32 {
         self.inner.at(self.start + i)
+    }
+    fn read_into(&self, start: usize, out: &mut [f32]) {
+        self.inner.read_into(self.start + start, out)
     }
 }
 

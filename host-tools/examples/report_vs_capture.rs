@@ -131,7 +131,7 @@ fn offsets(bar: f64, seconds: f64, effect: Option<&str>) -> [f64; 2] {
         .filter(|w| w[0].is_valid() && w[1].is_valid() && w[1].seq == w[0].seq + 1)
         .filter_map(|w| {
             let [open, close] = [&w[0], &w[1]].map(|r| (r.t_impact_s() / dt).round() as usize);
-            characterise_cycle(&config, &geo, &codes[open..], close - open, &w[1], &mut work)
+            characterise_cycle(&config, &geo, &codes[open..], close - open, &w[1], true, &mut work)
         })
         .map(|c| as_reading(&c))
         .collect();

@@ -58,7 +58,32 @@ pub const SYSCLK_HZ: u32 = 25_000_000;
 pub const NVM_OFFSET: usize = 13 * 1024 * 1024;
 pub const NVM_BYTES: usize = 64 * 1024;
 
-const _: () = assert!(RING_OFFSET + CAPACITY_SETS as usize * SET_BYTES <= NVM_OFFSET);
+/// The chamber bench's exchange (`hammer-chambers-bench`, `cargo xtask
+/// bench-chambers`), between the ring and the NVM area: the host writes its
+/// input (the configuration record) before QEMU starts, the bench board
+/// writes its figures and readings there before it ends QEMU. The sampling
+/// firmware never touches it.
+pub const BENCH_OFFSET: usize = 12 * 1024 * 1024 + 64 * 1024;
+pub const BENCH_BYTES: usize = 64 * 1024;
+
+/// The bench's input: "HBCH" little-endian, then the configuration record
+/// (`hammer_app::persisted::config_record`) at [`BENCH_CONFIG`].
+pub const BENCH_MAGIC: u32 = u32::from_le_bytes(*b"HBCH");
+pub const BENCH_CONFIG: usize = 4;
+/// The bench's output, from this offset in its area: the number of cycles
+/// read (u32), then per cycle [`BENCH_RECORD_WORDS`] little-endian u32:
+/// the report's sequence number, the opening and closing impact's sample
+/// index, which readings were found (bit 0 any, 1 front, 2 rear, 3 charge,
+/// 8 the reading in the smaller room differed), the core cycles of the
+/// reading with the log cache, with a room as long as the window, and so
+/// with one track (the accelerometer's, no widening), a spare word; then the reading's 22
+/// values as f32 bits: per feed (front, rear) its ten fields in
+/// declaration order, then the charge's two.
+pub const BENCH_OUTPUT: usize = 4096;
+pub const BENCH_RECORD_WORDS: usize = 8 + 22;
+
+const _: () = assert!(RING_OFFSET + CAPACITY_SETS as usize * SET_BYTES <= BENCH_OFFSET);
+const _: () = assert!(BENCH_OFFSET + BENCH_BYTES <= NVM_OFFSET);
 const _: () = assert!(NVM_OFFSET + NVM_BYTES <= PSRAM_BYTES);
 const _: () = assert!(CAPACITY_SETS.is_power_of_two() && CAPACITY_SETS % BLOCK_SETS == 0);
 const _: () = assert!(core::mem::size_of::<Header>() <= RING_OFFSET);

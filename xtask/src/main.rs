@@ -411,6 +411,9 @@ const USAGE: &str = "usage: cargo xtask <command>
   size            flash and static RAM of the built firmware binaries, each board's stack region and high-water mark (a 20 s soak)
   bench-firmware  the sampling loop's instructions per sample-set on the Cortex-M4 ISA under QEMU (-icount),
                   the same on every run, with the per-function split (a QEMU plugin) and sizes
+  bench-chambers  the chamber characteristics at a cycle's close (chambers::at_close) on the Cortex-M4 ISA
+                  under QEMU (-icount): instructions per reading of a 4 bar cycle, each reading checked
+                  bit for bit against the host's, with the per-function split
   soak [--minutes N] [hammer soak options]
                   the emulated board at the full 100 kS/s x 3 for N minutes of hammer time (default 10):
                   overruns, lost frames, parity with the host estimator, CPU duty, worst latency
@@ -443,6 +446,17 @@ fn main() -> ExitCode {
         Some("bench-firmware") => build_firmware()
             .and_then(|_| run(&root(), "cargo", &["build", "--release", "-p", "qemu-profile"]))
             .and_then(|_| run(&root(), "cargo", &["bench", "-p", "hammer-host", "--bench", "firmware"])),
+        // The chamber characteristics' cost at a cycle's close (the emulated
+        // board's bench binary, hammer-chambers-bench), checked against the host's.
+        Some("bench-chambers") => build_firmware()
+            .and_then(|_| run(&root(), "cargo", &["build", "--release", "-p", "qemu-profile"]))
+            .and_then(|_| {
+                run(
+                    &root(),
+                    "cargo",
+                    &["bench", "-p", "hammer-host", "--bench", "chambers_close"],
+                )
+            }),
         _ => Err(USAGE.into()),
     };
     match result {

@@ -18,16 +18,17 @@
 //! the host).
 //!
 //! The caller lends the room ([`Work`]): one float a sample of the window
-//! for the position track (read once from each track, one after the
-//! other), and optionally room for the closed fits' logarithms (two floats
-//! a sample of a closed phase; shorter is allowed and only slower). The
-//! pressures and the acceleration are read from the codes where they are
-//! kept ([`Codes`]: a board's ring), through their calibration, as they are
-//! needed; nothing is allocated. A window longer than the room gives
-//! `None`, never a reading of part of it.
+//! for the position track, and one a sample of the cycle for the track's
+//! source (the acceleration, converted from the codes once a sample and
+//! read by the track's three passes), which the closed fits' logarithms
+//! (two floats a sample of a closed phase) take over once the track is
+//! done. The pressures are read from the codes where they are kept
+//! ([`Codes`]: a board's ring), through their calibration and delay, by the
+//! fits that read each sample once or twice; nothing is allocated. A window
+//! longer than the room gives `None`, never a reading of part of it.
 
 use super::track::{self, PhaseFriction, Piston};
-use super::{characterise_with, ChamberGeometry, Characteristics, Part, Series, Window, LOOK_AFTER_S, P_ATM_PA};
+use super::{characterise_with, each, ChamberGeometry, Characteristics, Part, Series, Window, LOOK_AFTER_S, P_ATM_PA};
 use crate::{ChannelCal, Config, CycleReport, RawSample};
 
 /// Samples kept after [`LOOK_AFTER_S`] past the closing impact (the host's
@@ -57,8 +58,11 @@ fn look_after(dt_s: f32) -> usize {
     }
 }
 
-/// The room a reading works in: `x_m` at least as long as the window, the
-/// closed fits' cache `room` any length ([`characterise`](super::characterise)).
+/// The room a reading works in: `x_m` at least as long as the window;
+/// `room` at least the cycle's samples and its closing impact (`close + 1`
+/// floats: a track's source, once a sample), then the closed fits'
+/// logarithms where it holds two floats a sample of a closed phase (where
+/// it is shorter they are computed as read: the same figures, slower).
 pub struct Work<'a> {
     pub x_m: &'a mut [f32],
     pub room: &'a mut [f32],
@@ -85,33 +89,49 @@ impl Codes for [RawSample] {
 /// One channel of `codes` through its calibration, read `lag` samples
 /// later (linear interpolation; the last samples repeat the end): a delayed
 /// channel brought back in time, as the host's capture reading does it.
+/// `ch` picks the channel (a function pointer there kept every read from
+/// being inlined).
 struct Channel<'a, C: Codes + ?Sized> {
     codes: &'a C,
     n: usize,
     cal: ChannelCal,
-    pick: fn(&RawSample) -> u16,
+    ch: Pick,
     whole: usize,
     frac: f32,
     lagged: bool,
 }
 
+/// A sample-set's channels.
+#[derive(Clone, Copy)]
+enum Pick {
+    Rear,
+    Front,
+    Accel,
+}
+
 impl<'a, C: Codes + ?Sized> Channel<'a, C> {
-    fn new(codes: &'a C, n: usize, cal: ChannelCal, pick: fn(&RawSample) -> u16, lag: f32) -> Self {
+    fn new(codes: &'a C, n: usize, cal: ChannelCal, ch: Pick, lag: f32) -> Self {
         let lagged = !(lag.is_nan() || lag <= 0.0);
         let whole = if lagged { lag as usize } else { 0 };
         Self {
             codes,
             n,
             cal,
-            pick,
+            ch,
             whole,
             frac: if lagged { lag - whole as f32 } else { 0.0 },
             lagged,
         }
     }
 
+    #[inline(always)]
     fn value(&self, i: usize) -> f32 {
-        self.cal.value((self.pick)(&self.codes.get(i)))
+        let s = self.codes.get(i);
+        self.cal.value(match self.ch {
+            Pick::Rear => s.rear,
+            Pick::Front => s.front,
+            Pick::Accel => s.accel,
+        })
     }
 }
 
@@ -126,6 +146,23 @@ impl<C: Codes + ?Sized> Series for Channel<'_, C> {
         let a = self.value((i + self.whole).min(self.n - 1));
         let b = self.value((i + self.whole + 1).min(self.n - 1));
         a + self.frac * (b - a)
+    }
+    /// As [`Series::at`] sample by sample, each code read once: a sample's
+    /// later neighbour is the next one's earlier.
+    fn read_into(&self, start: usize, out: &mut [f32]) {
+        if !self.lagged || out.is_empty() {
+            for (k, v) in out.iter_mut().enumerate() {
+                *v = self.value(start + k);
+            }
+            return;
+        }
+        let last = self.n - 1;
+        let mut a = self.value((start + self.whole).min(last));
+        for (k, v) in out.iter_mut().enumerate() {
+            let b = self.value((start + k + self.whole + 1).min(last));
+            *v = a + self.frac * (b - a);
+            a = b;
+        }
     }
 }
 
@@ -151,7 +188,10 @@ impl ChamberGeometry {
 /// The characteristics of the cycle `report` closes. `codes` starts at the
 /// cycle's opening impact (its first shock sample, index 0) and holds the
 /// closing one at `close` and at least half the look-after past it (all of
-/// it and [`AFTER_MARGIN`] are read where there). `None` where the window
+/// it and [`AFTER_MARGIN`] are read where there). With `track_term` the
+/// cycle is also read along the force balance's track, whose spread widens
+/// the uncertainties (the host's reading of a capture does); without, the
+/// values are the same and the reading costs half. `None` where the window
 /// does not fit `work`, the cycle is not a valid one, or the samples after
 /// it are too few.
 pub fn characterise_cycle<C: Codes + ?Sized>(
@@ -160,20 +200,27 @@ pub fn characterise_cycle<C: Codes + ?Sized>(
     codes: &C,
     close: usize,
     report: &CycleReport,
+    track_term: bool,
     work: &mut Work,
 ) -> Option<Characteristics> {
     let dt = cfg.dt_s();
     let look = look_after(dt);
     let following = (close + look + AFTER_MARGIN).min(codes.len().checked_sub(1)?);
     let n = following + 1;
-    if !(work.x_m.len() >= n && report.is_valid() && 0 < close && close + look / 2 <= following && geo.is_valid()) {
+    if !(work.x_m.len() >= n
+        && work.room.len() > close
+        && report.is_valid()
+        && 0 < close
+        && close + look / 2 <= following
+        && geo.is_valid())
+    {
         return None;
     }
     // The pressures, read back by the channels' group delay.
     let lag = cfg.chambers.pressure_group_delay_s / dt;
-    let p1 = Channel::new(codes, n, cfg.rear, |s| s.rear, lag);
-    let p2 = Channel::new(codes, n, cfg.front, |s| s.front, lag);
-    let accel = Channel::new(codes, n, cfg.accel, |s| s.accel, 0.0);
+    let p1 = Channel::new(codes, n, cfg.rear, Pick::Rear, lag);
+    let p2 = Channel::new(codes, n, cfg.front, Pick::Front, lag);
+    let accel = Channel::new(codes, n, cfg.accel, Pick::Accel, 0.0);
     let piston = Piston::of(cfg);
     let friction = PhaseFriction {
         backhaul_n: report.friction_backhaul_n,
@@ -186,29 +233,54 @@ pub fn characterise_cycle<C: Codes + ?Sized>(
     let tail_end = shock_end(&accel, close, threshold, dt);
     let end = (close + look + AFTER_MARGIN).min(following);
     let supply_abs = cfg.supply_pressure_pa + P_ATM_PA;
-    let balance = || track::force_balance(&p1, &p2, &piston, friction);
     let tau = cfg.accel_zero_shift_tau_s;
-    // The accelerometer's source: the force balance while it still rings
-    // (friction's sign split at the turn), its own reading after.
-    let source = track::accelerometer(&accel, report.accel_zero_shift_mps2, tau, dt, 0, blank, balance());
-    let by_accel = |i: usize, turn: usize| {
-        if i < turn || i >= blank {
-            source(i, usize::MAX)
-        } else {
-            source(i, 0)
-        }
-    };
+    let with_friction = track::WithFriction::new(&piston, friction);
     let x = &mut work.x_m[..n];
     let room = &mut *work.room;
-    // Each track in turn in the one room: the force balance's first (its
-    // spread widens the uncertainties), then the accelerometer's (the value).
+    // Each track in turn in the one room: the force balance's (its spread
+    // widens the uncertainties), then the accelerometer's (the value).
     let mut read = |by_force: bool| {
         x.fill(f32::NAN);
         x[..a_end].fill(impact);
-        if by_force {
-            track::closed(dt, impact, a_end, close, x, balance());
-        } else {
-            track::closed(dt, impact, a_end, close, x, by_accel);
+        {
+            // The track's source once a sample, in the room the closed fits'
+            // logarithms take after it (the track reads it three times
+            // over): the accelerometer's, its zero shift's decay carried
+            // from sample to sample; the pressure force where the force
+            // balance stands in (the accelerometer's blank after the shock,
+            // or all of the force balance's track), friction's sign split
+            // at the turn as it is read.
+            let source = &mut room[..=close];
+            let balanced = if by_force {
+                close + 1
+            } else {
+                blank.clamp(a_end, close + 1)
+            };
+            if balanced <= close {
+                track::accelerometer(
+                    &accel,
+                    report.accel_zero_shift_mps2,
+                    tau,
+                    dt,
+                    0,
+                    a_end,
+                    &mut source[a_end..],
+                );
+            }
+            for (i, f) in source.iter_mut().enumerate().take(balanced).skip(a_end) {
+                *f = track::pressure_force(&p1, &p2, &piston, i);
+            }
+            let source = &*source;
+            // (No panic path: `closed` reads `..=close`, all in `source`.)
+            let acc = |i: usize, turn: usize| {
+                let s = source.get(i).copied().unwrap_or(f32::NAN);
+                if i < balanced {
+                    with_friction.acceleration(s, i, turn)
+                } else {
+                    s
+                }
+            };
+            track::closed(dt, impact, a_end, close, x, acc);
         }
         let rebound = if a_end + 1 < close {
             Some((x[a_end + 1] - x[a_end]) / dt).filter(|v| v.is_finite())
@@ -230,8 +302,9 @@ pub fn characterise_cycle<C: Codes + ?Sized>(
         // double-precision sums in a board's image.
         characterise_with::<false, _>(&w, geo, supply_abs, room)
     };
-    let by_force = read(true);
-    Some(read(false).widened(&by_force))
+    let by_force = if track_term { Some(read(true)) } else { None };
+    let value = read(false);
+    Some(by_force.map_or(value, |f| value.widened(&f)))
 }
 
 /// The first sample after the impact at `i` where the accelerometer has
@@ -301,11 +374,15 @@ fn tail(
 fn displacement(accel: &impl Series, dt: f32, a_end: usize, len: usize, mut f: impl FnMut(usize, f32)) {
     let (mut u, mut v) = (0.0f32, 0.0f32);
     f(0, 0.0);
-    for k in 1..len {
-        let i = a_end + k;
-        let v_next = v + 0.5 * dt * (accel.at(i - 1) + accel.at(i));
-        u += 0.5 * dt * (v + v_next);
-        v = v_next;
-        f(k, u);
-    }
+    let mut a_prev = f32::NAN;
+    // Each sample read once, carried to the next step.
+    each(accel, a_end, a_end + len, |i, a| {
+        if i > a_end {
+            let v_next = v + 0.5 * dt * (a_prev + a);
+            u += 0.5 * dt * (v + v_next);
+            v = v_next;
+            f(i - a_end, u);
+        }
+        a_prev = a;
+    });
 }

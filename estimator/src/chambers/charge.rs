@@ -17,7 +17,7 @@
 //! cycle before): in a steady run the two are the same.
 
 use super::fill::{psi, sqrt_rt_supply, GAMMA};
-use super::{interpolate, ChamberGeometry, Characteristics, Series, Window, P_ATM_PA};
+use super::{each, interpolate, ChamberGeometry, Characteristics, Series, Window, P_ATM_PA};
 
 /// The air each chamber drew in one cycle, as R·T_s·m, J.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -52,20 +52,30 @@ impl<P: Series + ?Sized> Chamber<'_, P> {
             a.max(0.0) as usize,
             (b.max(0.0) as usize).min(self.p.len().saturating_sub(1)),
         );
-        (a..b)
-            .map(|i| {
-                let pm = 0.5 * (self.p.at(i) + self.p.at(i + 1)) + P_ATM_PA;
-                pm * ((self.volume)(self.x[i + 1]) - (self.volume)(self.x[i]))
-            })
-            .sum()
+        // Each sample's pressure and volume read once, carried to the next
+        // step (a board reads the pressure from its codes).
+        if a >= b {
+            return 0.0;
+        }
+        let (mut p0, mut v0) = (f32::NAN, (self.volume)(self.x[a]));
+        let mut sum = 0.0f32;
+        each(self.p, a, b + 1, |i, p1| {
+            if i > a {
+                let v1 = (self.volume)(self.x[i]);
+                let pm = 0.5 * (p0 + p1) + P_ATM_PA;
+                sum += pm * (v1 - v0);
+                v0 = v1;
+            }
+            p0 = p1;
+        });
+        sum
     }
 
     /// What blows through the feed of area `area_m2` from `a` to `b`.
     fn through(&self, a: f32, b: f32, area_m2: f32, supply_abs_pa: f32, dt: f32) -> f32 {
         let (a, b) = (a.max(0.0) as usize, (b.max(0.0) as usize).min(self.p.len()));
-        let flow: f32 = (a..b)
-            .map(|i| psi((self.p.at(i) + P_ATM_PA) / supply_abs_pa) * dt)
-            .sum();
+        let mut flow = 0.0f32;
+        each(self.p, a, b, |_, p| flow += psi((p + P_ATM_PA) / supply_abs_pa) * dt);
         if b > a {
             area_m2 * supply_abs_pa * sqrt_rt_supply() * flow
         } else {

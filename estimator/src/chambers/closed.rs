@@ -98,8 +98,10 @@ impl<'a> Cached<'a> {
         let (ln_p, rest) = room.split_at_mut_checked(len)?;
         let ln_v = rest.get_mut(..len)?;
         let mut valid = true;
+        // The pressures first, in order (a board's from its codes).
+        p.read_into(0, ln_p);
         for i in 0..len {
-            let (pa, v) = (p.at(i) + P_ATM_PA, volume(x[i]));
+            let (pa, v) = (ln_p[i] + P_ATM_PA, volume(x[i]));
             valid &= pa > 0.0 && v > 0.0;
             ln_p[i] = math::ln(pa);
             ln_v[i] = math::ln(v);
@@ -115,11 +117,15 @@ impl Logs for Cached<'_> {
     fn valid(&self) -> bool {
         self.valid
     }
+    // No panic path (the fits read `..len`): small enough to inline into
+    // the fits' passes.
+    #[inline(always)]
     fn ln_p(&self, i: usize) -> f32 {
-        self.ln_p[i]
+        self.ln_p.get(i).copied().unwrap_or(f32::NAN)
     }
+    #[inline(always)]
     fn ln_v(&self, i: usize) -> f32 {
-        self.ln_v[i]
+        self.ln_v.get(i).copied().unwrap_or(f32::NAN)
     }
 }
 
@@ -260,16 +266,19 @@ fn read(logs: &impl Logs, dt_s: f32, base_end: usize) -> Option<Onset> {
     let ln_v = |i: usize| logs.ln_v(i);
 
     // 2. The closed phase's exponent: ln p = c − n·ln V.
-    let line = Line::fit((0..base_end).map(|i| (ln_v(i), ln_p(i))))?;
+    // With each half's line in the same two passes (the noise's share, and
+    // the form's: a chamber that is not exactly polytropic (heat, leaks)
+    // gives each half of its closed phase another exponent, a spread the
+    // residual's noise does not show).
+    let halves = base_end >= 2 * min_base;
+    let [line, first_half, second_half] = Line::fit_with_halves(|i| (ln_v(i), ln_p(i)), base_end, halves);
+    let line = line?;
     let fitted = -line.slope;
     let (rms, rho) = residual_noise((0..base_end).map(|i| ln_p(i) - line.at(ln_v(i))));
     let inflation = (1.0 + rho) / (1.0 - rho);
-    // The noise's share, and the form's: a chamber that is not exactly
-    // polytropic (heat, leaks) gives each half of its closed phase another
-    // exponent, a spread the residual's noise does not show.
-    let half = |r: core::ops::Range<usize>| Line::fit(r.map(|i| (ln_v(i), ln_p(i)))).map_or(0.0, |l| -l.slope);
-    let split = if base_end >= 2 * min_base {
-        half(0..base_end / 2) - half(base_end / 2..base_end)
+    let half = |l: Option<Line>| l.map_or(0.0, |l| -l.slope);
+    let split = if halves {
+        half(first_half) - half(second_half)
     } else {
         0.0
     };
@@ -300,7 +309,9 @@ fn read(logs: &impl Logs, dt_s: f32, base_end: usize) -> Option<Onset> {
     let hi = if hi - lo < 3 { (hi + 1).min(len) } else { hi };
     // A port opened by a moving spool grows in area from zero, so the
     // rise starts as (t − t0)²: its square root is the straight line.
-    let g = |i: usize| math::sqrt(if r(i) > 0.0 { r(i) } else { 0.0 });
+    let root = |i: usize| math::sqrt(if r(i) > 0.0 { r(i) } else { 0.0 });
+    let kept = Roots::around(lo, root);
+    let g = |i: usize| kept.at(i);
     let first = Line::fit((lo..hi).map(|i| (i as f32, g(i))))?;
     if !(first.slope > 0.0) {
         return None;
@@ -346,6 +357,44 @@ fn read(logs: &impl Logs, dt_s: f32, base_end: usize) -> Option<Onset> {
         noise_ln: rms,
         rise_s: lo as f32 * dt_s,
     })
+}
+
+/// Samples of the rise whose square roots are kept: the band's fits read
+/// each five times (two lines of two passes, the χ²), and a board's square
+/// root is software (~120 instructions).
+const KEPT_ROOTS: usize = 512;
+
+/// √r of the rise's samples from `base` on, each computed once when first
+/// read (the same value as computed each time); outside the kept span, as read.
+struct Roots<F: Fn(usize) -> f32> {
+    base: usize,
+    kept: [core::cell::Cell<f32>; KEPT_ROOTS],
+    root: F,
+}
+
+impl<F: Fn(usize) -> f32> Roots<F> {
+    /// Kept from a little before `lo` (the band chosen again by the line
+    /// can start earlier). NaN marks a root not yet computed: √ of a
+    /// non-negative float is never NaN.
+    fn around(lo: usize, root: F) -> Self {
+        Self {
+            base: lo.saturating_sub(KEPT_ROOTS / 4),
+            kept: core::array::from_fn(|_| core::cell::Cell::new(f32::NAN)),
+            root,
+        }
+    }
+
+    fn at(&self, i: usize) -> f32 {
+        match i.checked_sub(self.base).and_then(|k| self.kept.get(k)) {
+            Some(c) if !c.get().is_nan() => c.get(),
+            Some(c) => {
+                let v = (self.root)(i);
+                c.set(v);
+                v
+            }
+            None => (self.root)(i),
+        }
+    }
 }
 
 /// The samples whose line value lies in the band [`low`, `high`] of the
@@ -405,6 +454,46 @@ fn residual_noise(r: impl Iterator<Item = f32> + Clone) -> (f32, f32) {
     (math::sqrt(ss / (n - 2.0)), rho)
 }
 
+/// A least-squares line's sums, as [`Line::fit`] adds them.
+#[derive(Clone, Copy, Default)]
+struct Sums {
+    n: f32,
+    sx: f32,
+    sy: f32,
+    xm: f32,
+    ym: f32,
+    sxx: f32,
+    sxy: f32,
+}
+
+impl Sums {
+    fn add(&mut self, x: f32, y: f32) {
+        self.n += 1.0;
+        self.sx += x;
+        self.sy += y;
+    }
+
+    fn centre(&mut self) {
+        if self.n >= 2.0 {
+            (self.xm, self.ym) = (self.sx / self.n, self.sy / self.n);
+        }
+    }
+
+    fn add_centred(&mut self, x: f32, y: f32) {
+        self.sxx += (x - self.xm) * (x - self.xm);
+        self.sxy += (x - self.xm) * (y - self.ym);
+    }
+
+    fn line(&self) -> Option<Line> {
+        (self.n >= 2.0 && self.sxx > 0.0).then(|| Line {
+            x_mean: self.xm,
+            y_mean: self.ym,
+            slope: self.sxy / self.sxx,
+            sxx: self.sxx,
+        })
+    }
+}
+
 /// A least-squares line y = y_mean + slope·(x − x_mean).
 struct Line {
     x_mean: f32,
@@ -415,27 +504,49 @@ struct Line {
 
 impl Line {
     fn fit(pts: impl Iterator<Item = (f32, f32)> + Clone) -> Option<Line> {
-        let (mut n, mut sx, mut sy) = (0.0f32, 0.0f32, 0.0f32);
+        let mut s = Sums::default();
         for (x, y) in pts.clone() {
-            n += 1.0;
-            sx += x;
-            sy += y;
+            s.add(x, y);
         }
-        if n < 2.0 {
+        if s.n < 2.0 {
             return None;
         }
-        let (xm, ym) = (sx / n, sy / n);
-        let (mut sxx, mut sxy) = (0.0f32, 0.0f32);
+        s.centre();
         for (x, y) in pts {
-            sxx += (x - xm) * (x - xm);
-            sxy += (x - xm) * (y - ym);
+            s.add_centred(x, y);
         }
-        (sxx > 0.0).then(|| Line {
-            x_mean: xm,
-            y_mean: ym,
-            slope: sxy / sxx,
-            sxx,
-        })
+        s.line()
+    }
+
+    /// [`Line::fit`] of the points `0..n`, and where `halves` of
+    /// `0..n / 2` and `n / 2..n` too, in the same two passes: each sum
+    /// added in the same order as three fits would (the same figures),
+    /// the points read half as often.
+    fn fit_with_halves(pt: impl Fn(usize) -> (f32, f32), n: usize, halves: bool) -> [Option<Line>; 3] {
+        let mid = n / 2;
+        let mut s = [Sums::default(); 3];
+        let part = |i: usize| if i < mid { 1 } else { 2 };
+        for i in 0..n {
+            let (x, y) = pt(i);
+            s[0].add(x, y);
+            if halves {
+                s[part(i)].add(x, y);
+            }
+        }
+        if s[0].n < 2.0 {
+            return [None, None, None];
+        }
+        for t in s.iter_mut() {
+            t.centre();
+        }
+        for i in 0..n {
+            let (x, y) = pt(i);
+            s[0].add_centred(x, y);
+            if halves {
+                s[part(i)].add_centred(x, y);
+            }
+        }
+        s.map(|t| t.line())
     }
 
     fn at(&self, x: f32) -> f32 {
@@ -562,6 +673,23 @@ mod tests {
         assert_eq!(onset_of(&kept, DT), onset(&p[..], &x, &vol, DT));
         assert!(onset(&p[..], &x, &vol, DT).is_some());
         assert!(Cached::fill(&p[..], &x, &vol, &mut room[..1999]).is_none());
+    }
+
+    /// The line and its halves in two passes are the three fits', bit
+    /// for bit (the reading's figures do not depend on how it is read).
+    #[test]
+    fn a_line_and_its_halves_in_two_passes_are_three_fits() {
+        let pt = |i: usize| {
+            let x = 1e-3 * i as f32 + 0.25 * math::sin_small((i % 7) as f32 * 0.2);
+            (x, 2.0 - 1.37 * x + 1e-3 * ((i * 7919) % 13) as f32)
+        };
+        for n in [0usize, 1, 2, 3, 17, 400, 401] {
+            let [all, a, b] = Line::fit_with_halves(pt, n, true);
+            let bits = |l: Option<Line>| l.map(|l| [l.x_mean, l.y_mean, l.slope, l.sxx].map(f32::to_bits));
+            assert_eq!(bits(all), bits(Line::fit((0..n).map(pt))), "{n}");
+            assert_eq!(bits(a), bits(Line::fit((0..n / 2).map(pt))), "{n}");
+            assert_eq!(bits(b), bits(Line::fit((n / 2..n).map(pt))), "{n}");
+        }
     }
 
     /// No feed: no onset (the chamber stays closed).

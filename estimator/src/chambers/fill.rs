@@ -46,8 +46,11 @@ pub(super) fn psi(ratio: f32) -> f32 {
     if ratio <= CRITICAL {
         CHOKED
     } else if ratio < 1.0 {
+        // r^(2/γ) − r^((γ+1)/γ) = a·(a − r) with a = r^(1/γ): one power,
+        // not two (a board reads this for every sample of a feed).
         let g = GAMMA;
-        math::sqrt(2.0 * g / (g - 1.0) * (math::powf(ratio, 2.0 / g) - math::powf(ratio, (g + 1.0) / g)))
+        let a = math::powf(ratio, 1.0 / g);
+        math::sqrt(2.0 * g / (g - 1.0) * (a * (a - ratio)))
     } else {
         0.0
     }

@@ -39,6 +39,7 @@ pub struct PhaseFriction {
 /// piston's acceleration `accel(i, turn)` (`turn`: the turning point's
 /// index, which splits friction's sign): `x[open] = x[close] = impact_m`,
 /// the start velocity set by the closure. Other samples are left as they are.
+#[inline(always)]
 pub fn closed(dt_s: f32, impact_m: f32, open: usize, close: usize, x: &mut [f32], accel: impl Fn(usize, usize) -> f32) {
     if !(open < close && close < x.len() && dt_s > 0.0) {
         return;
@@ -79,6 +80,41 @@ pub fn closed(dt_s: f32, impact_m: f32, open: usize, close: usize, x: &mut [f32]
     x[close] = impact_m;
 }
 
+/// The pressure force on the piston at sample `i` (and gravity's share),
+/// N: the force balance's sum before friction and the mass, which a
+/// reading may keep a sample at a time ([`WithFriction`]).
+#[inline]
+pub fn pressure_force<P: super::Series + ?Sized>(p_rear_pa: &P, p_front_pa: &P, piston: &Piston, i: usize) -> f32 {
+    piston.rear_area_m2 * p_rear_pa.at(i) - piston.front_area_m2 * p_front_pa.at(i) + piston.gravity_n
+}
+
+/// The force balance's acceleration from a kept [`pressure_force`]:
+/// friction per phase (NaN read as none: backhaul before the turn, stroke
+/// after), over the mass. A struct, not a closure, so that a reading's
+/// track passes inline it.
+#[derive(Debug, Clone, Copy)]
+pub struct WithFriction {
+    backhaul_n: f32,
+    stroke_n: f32,
+    mass_kg: f32,
+}
+
+impl WithFriction {
+    pub fn new(piston: &Piston, friction: PhaseFriction) -> Self {
+        let f = |v: f32| if v.is_finite() { v } else { 0.0 };
+        Self {
+            backhaul_n: f(friction.backhaul_n),
+            stroke_n: f(friction.stroke_n),
+            mass_kg: piston.mass_kg,
+        }
+    }
+
+    #[inline(always)]
+    pub fn acceleration(&self, force_n: f32, i: usize, turn: usize) -> f32 {
+        (force_n + if i < turn { self.backhaul_n } else { -self.stroke_n }) / self.mass_kg
+    }
+}
+
 /// The force balance's acceleration: the pressure force less the cycle's
 /// friction per phase (backhaul before the turn, stroke after), over the mass.
 pub fn force_balance<'a, P: super::Series + ?Sized>(
@@ -87,20 +123,8 @@ pub fn force_balance<'a, P: super::Series + ?Sized>(
     piston: &'a Piston,
     friction: PhaseFriction,
 ) -> impl Fn(usize, usize) -> f32 + 'a {
-    let f_bh = if friction.backhaul_n.is_finite() {
-        friction.backhaul_n
-    } else {
-        0.0
-    };
-    let f_st = if friction.stroke_n.is_finite() {
-        friction.stroke_n
-    } else {
-        0.0
-    };
-    move |i, turn| {
-        let p = piston.rear_area_m2 * p_rear_pa.at(i) - piston.front_area_m2 * p_front_pa.at(i) + piston.gravity_n;
-        (p + if i < turn { f_bh } else { -f_st }) / piston.mass_kg
-    }
+    let acc = WithFriction::new(piston, friction);
+    move |i, turn| acc.acceleration(pressure_force(p_rear_pa, p_front_pa, piston, i), i, turn)
 }
 
 /// The track of [`force_balance`] (what the estimator's velocity integral assumes).
@@ -129,20 +153,23 @@ pub fn position(
     }
 }
 
-/// The accelerometer's acceleration, less the zero shift the estimator
+/// The accelerometer's acceleration less the zero shift the estimator
 /// fitted (`zero_shift_mps2`, decaying from the impact at `open` with
-/// `tau_s`); before `blank_end` (the accelerometer still rings from the
-/// shock) `fallback`'s. It sees friction of any form, which the force
-/// balance's two constants only approximate.
-pub fn accelerometer<'a, A: super::Series + ?Sized>(
-    accel_mps2: &'a A,
+/// `tau_s`), written sample after sample from `from`: `out[k]` is sample
+/// `from + k`'s. The decay is carried from one sample to the next (one
+/// multiplication a sample; a power of the distance from the impact cost a
+/// tenth of a board's reading). It sees friction of any form, which the
+/// force balance's two constants only approximate; where the accelerometer
+/// still rings from the shock the caller puts the force balance's instead.
+pub fn accelerometer<A: super::Series + ?Sized>(
+    accel_mps2: &A,
     zero_shift_mps2: f32,
     tau_s: f32,
     dt_s: f32,
     open: usize,
-    blank_end: usize,
-    fallback: impl Fn(usize, usize) -> f32 + 'a,
-) -> impl Fn(usize, usize) -> f32 + 'a {
+    from: usize,
+    out: &mut [f32],
+) {
     let q = if tau_s > 0.0 && zero_shift_mps2.is_finite() {
         crate::math::exp(-dt_s / tau_s)
     } else {
@@ -153,12 +180,11 @@ pub fn accelerometer<'a, A: super::Series + ?Sized>(
     } else {
         0.0
     };
-    move |i, turn| {
-        if i < blank_end {
-            fallback(i, turn)
-        } else {
-            accel_mps2.at(i) - zs * crate::math::powi(q, (i - open) as u32)
-        }
+    let mut shift = zs * crate::math::powi(q, from.saturating_sub(open) as u32);
+    accel_mps2.read_into(from, out);
+    for v in out.iter_mut() {
+        *v -= shift;
+        shift *= q;
     }
 }
 

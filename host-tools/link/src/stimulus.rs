@@ -232,6 +232,28 @@ impl Stimulus {
         }
     }
 
+    /// Writes `bytes` at the start of the chamber bench's exchange
+    /// (`hammer_wire::stimulus::BENCH_OFFSET`), before QEMU starts.
+    pub fn write_bench(&self, bytes: &[u8]) -> io::Result<()> {
+        if bytes.len() > stimulus::BENCH_BYTES {
+            return Err(io::Error::other("bench input larger than its area"));
+        }
+        for (i, b) in bytes.iter().enumerate() {
+            // SAFETY: inside the BENCH area, which lies in the mapping
+            // (hammer_wire::stimulus asserts it); QEMU has not started yet.
+            unsafe { std::ptr::write_volatile(self.base.add(stimulus::BENCH_OFFSET + i), *b) };
+        }
+        Ok(())
+    }
+
+    /// The chamber bench's exchange as the board left it (read after QEMU ended).
+    pub fn read_bench(&self) -> Vec<u8> {
+        (0..stimulus::BENCH_BYTES)
+            // SAFETY: as in `write_bench`; the board has ended.
+            .map(|i| unsafe { std::ptr::read_volatile(self.base.add(stimulus::BENCH_OFFSET + i)) })
+            .collect()
+    }
+
     /// The backing file's path (gone once [`Stimulus::unlink_once_mapped`] succeeded).
     pub fn path(&self) -> &Path {
         &self.path

@@ -252,14 +252,18 @@ fn span_tracks(
         x_force[a..a_end].fill(impact);
         let balance = || track::force_balance(p1, p2, &r.piston, span.friction);
         let tau = r.zero_shift_tau_s as f32;
-        let source = track::accelerometer(accel, span.zero_shift_mps2, tau, dt, a, a + blank, balance());
-        // The source once a sample (its zero shift's decay is a power of
-        // the sample's distance from the impact), read by the track's three
-        // passes: before the turn and after it. It depends on the turn only
-        // in the blank, where the force balance's friction changes sign.
+        // The source once a sample (the accelerometer's, its zero shift's
+        // decay carried from sample to sample; the force balance's while it
+        // rings), read by the track's three passes: before the turn and
+        // after it. It depends on the turn only in the blank, where the
+        // force balance's friction changes sign.
+        track::accelerometer(accel, span.zero_shift_mps2, tau, dt, a, a_end, &mut before[a_end..=b]);
+        let force = balance();
         for i in a_end..=b {
-            before[i] = source(i, usize::MAX);
-            after[i] = if i < a + blank { source(i, 0) } else { before[i] };
+            after[i] = if i < a + blank { force(i, 0) } else { before[i] };
+            if i < a + blank {
+                before[i] = force(i, usize::MAX);
+            }
         }
         let kept = |i: usize, turn: usize| if i < turn { before[i] } else { after[i] };
         track::closed(dt, impact, a_end, b, &mut x_acc, kept);
@@ -501,6 +505,10 @@ mod tests {
             assert!(if k < 2 { (a / b - 1.0).abs() < 2e-7 } else { a == b }, "{k}: {a} {b}");
         }
         let reading = Reading::of(&config);
+        let one_track = Reading {
+            track_term: false,
+            ..reading
+        };
         let n = window_samples(6_000, config.dt_s());
         let (mut x_buf, mut logs_buf) = (vec![0.0f32; n], vec![0.0f32; 2 * n]);
         let mut work = Work {
@@ -516,8 +524,17 @@ mod tests {
             let span = Span::between(prev, cur);
             let host = characterise_spans(&s, &[span], &reading, &geo, true)[0];
             let [open, close] = [span.open_s, span.close_s].map(|t| (t / trace.dt_s).round() as usize);
-            let board = characterise_cycle(&config, &geo, &codes[open..], close - open, cur, &mut work);
+            let board = characterise_cycle(&config, &geo, &codes[open..], close - open, cur, true, &mut work);
             assert_eq!(board.is_some(), host.is_some(), "cycle {}", cur.seq);
+            // One track (the accelerometer's), as the host reads without the track term.
+            let one = characterise_cycle(&config, &geo, &codes[open..], close - open, cur, false, &mut work);
+            let host_one = characterise_spans(&s, &[span], &one_track, &geo, true)[0];
+            assert_eq!(
+                format!("{one:?}"),
+                format!("{host_one:?}"),
+                "cycle {} on one track",
+                cur.seq
+            );
             let (Some(board), Some(host)) = (board, host) else {
                 continue;
             };
@@ -547,7 +564,24 @@ mod tests {
         let close = (reports[cur].t_impact_s() / trace.dt_s).round() as usize;
         let open = (reports[cur - 1].t_impact_s() / trace.dt_s).round() as usize;
         assert!(close - open > 2_000);
-        assert!(characterise_cycle(&config, &geo, &codes[open..], close - open, &reports[cur], &mut tight).is_none());
+        assert!(characterise_cycle(
+            &config,
+            &geo,
+            &codes[open..],
+            close - open,
+            &reports[cur],
+            true,
+            &mut tight
+        )
+        .is_none());
+        // Nor where the room cannot hold the track's source over the cycle.
+        let mut one_short = vec![0.0f32; close - open];
+        let mut short_room = Work {
+            x_m: &mut x_buf,
+            room: &mut one_short,
+        };
+        let c = &reports[cur];
+        assert!(characterise_cycle(&config, &geo, &codes[open..], close - open, c, true, &mut short_room).is_none());
         println!(
             "{read} feeds read; worst |Δ onset| {:.3e} s, |Δn/n| {:.2e}, |ΔA/A| {:.2e}",
             worst[0], worst[1], worst[2]
