@@ -156,7 +156,7 @@ impl Default for Options {
     fn default() -> Self {
         Self {
             floors: Floors::default(),
-            nominal_uncertainty: 0.2,
+            nominal_uncertainty: hammer_sim::params::NOMINAL_UNCERTAINTY,
             max_iterations: 12,
             min_score: 20.0,
             min_model_free_z: default_min_model_free_z(),

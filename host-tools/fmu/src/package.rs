@@ -3,6 +3,7 @@
 //! `documentation/index.html`) and the model map beside it that
 //! `hammer diagnose --model-map` reads (issue 46).
 
+use hammer_sim::params::{NOMINAL_UNCERTAINTY, NUISANCE};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -15,34 +16,18 @@ use crate::table::{Binding, Table, Val};
 /// The shared library cargo builds from this crate.
 pub const LIBRARY_FILE: &str = "libhammer_fmu.so";
 
-/// The nominal parameters the diagnosis is unsure of, with the relative
-/// uncertainty it gives them by default: hammer_diagnose's `NUISANCE` list
-/// and its `nominal_uncertainty` (0.2), repeated here because the diagnosis
-/// will load FMUs (issue 46) and this crate must not depend on it.
-pub const NUISANCE: [(&str, f64); 9] = [
-    ("valve.full_open_area_m2", 0.2),
-    ("valve.cd", 0.2),
-    ("valve.damping_n_s_per_m", 0.2),
-    ("valve.pilot_area_rear_m2", 0.2),
-    ("valve.pilot_area_front_m2", 0.2),
-    ("hammer.outlet_cd", 0.2),
-    ("hammer.rear_dead_volume_m3", 0.2),
-    ("hammer.front_dead_volume_m3", 0.2),
-    ("contact.restitution", 0.2),
-];
-
-/// The second family's counterparts of [`NUISANCE`] (its valve's
-/// conductance and pilots, its ports' conductance, its dead volumes, its
-/// contact damping), with the same uncertainty.
-pub const VARIANT_NUISANCE: [(&str, f64); 8] = [
-    ("params.valve_conductance", 0.2),
-    ("params.valve_critical_ratio", 0.2),
-    ("params.pilot_rear_m2", 0.2),
-    ("params.pilot_front_m2", 0.2),
-    ("params.port_conductance", 0.2),
-    ("params.rear_dead_m3", 0.2),
-    ("params.front_dead_m3", 0.2),
-    ("params.contact_damping_ratio", 0.2),
+/// The second family's counterparts of the built-in model's nuisance
+/// parameters (`hammer_sim::params::NUISANCE`: its valve's conductance and
+/// pilots, its ports' conductance, its dead volumes, its contact damping).
+pub const VARIANT_NUISANCE: [&str; 8] = [
+    "params.valve_conductance",
+    "params.valve_critical_ratio",
+    "params.pilot_rear_m2",
+    "params.pilot_front_m2",
+    "params.port_conductance",
+    "params.rear_dead_m3",
+    "params.front_dead_m3",
+    "params.contact_damping_ratio",
 ];
 
 /// What a model's FMU is called and says of itself.
@@ -51,7 +36,8 @@ struct Identity {
     description: &'static str,
     stop_time_s: f64,
     step_s: f64,
-    nuisance: &'static [(&'static str, f64)],
+    /// The nominal parameters the map's `[[nuisance]]` lists.
+    nuisance: Vec<&'static str>,
 }
 
 fn identity(model: &Model) -> Identity {
@@ -61,14 +47,14 @@ fn identity(model: &Model) -> Identity {
             description: "The paper's small pneumatic impact hammer (hammer-monitor's simulator): piston, two chambers, pilot valve, supply; sensor chain with a seed",
             stop_time_s: cfg.solver.duration_s,
             step_s: cfg.solver.output_step_s,
-            nuisance: &NUISANCE,
+            nuisance: NUISANCE.iter().map(|(name, _)| *name).collect(),
         },
         Model::Variants(cfg) => Identity {
             model_identifier: "hammer_variants",
             description: "The paper's hammer in hammer-monitor's second model family (hammer-variants): other valve, port, chamber, supply, anvil and sensor laws, fixed-step RK4",
             stop_time_s: cfg.duration_s,
             step_s: hammer_variants::generate::STEP_S * hammer_variants::generate::OUTPUT_EVERY as f64,
-            nuisance: &VARIANT_NUISANCE,
+            nuisance: VARIANT_NUISANCE.to_vec(),
         },
     }
 }
@@ -163,7 +149,7 @@ pub fn write_fmu(model: &Model, library: &Path, out: &Path) -> Result<Written, S
     let zip = zip_stored(&files);
     std::fs::write(out, zip).map_err(|e| format!("{}: {e}", out.display()))?;
     let map = map_path(out);
-    std::fs::write(&map, model_map(&table, out, who.nuisance)?).map_err(|e| format!("{}: {e}", map.display()))?;
+    std::fs::write(&map, model_map(&table, out, &who.nuisance)?).map_err(|e| format!("{}: {e}", map.display()))?;
     let outputs = table.vars.iter().filter(|v| v.is_output()).count();
     Ok(Written {
         fmu: out.to_path_buf(),
@@ -179,7 +165,7 @@ pub fn write_fmu(model: &Model, library: &Path, out: &Path) -> Result<Written, S
 /// applies the sensor effects itself, so the sensor effects are left to
 /// `[outside]`), the supply parameter, the nuisance list, and every
 /// physical catalogue effect with its switch and parameters.
-fn model_map(table: &Table, fmu: &Path, nuisance: &[(&str, f64)]) -> Result<String, String> {
+fn model_map(table: &Table, fmu: &Path, nuisance: &[&str]) -> Result<String, String> {
     use crate::import::map::{
         EffectCarrier, EffectParam, ModelMap, Nuisance, Outside, Reference, Signal, Signals, Supply,
     };
@@ -256,10 +242,10 @@ fn model_map(table: &Table, fmu: &Path, nuisance: &[(&str, f64)]) -> Result<Stri
         },
         nuisance: nuisance
             .iter()
-            .map(|&(p, u)| Nuisance {
+            .map(|&p| Nuisance {
                 parameter: p.to_string(),
                 nominal: start(p).unwrap_or(f64::NAN),
-                relative_uncertainty: u,
+                relative_uncertainty: NOMINAL_UNCERTAINTY,
             })
             .collect(),
         fixed: Default::default(),

@@ -312,6 +312,28 @@ impl SolverParams {
     }
 }
 
+/// The nominal parameters a modeller knows only to a few percent (calibrated
+/// or estimated in docs/model.md), each with the config field it is: the
+/// diagnosis lets each of them move within a prior rather than blame an
+/// effect for what they explain, and the FMU's model map lists the same.
+/// Mass and piston areas are not among them: they are measured.
+pub const NUISANCE: [(&str, fn(&mut SimConfig) -> &mut f64); 9] = [
+    ("valve.full_open_area_m2", |c| &mut c.valve.full_open_area_m2),
+    ("valve.cd", |c| &mut c.valve.cd),
+    ("valve.damping_n_s_per_m", |c| &mut c.valve.damping_n_s_per_m),
+    ("valve.pilot_area_rear_m2", |c| &mut c.valve.pilot_area_rear_m2),
+    ("valve.pilot_area_front_m2", |c| &mut c.valve.pilot_area_front_m2),
+    ("hammer.outlet_cd", |c| &mut c.hammer.outlet_cd),
+    ("hammer.rear_dead_volume_m3", |c| &mut c.hammer.rear_dead_volume_m3),
+    ("hammer.front_dead_volume_m3", |c| &mut c.hammer.front_dead_volume_m3),
+    ("contact.restitution", |c| &mut c.contact.restitution),
+];
+
+/// The relative uncertainty the nominal parameters are known to by default
+/// (a real hammer's, ±20 %): the diagnosis' `nominal_uncertainty` and the
+/// FMU map's `relative_uncertainty`.
+pub const NOMINAL_UNCERTAINTY: f64 = 0.2;
+
 /// Everything a simulation run needs.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
 #[serde(deny_unknown_fields, default)]

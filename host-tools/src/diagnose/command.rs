@@ -50,7 +50,7 @@ pub struct DiagnoseArgs {
     /// Relative standard deviation of the nominal parameters the model is
     /// unsure of (valve, ports, dead volumes, contact): a real hammer's are
     /// known to about ±20 %; they are recalibrated within it.
-    #[arg(long, default_value_t = 0.2)]
+    #[arg(long, default_value_t = hammer_sim::params::NOMINAL_UNCERTAINTY)]
     pub nominal_uncertainty: f64,
     /// Directory for report.json, report.md and the figures.
     #[arg(long)]

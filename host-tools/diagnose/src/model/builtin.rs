@@ -6,21 +6,7 @@ use hammer_sim::effects::Effects;
 use hammer_sim::run::{output_len, run_model, SimRun, TruthSample, TruthSink};
 use hammer_sim::{simulate_truth, SimConfig};
 
-/// The nominal parameters a modeller knows only to a few percent (calibrated
-/// or estimated in docs/model.md): the diagnosis lets each of them move
-/// within a Gaussian prior rather than blame an effect for what they explain.
-/// Mass and piston areas are not among them: they are measured.
-pub const NUISANCE: [(&str, fn(&mut SimConfig) -> &mut f64); 9] = [
-    ("valve.full_open_area_m2", |c| &mut c.valve.full_open_area_m2),
-    ("valve.cd", |c| &mut c.valve.cd),
-    ("valve.damping_n_s_per_m", |c| &mut c.valve.damping_n_s_per_m),
-    ("valve.pilot_area_rear_m2", |c| &mut c.valve.pilot_area_rear_m2),
-    ("valve.pilot_area_front_m2", |c| &mut c.valve.pilot_area_front_m2),
-    ("hammer.outlet_cd", |c| &mut c.hammer.outlet_cd),
-    ("hammer.rear_dead_volume_m3", |c| &mut c.hammer.rear_dead_volume_m3),
-    ("hammer.front_dead_volume_m3", |c| &mut c.hammer.front_dead_volume_m3),
-    ("contact.restitution", |c| &mut c.contact.restitution),
-];
+pub use hammer_sim::params::NUISANCE;
 
 /// The built-in model of `base` (its geometry, nominal values and solver).
 #[derive(Debug, Clone)]
