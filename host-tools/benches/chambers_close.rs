@@ -18,7 +18,8 @@
 //! With the profiling plugin the split by function follows (the whole run:
 //! the estimator's pass over the codes and every reading).
 
-use std::path::PathBuf;
+mod common;
+use common::plugin;
 use std::sync::atomic::AtomicBool;
 use std::time::Duration;
 
@@ -35,15 +36,6 @@ use hammer_wire::DeviceConfig;
 const INSTRUCTIONS_PER_CYCLE: f64 = 1e9 / SYSCLK_HZ as f64;
 /// The board's log cache, floats (the bench binary's `LOG_CACHE`).
 const LOG_CACHE: usize = 12_000;
-
-fn plugin() -> Option<PathBuf> {
-    if let Some(p) = std::env::var_os("HAMMER_QEMU_PROFILE_PLUGIN") {
-        return Some(PathBuf::from(p));
-    }
-    let exe = std::env::current_exe().ok()?;
-    let release = exe.parent()?.parent()?;
-    Some(release.join("libqemu_profile.so")).filter(|p| p.is_file())
-}
 
 fn feed_words(f: &Option<Feed>) -> [f32; 10] {
     f.map_or([f32::NAN; 10], |f| {

@@ -20,8 +20,9 @@
 //! plugin (`xtask/qemu-profile`, QEMU's TCG plugin API), every instruction
 //! the guest executed is counted by function: the split per sample-set.
 
+mod common;
+use common::plugin;
 use std::collections::HashMap;
-use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 use std::time::Duration;
 
@@ -39,17 +40,6 @@ const INSTRUCTIONS_PER_CYCLE: f64 = 1e9 / SYSCLK_HZ as f64;
 const IDLE_FUNCTION: &str = "hammer_firmware_emu::executor::spin_until_woken";
 /// Functions shown in the split; the rest are summed in one line.
 const SHOWN: usize = 24;
-
-/// The profiling plugin: `HAMMER_QEMU_PROFILE_PLUGIN`, else where
-/// `cargo build --release -p qemu-profile` puts it beside this bench.
-fn plugin() -> Option<PathBuf> {
-    if let Some(p) = std::env::var_os("HAMMER_QEMU_PROFILE_PLUGIN") {
-        return Some(PathBuf::from(p));
-    }
-    let exe = std::env::current_exe().ok()?;
-    let release = exe.parent()?.parent()?;
-    Some(release.join("libqemu_profile.so")).filter(|p| p.is_file())
-}
 
 fn main() {
     if !qemu_available() {
