@@ -300,6 +300,10 @@ pub struct CaseResult {
     /// point, the held-out one included.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub friction_within_u: Option<bool>,
+    /// The confirm stage's check of an effect the waveforms alone named
+    /// (against the model alone), kept or dropped.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub confirmation: Option<super::report::Confirmation>,
     /// With references: the same case diagnosed against the model alone,
     /// side by side (a record must add evidence, never subtract it).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -583,6 +587,7 @@ pub fn run_case_with(
         detection_floors: r.detection_floors.clone(),
         front_dead_volume_error,
         friction_within_u,
+        confirmation: r.verdict.confirmation.clone(),
         port_shift_error,
         alone,
         report: Some(out.report),

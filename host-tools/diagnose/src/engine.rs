@@ -18,7 +18,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use super::features::{pressure_floor, Extractor};
 pub use super::gap::PointWaves;
 use super::model::{Builtin, ModelRunner, Plant};
-use super::pipeline::{floor, force_balance, group, held_out, nominal, rank, reference, where_};
+use super::pipeline::{confirm, floor, force_balance, group, held_out, nominal, rank, reference, where_};
 use hammer_sim::effects::EFFECT_NAMES;
 use hammer_sim::SimConfig;
 use std::sync::Arc;
@@ -27,8 +27,9 @@ pub use super::features::extractor_for;
 pub use super::input::{DiagnoseError, MeasuredInput, Progress};
 pub use super::options::{Floors, Options};
 pub use super::report::{
-    Alternative, DeadVolume, EffectResult, FittedParam, ForceBalancePoint, ForceBalanceQuantity, InputInfo, ModelForm,
-    ModelFreeStat, PointShrink, Recalibration, Remainder, Report, Shrink, Verdict, WhereCell,
+    Alternative, Confirmation, DeadVolume, EffectResult, FittedParam, ForceBalancePoint, ForceBalanceQuantity,
+    InputInfo, ModelForm, ModelFreeStat, NominalMove, PointShrink, Recalibration, Remainder, Report, Shrink, Verdict,
+    WhereCell,
 };
 
 #[derive(Debug, Clone)]
@@ -135,8 +136,10 @@ pub fn diagnose_with(
         }
     };
     let (fs, model_form) = nominal::fit_set(points, &nominal, &runner, &fit_opts);
-    let ranking = rank::rank(&fs, &fit_opts, &step);
+    let mut ranking = rank::rank(&fs, &fit_opts, &step);
     plant_ok(&runner)?;
+    let form: Vec<f64> = model_form.iter().map(|m| m.factor).collect();
+    let (confirmation, reuse) = confirm::confirm(&fs, &mut ranking, &form, &fit_opts).unzip();
     let detection_floors = floor::floors(&fs, &ranking, &fit_opts);
     step("detection floors");
 
@@ -145,7 +148,9 @@ pub fn diagnose_with(
         (Some(f), Some(p)) => (f, p.as_slice()),
         _ => (&fs, points.as_slice()),
     };
-    let models = held_out::models(check_fs, &nominal.bars, ranking.verdict.as_ref(), opts);
+    // The confirm stage's recalibrations were made on `fs` (only without a
+    // record, where `check_fs` is `fs`).
+    let models = held_out::models(check_fs, &nominal.bars, ranking.verdict.as_ref(), reuse.flatten(), opts);
     step("held-out check");
     let shrink = held_out::shrink(check_points, &nominal.features, &models);
     let located = where_::locate(inputs, &grouped, &nominal, &models, &runner.hammer, opts);
@@ -165,7 +170,10 @@ pub fn diagnose_with(
             dead_volumes,
             fit_points: fs.bars(),
             where_: located.where_,
-            verdict: ranking.verdict_report(alternatives),
+            verdict: Verdict {
+                confirmation,
+                ..ranking.verdict_report(alternatives)
+            },
             effects: ranking.effects,
             pairs: ranking.pairs,
             recalibration,
@@ -291,7 +299,7 @@ fn close_call_group(
     let (Some(named), Some(other)) = (&ranking.verdict, &ranking.close_call) else {
         return (Vec::new(), 0);
     };
-    let models = held_out::models(fs, &nominal.bars, Some(other), opts);
+    let models = held_out::models(fs, &nominal.bars, Some(other), None, opts);
     let other_shrink = held_out::shrink(points, &nominal.features, &models);
     let member = |e: &EffectResult, s: &Shrink| {
         let name = e.name.rsplit('+').next().unwrap_or_default().to_string();

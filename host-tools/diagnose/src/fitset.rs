@@ -377,6 +377,8 @@ impl<'a> FitSet<'a> {
         }
         Some(Recalibrated {
             runner: runner_at(&delta),
+            cost: cost(&r, &delta),
+            residuals: r,
             delta,
             sd,
         })
@@ -463,6 +465,11 @@ pub(crate) struct Recalibrated {
     /// Each nuisance parameter's move and standard deviation, in prior standard deviations.
     pub(crate) delta: Vec<f64>,
     pub(crate) sd: Vec<f64>,
+    /// The whitened residuals' and the prior's squares summed where it
+    /// ended: the recalibrated model's χ², nonlinear in the nominal values.
+    pub(crate) cost: f64,
+    /// The whitened residuals where it ended, point after point.
+    pub(crate) residuals: Vec<f64>,
 }
 
 /// A recalibration stops at this many prior standard deviations: beyond,

@@ -14,6 +14,7 @@
 //! | group | `pipeline::group` | the fit/held-out split decides what the check may claim |
 //! | nominal | `pipeline::nominal` | the weights every fit shares are fixed once, before any effect |
 //! | rank | `pipeline::rank`, `pipeline::effect_fit` | the decisions (named? pair?) read from scores alone |
+//! | confirm | `pipeline::confirm` | the ranking's profile is linear in the nominal values; this checks a waveform-only name with them refitted on the model |
 //! | floors | `pipeline::floor` | what the verdict cannot exclude: each unseen effect's weakest nameable magnitude |
 //! | held-out | `pipeline::held_out` | the claim: the shrink on unseen data, against a recalibration-only control |
 //! | where | `pipeline::where_` | where to look next; changes no number of the ranking |

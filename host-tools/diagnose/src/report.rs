@@ -107,6 +107,46 @@ pub struct Verdict {
     /// ranking's choice.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub alternatives: Vec<Vec<Alternative>>,
+    /// The check of an effect the waveforms alone named, with the nominal
+    /// parameters refitted on the model itself (against the model alone;
+    /// `pipeline::confirm`, docs/diagnosis.md).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub confirmation: Option<Confirmation>,
+}
+
+/// An effect named on the waveforms alone, checked with the nominal
+/// parameters refitted on the model (Gauss–Newton, not the ranking's
+/// profile linearised at nominal): without it and with it.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Confirmation {
+    pub effect: String,
+    /// χ² of the verdict's model without the effect and with it, each with
+    /// its nominal parameters refitted (their prior's terms included).
+    pub chi2_without: f64,
+    pub chi2_with: f64,
+    /// The model-form factors both are weighed with, re-measured on the
+    /// model with the effect and its nominal values refitted (one per
+    /// waveform, as `model_form`; empty without them).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub form_factors: Vec<f64>,
+    /// What the effect adds in BIC units (its parameters' price paid), and
+    /// its share of `chi2_without`.
+    pub score: f64,
+    pub explained_fraction: f64,
+    /// Whether it held (the ranking's rule: `score` above `min_score` and
+    /// the share at least the ranking's); if not, it was dropped from the verdict.
+    pub kept: bool,
+    /// The nominal values that moved most, without the effect, beyond half
+    /// their prior's width: what stands in for the effect if it is dropped.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub nominal_moves: Vec<NominalMove>,
+}
+
+/// A nominal value refitted: its name in the model and its change, relative.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct NominalMove {
+    pub parameter: String,
+    pub relative_change: f64,
 }
 
 /// One member of a close call: its size, its score and its own held-out

@@ -35,7 +35,7 @@ pub(crate) fn fit_effects(
 
 /// Fits `names` over `held` (effects already in the model at sizes not
 /// fitted here, with their parameters, counted in the BIC penalty).
-fn fit_over(
+pub(crate) fn fit_over(
     fs: &FitSet,
     held: Option<(&Candidate, &[FittedParam])>,
     names: &[&str],

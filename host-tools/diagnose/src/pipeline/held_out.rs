@@ -8,6 +8,7 @@
 
 use std::collections::BTreeMap;
 
+use super::confirm::Reuse;
 use super::group::Point;
 use crate::features::{summarize, wave_index, BINS, ENERGY, PERIOD, WAVE_SIGNALS};
 use crate::fitset::{FitSet, Recalibrated, RECALIBRATION_STEPS};
@@ -71,9 +72,16 @@ impl Models {
     }
 }
 
-/// Recalibrates the nominal model alone and with the verdict's effects, and
-/// runs both at every point of `bars`.
-pub(crate) fn models(fs: &FitSet, bars: &[f64], verdict: Option<&EffectResult>, opts: &Options) -> Models {
+/// Recalibrates the nominal model alone and with the verdict's effects
+/// (unless `given`: the confirm stage's, made the same way on the same fit
+/// set), and runs both at every point of `bars`.
+pub(crate) fn models(
+    fs: &FitSet,
+    bars: &[f64],
+    verdict: Option<&EffectResult>,
+    given: Option<Reuse>,
+    opts: &Options,
+) -> Models {
     let fitted_cand = verdict.map(|v| v.candidate.clone());
     let h = opts.nominal_uncertainty;
     let recalibrated = |cand: &Candidate, from: Option<&[f64]>| -> Option<Recalibrated> {
@@ -92,13 +100,16 @@ pub(crate) fn models(fs: &FitSet, bars: &[f64], verdict: Option<&EffectResult>, 
     };
     let none = || bars.iter().map(|_| None).collect::<Vec<_>>();
     let nominal = Candidate::default();
-    let recal_nominal = recalibrated(&nominal, None);
+    let (given_nominal, given_verdict) = given.map_or((None, None), |g| (Some(g.nominal), g.verdict));
+    let recal_nominal = given_nominal.or_else(|| recalibrated(&nominal, None));
     // The verdict's model starts where the nominal one got to (if that is
     // better than nominal for it): the effects move the nominal parameters
     // less than the hammer's form does.
-    let recal_verdict = fitted_cand
-        .as_ref()
-        .and_then(|c| recalibrated(c, recal_nominal.as_ref().map(|r| r.delta.as_slice())));
+    let recal_verdict = given_verdict.or_else(|| {
+        fitted_cand
+            .as_ref()
+            .and_then(|c| recalibrated(c, recal_nominal.as_ref().map(|r| r.delta.as_slice())))
+    });
     let (fitted_runner, fitted_runs) = match &fitted_cand {
         Some(c) => model_runs(&recal_verdict, c),
         None => (fs.runner.clone(), none()),
@@ -309,6 +320,8 @@ mod tests {
             runner: ModelRunner::new(base.clone(), crate::features::extractor_for(&base)),
             delta,
             sd: vec![0.5; n],
+            cost: 0.0,
+            residuals: Vec::new(),
         };
         let t = recalibration_table(&rc, 0.2);
         assert_eq!(t.len(), n);

@@ -7,6 +7,8 @@
 //! 2. [`nominal`]: the nominal model at every point → the fit set;
 //!    [`force_balance`]: what the force balance measures at every point;
 //! 3. [`rank`]: every effect fitted ([`effect_fit`]) and ranked → the verdict;
+//!    [`confirm`] (against the model alone): an effect the waveforms alone
+//!    named, checked with the nominal values refitted on the model itself;
 //!    [`floor`]: how large each unseen effect must be to be named here;
 //! 4. [`held_out`]: the verdict's model against the held-out data → the shrink;
 //! 5. [`where_`]: the gap and its remainder by signal × stage → where to look.
@@ -14,6 +16,7 @@
 //! [`crate::engine::diagnose`] runs them in this order and
 //! assembles the report; a stage's unit test runs it alone.
 
+pub(crate) mod confirm;
 pub(crate) mod effect_fit;
 pub(crate) mod floor;
 pub(crate) mod force_balance;

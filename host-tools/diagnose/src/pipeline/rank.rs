@@ -61,6 +61,7 @@ impl Ranking {
                     } else {
                         vec![alternatives]
                     },
+                    confirmation: None,
                 }
             }
             None => Verdict {
@@ -69,6 +70,7 @@ impl Ranking {
                 score: self.effects.first().map_or(0.0, |e| e.score),
                 reason: self.reason.clone(),
                 alternatives: Vec::new(),
+                confirmation: None,
             },
         }
     }

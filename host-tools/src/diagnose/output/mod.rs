@@ -133,6 +133,7 @@ mod tests {
                 score: 1234.5,
                 reason: "explains 87 % of the nominal chi2".into(),
                 alternatives: vec![],
+                confirmation: None,
             },
             recalibration: vec![],
             remainder: vec![],
@@ -384,6 +385,7 @@ mod tests {
             score: f64::NAN,
             reason: String::new(),
             alternatives: vec![],
+            confirmation: None,
         };
         let md = markdown(&r, &[]);
         assert!(md.contains("**none**"));
