@@ -306,21 +306,37 @@ impl Instance {
         let s = unsafe {
             let mut s = 0;
             if n.0 > 0 {
-                s = s.max((self.api.get_real)(c, rows.real_vr.as_ptr(), n.0, rows.reals.as_mut_ptr()));
+                s = s.max((self.api.get_real)(
+                    c,
+                    rows.real_vr.as_ptr(),
+                    n.0,
+                    rows.reals.as_mut_ptr(),
+                ));
             }
             if n.1 > 0 {
-                s = s.max((self.api.get_integer)(c, rows.int_vr.as_ptr(), n.1, rows.ints.as_mut_ptr()));
+                s = s.max((self.api.get_integer)(
+                    c,
+                    rows.int_vr.as_ptr(),
+                    n.1,
+                    rows.ints.as_mut_ptr(),
+                ));
             }
             if n.2 > 0 {
-                s = s.max((self.api.get_boolean)(c, rows.bool_vr.as_ptr(), n.2, rows.bools.as_mut_ptr()));
+                s = s.max((self.api.get_boolean)(
+                    c,
+                    rows.bool_vr.as_ptr(),
+                    n.2,
+                    rows.bools.as_mut_ptr(),
+                ));
             }
             s
         };
         if s > 1 {
             // Which value failed: asked one by one, as the message names it.
-            return Err(self.read_singly(&rows.outputs, t).err().unwrap_or_else(|| {
-                format!("reading the outputs at t = {t} s returned {}", status_name(s))
-            }));
+            return Err(self
+                .read_singly(&rows.outputs, t)
+                .err()
+                .unwrap_or_else(|| format!("reading the outputs at t = {t} s returned {}", status_name(s))));
         }
         for (j, &(group, k)) in rows.order.iter().enumerate() {
             let x = match group {

@@ -79,7 +79,11 @@ fn read_answer(out: &mut impl BufRead) -> Option<Answer> {
             if out.read_exact(&mut bytes[..n]).is_err() {
                 return None;
             }
-            data.extend(bytes[..n].chunks_exact(8).map(|c| f64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]])));
+            data.extend(
+                bytes[..n]
+                    .chunks_exact(8)
+                    .map(|c| f64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]])),
+            );
             left -= n;
         }
     }
