@@ -306,8 +306,8 @@ impl FmuModel {
 
     /// [`Self::run_with_friction`]; with `all` false only the three
     /// signals come back (position, velocity and the impacts are None):
-    /// the worker still reads and checks every mapped output, it pipes
-    /// half the samples.
+    /// the worker reads and pipes only those (all of them when it drives
+    /// friction, which reads the velocity).
     pub fn run_keeping(
         &self,
         supply_pa: f64,
@@ -341,10 +341,18 @@ impl FmuModel {
         let (sv, per_unit, reference) = plan.supply;
         starts.push((sv, from_gauge_pa(supply_pa, per_unit, reference)));
         let drive = self.drive(plan, outside, supply_pa)?;
+        // A run for its three signals reads only those (a third of a run of
+        // the project's own FMU went to reading outputs); the friction
+        // drive needs the velocity, so a driven run reads every output.
+        let read = if all || drive.is_some() {
+            plan.outputs.len()
+        } else {
+            SIGNALS
+        };
         let send = if all { plan.outputs.len() } else { SIGNALS };
         let request = Request::Run {
             starts,
-            outputs: plan.outputs.clone(),
+            outputs: plan.outputs[..read].to_vec(),
             send,
             step_s: plan.step_s,
             steps: steps as usize,

@@ -27,10 +27,9 @@ pub enum Request {
         preload: Vec<PathBuf>,
     },
     /// One run from t = 0: values set before initialisation, `steps`
-    /// communication steps of `step_s`, `outputs` read at each point; the
-    /// first `send` of them are sent back (a run whose caller needs only
-    /// the three signals does not pipe the rest; every output is still
-    /// read, and checked, and the drive reads its velocity).
+    /// communication steps of `step_s`, `outputs` read (and checked
+    /// finite) at each point; the first `send` of them are sent back (a
+    /// driven run reads its velocity without needing it back).
     Run {
         starts: Vec<(Typed, f64)>,
         outputs: Vec<Typed>,
