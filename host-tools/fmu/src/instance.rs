@@ -22,15 +22,15 @@ use hammer_sim::simulate::ENDLESS_S;
 use hammer_sim::stepper::Stepper;
 use hammer_sim::SimConfig;
 
-use crate::table::{Binding, Kind, Table, Val};
+use crate::table::{Binding, Kind, Out, Table, Val};
 use crate::variants::VariantsConfig;
 
 /// A run under way, of either family.
 pub trait Runner {
     /// Advances to the communication point `t_s` (see the module's doc).
     fn advance_to(&mut self, t_s: f64) -> Result<(), String>;
-    /// The output named `name` at the communication point.
-    fn output(&self, name: &str) -> Val;
+    /// Output `which` at the communication point.
+    fn output(&self, which: Out) -> Val;
     /// The communication point reached.
     fn time_s(&self) -> f64;
     /// The output grid's step, s.
@@ -97,8 +97,8 @@ impl Runner for Run {
     fn advance_to(&mut self, t_s: f64) -> Result<(), String> {
         Run::advance_to(self, t_s)
     }
-    fn output(&self, name: &str) -> Val {
-        Run::output(self, name)
+    fn output(&self, which: Out) -> Val {
+        Run::output(self, which)
     }
     fn time_s(&self) -> f64 {
         self.time_s
@@ -151,8 +151,8 @@ impl Run {
         Ok(())
     }
 
-    /// The output named `name` ([`crate::table::OUTPUTS`]).
-    fn output(&self, name: &str) -> Val {
+    /// Output `which` ([`crate::table::OUTPUTS`]).
+    fn output(&self, which: Out) -> Val {
         let Some((s, m)) = &self.probe.last else {
             return Val::Real(0.0);
         };
@@ -160,24 +160,23 @@ impl Run {
         let md = self.stepper.model();
         // p·V = m·R·T with the state's absolute pressure.
         let temperature = |p: usize, mass: usize, volume_m3: f64| y[p] * volume_m3 / (y[mass] * R_AIR);
-        let x = match name {
-            "p_rear_true_pa" => s.p_rear_pa,
-            "p_front_true_pa" => s.p_front_pa,
-            "accel_true_mps2" => s.accel_mps2,
-            "p_rear_pa" => m.values[0],
-            "p_front_pa" => m.values[1],
-            "accel_mps2" => m.values[2],
-            "x_m" => s.x_m,
-            "v_mps" => s.v_mps,
-            "valve_m" => s.valve_m,
-            "rear_mass_kg" => y[model::M1],
-            "front_mass_kg" => y[model::M2],
-            "rear_temperature_k" => temperature(model::P1, model::M1, md.rear_volume_m3(s.x_m)),
-            "front_temperature_k" => temperature(model::P2, model::M2, md.front_volume_m3(s.x_m)),
-            "impact_count" => return Val::Integer(self.impacts),
-            "last_impact_velocity_mps" => self.last_impact.map_or(0.0, |(_, v)| v),
-            "last_period_s" => self.last_period_s,
-            _ => f64::NAN,
+        let x = match which {
+            Out::PRearTrue => s.p_rear_pa,
+            Out::PFrontTrue => s.p_front_pa,
+            Out::AccelTrue => s.accel_mps2,
+            Out::PRear => m.values[0],
+            Out::PFront => m.values[1],
+            Out::Accel => m.values[2],
+            Out::X => s.x_m,
+            Out::V => s.v_mps,
+            Out::Valve => s.valve_m,
+            Out::RearMass => y[model::M1],
+            Out::FrontMass => y[model::M2],
+            Out::RearTemperature => temperature(model::P1, model::M1, md.rear_volume_m3(s.x_m)),
+            Out::FrontTemperature => temperature(model::P2, model::M2, md.front_volume_m3(s.x_m)),
+            Out::ImpactCount => return Val::Integer(self.impacts),
+            Out::LastImpactVelocity => self.last_impact.map_or(0.0, |(_, v)| v),
+            Out::LastPeriod => self.last_period_s,
         };
         Val::Real(x)
     }
@@ -332,10 +331,10 @@ impl Instance {
     /// The value of `vr`; an output before the run is the initial state's.
     pub fn get(&self, vr: u32, kind: Kind) -> Result<Val, Refusal> {
         let i = self.variable(vr, kind)?;
-        let name = &self.table.vars[i].name;
+        let which = |k: usize| Out::ALL.get(k).copied().ok_or_else(|| format!("no output {k}"));
         match (&self.table.vars[i].binding, &self.run) {
-            (Binding::Output(_), Some(run)) => Ok(run.output(name)),
-            (Binding::Output(_), None) if self.phase == Phase::Initialising => Ok(self.start_run()?.output(name)),
+            (Binding::Output(k), Some(run)) => Ok(run.output(which(*k)?)),
+            (Binding::Output(k), None) if self.phase == Phase::Initialising => Ok(self.start_run()?.output(which(*k)?)),
             (Binding::Output(_), None) => Ok(self.table.vars[i].start),
             _ => Ok(self.values[i]),
         }

@@ -80,6 +80,50 @@ const fn out(name: &'static str, unit: &'static str, description: &'static str) 
     }
 }
 
+/// An output by its place in [`outputs`]: what a run is asked for at
+/// every communication point, so by a number, not by its name.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Out {
+    PRearTrue,
+    PFrontTrue,
+    AccelTrue,
+    PRear,
+    PFront,
+    Accel,
+    X,
+    V,
+    Valve,
+    RearMass,
+    RearTemperature,
+    FrontMass,
+    FrontTemperature,
+    ImpactCount,
+    LastImpactVelocity,
+    LastPeriod,
+}
+
+impl Out {
+    /// In [`outputs`]' order.
+    pub const ALL: [Out; 16] = [
+        Out::PRearTrue,
+        Out::PFrontTrue,
+        Out::AccelTrue,
+        Out::PRear,
+        Out::PFront,
+        Out::Accel,
+        Out::X,
+        Out::V,
+        Out::Valve,
+        Out::RearMass,
+        Out::RearTemperature,
+        Out::FrontMass,
+        Out::FrontTemperature,
+        Out::ImpactCount,
+        Out::LastImpactVelocity,
+        Out::LastPeriod,
+    ];
+}
+
 /// The built-in model's outputs, in value-reference order after the parameters.
 pub const OUTPUTS: [Output; 16] = outputs(out("valve_m", "m", "valve spool position (0 feeds the front)"));
 
@@ -391,6 +435,35 @@ fn leaves(v: &Value, path: &mut Vec<String>, skip: &[&str], out: &mut Vec<Variab
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Each output's number names the output of that name, in both families.
+    #[test]
+    fn each_output_is_its_number() {
+        let by_name = |name: &str| match name {
+            "p_rear_true_pa" => Out::PRearTrue,
+            "p_front_true_pa" => Out::PFrontTrue,
+            "accel_true_mps2" => Out::AccelTrue,
+            "p_rear_pa" => Out::PRear,
+            "p_front_pa" => Out::PFront,
+            "accel_mps2" => Out::Accel,
+            "x_m" => Out::X,
+            "v_mps" => Out::V,
+            "valve_m" | "spool" => Out::Valve,
+            "rear_mass_kg" => Out::RearMass,
+            "rear_temperature_k" => Out::RearTemperature,
+            "front_mass_kg" => Out::FrontMass,
+            "front_temperature_k" => Out::FrontTemperature,
+            "impact_count" => Out::ImpactCount,
+            "last_impact_velocity_mps" => Out::LastImpactVelocity,
+            "last_period_s" => Out::LastPeriod,
+            other => panic!("an output without a number: {other}"),
+        };
+        for family in [&OUTPUTS, &crate::variants::VARIANT_OUTPUTS] {
+            for (k, o) in family.iter().enumerate() {
+                assert_eq!(Out::ALL[k], by_name(o.name), "{}", o.name);
+            }
+        }
+    }
 
     /// The default configuration's table gives back the default
     /// configuration; a refused value is named.

@@ -21,7 +21,7 @@ use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
 use crate::instance::Runner;
-use crate::table::{outputs, Choice, Family, Output, Table, Val};
+use crate::table::{outputs, Choice, Family, Out, Output, Table, Val};
 
 /// The second family's outputs: its valve is a spool position, 0 feeds the
 /// front, 1 the rear.
@@ -190,29 +190,28 @@ impl Runner for VariantRun {
         Ok(())
     }
 
-    fn output(&self, name: &str) -> Val {
+    fn output(&self, which: Out) -> Val {
         let Some(s) = &self.last else {
             return Val::Real(0.0);
         };
         let (count, last, period) = self.stepper.impacts();
-        let x = match name {
-            "p_rear_true_pa" => s.p_rear_true_pa,
-            "p_front_true_pa" => s.p_front_true_pa,
-            "accel_true_mps2" => s.accel_true_mps2,
-            "accel_mps2" => s.accel_mps2,
-            "p_rear_pa" => s.p_rear_pa,
-            "p_front_pa" => s.p_front_pa,
-            "x_m" => s.x_m,
-            "v_mps" => s.v_mps,
-            "spool" => s.spool,
-            "rear_mass_kg" => s.m_rear_kg,
-            "front_mass_kg" => s.m_front_kg,
-            "rear_temperature_k" => s.t_rear_k,
-            "front_temperature_k" => s.t_front_k,
-            "impact_count" => return Val::Integer(i32::try_from(count).unwrap_or(i32::MAX)),
-            "last_impact_velocity_mps" => last.map_or(0.0, |(_, v)| v),
-            "last_period_s" => period,
-            _ => f64::NAN,
+        let x = match which {
+            Out::PRearTrue => s.p_rear_true_pa,
+            Out::PFrontTrue => s.p_front_true_pa,
+            Out::AccelTrue => s.accel_true_mps2,
+            Out::Accel => s.accel_mps2,
+            Out::PRear => s.p_rear_pa,
+            Out::PFront => s.p_front_pa,
+            Out::X => s.x_m,
+            Out::V => s.v_mps,
+            Out::Valve => s.spool,
+            Out::RearMass => s.m_rear_kg,
+            Out::FrontMass => s.m_front_kg,
+            Out::RearTemperature => s.t_rear_k,
+            Out::FrontTemperature => s.t_front_k,
+            Out::ImpactCount => return Val::Integer(i32::try_from(count).unwrap_or(i32::MAX)),
+            Out::LastImpactVelocity => last.map_or(0.0, |(_, v)| v),
+            Out::LastPeriod => period,
         };
         Val::Real(x)
     }

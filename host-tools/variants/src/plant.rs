@@ -5,7 +5,9 @@ use std::f64::consts::PI;
 
 use hammer_sim::effects::Effects;
 
-use crate::flow::{annular_gap, circular_segment_fraction, iso6358, smooth_ramp_fraction, CP, GAMMA, P_ATM, R};
+use crate::flow::{
+    annular_gap, circular_segment_fraction, iso6358_at, smooth_ramp_fraction, Temp, CP, GAMMA, P_ATM, R,
+};
 use crate::structure::{AnvilLaw, ChamberLaw, PortLaw, Structure, SupplyLaw, VariantParams};
 
 pub const X: usize = 0;
@@ -59,6 +61,29 @@ pub struct Plant {
     contact_c: f64,
     restriction_c: f64,
     drags: hammer_sim::effects::PistonDrags,
+    /// The run's constants [`Plant::deriv`] would otherwise work out at
+    /// every evaluation (four per 1 µs step), each the same expression of
+    /// the same values, so the same bits: the supply and ambient
+    /// temperatures with their flow factor, the hose's and lines'
+    /// coefficients, the tool's collar and workpiece damping.
+    ts: Temp,
+    ta: Temp,
+    consts: Consts,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Consts {
+    /// R·T of the supply air.
+    r_ts: f64,
+    /// The line volume's R·T/V behind a supply restriction.
+    line_gain: f64,
+    hose_area: f64,
+    /// 0.03·L/D of the hose's loss, A/L of its flow, R·T/V of the inlet volume.
+    hose_loss: f64,
+    hose_gain: f64,
+    inlet_gain: f64,
+    c_collar: f64,
+    c_workpiece: f64,
 }
 
 impl Plant {
@@ -75,6 +100,19 @@ impl Plant {
             .supply_restriction
             .as_ref()
             .map_or(0.0, |r| 1.99e-3 * 0.62 * PI * 0.25 * r.orifice_diameter_m.powi(2));
+        let ts = p.supply_temperature_k;
+        let hose_area = PI * 0.25 * p.hose_diameter_m.powi(2);
+        let kw = p.workpiece_stiffness_n_per_m;
+        let consts = Consts {
+            r_ts: R * ts,
+            line_gain: e.supply_restriction.as_ref().map_or(0.0, |r| R * ts / r.line_volume_m3),
+            hose_area,
+            hose_loss: 0.03 * p.hose_length_m / p.hose_diameter_m,
+            hose_gain: hose_area / p.hose_length_m,
+            inlet_gain: R * ts / p.inlet_volume_m3,
+            c_collar: 2.0 * 0.7 * (COLLAR_N_PER_M * p.tool_mass_kg).sqrt(),
+            c_workpiece: 2.0 * 0.5 * (kw * p.tool_mass_kg).sqrt(),
+        };
         Self {
             supply_abs: P_ATM + supply_bar * 1e5,
             supply_bar,
@@ -83,6 +121,9 @@ impl Plant {
             contact_c,
             restriction_c,
             drags: e.piston_drags(),
+            ts: Temp::fixed(ts),
+            ta: Temp::fixed(p.ambient_temperature_k),
+            consts,
             p,
             s,
             e,
@@ -180,21 +221,21 @@ impl Plant {
         let s = y[S].clamp(0.0, 1.0);
         let open_rear = (2.0 * s - 1.0).clamp(0.0, 1.0);
         let open_front = (1.0 - 2.0 * s).clamp(0.0, 1.0);
-        let q3 = iso6358(
+        let q3 = iso6358_at(
             p.valve_conductance * open_rear,
             p.valve_critical_ratio,
             p_in,
-            ts,
+            self.ts,
             p1,
-            t1,
+            Temp::at(t1),
         );
-        let q4 = iso6358(
+        let q4 = iso6358_at(
             p.valve_conductance * open_front,
             p.valve_critical_ratio,
             p_in,
-            ts,
+            self.ts,
             p2,
-            t2,
+            Temp::at(t2),
         );
 
         // Outlets uncovered by the piston.
@@ -202,21 +243,21 @@ impl Plant {
             PortLaw::CircularSegment => circular_segment_fraction(p.port_diameter_m, u),
             PortLaw::SmoothRamp => smooth_ramp_fraction(p.port_ramp_m, u),
         };
-        let qo1 = iso6358(
+        let qo1 = iso6358_at(
             p.port_conductance * frac(x - p.rear_port_m),
             p.port_critical_ratio,
             p1,
-            t1,
+            Temp::at(t1),
             P_ATM,
-            ta,
+            self.ta,
         );
-        let qo2 = iso6358(
+        let qo2 = iso6358_at(
             p.port_conductance * frac(p.front_port_m - x),
             p.port_critical_ratio,
             p2,
-            t2,
+            Temp::at(t2),
             P_ATM,
-            ta,
+            self.ta,
         );
 
         let (mut q12, mut q2a) = (0.0, 0.0);
@@ -267,18 +308,19 @@ impl Plant {
         let source = self.supply_abs;
         let restricted = self.line_volume();
         let node = if restricted.is_some() { y[PR] } else { source };
-        if let Some(vol) = restricted {
-            let q_in = iso6358(self.restriction_c, 0.5, source, ts, y[PR], ts);
+        let c = &self.consts;
+        if restricted.is_some() {
+            let q_in = iso6358_at(self.restriction_c, 0.5, source, self.ts, y[PR], self.ts);
             let q_out = if self.s.supply == SupplyLaw::Hose { y[W] } else { drawn };
-            dy[PR] = R * ts / vol * (q_in - q_out);
+            dy[PR] = c.line_gain * (q_in - q_out);
         }
         if self.s.supply == SupplyLaw::Hose {
-            let area = PI * 0.25 * p.hose_diameter_m.powi(2);
-            let rho = 0.5 * (node + y[PIN]) / (R * ts);
+            let area = c.hose_area;
+            let rho = 0.5 * (node + y[PIN]) / c.r_ts;
             let w = y[W];
-            let loss = 0.03 * p.hose_length_m / p.hose_diameter_m * w * w.abs() / (2.0 * rho * area * area);
-            dy[W] = area / p.hose_length_m * (node - y[PIN] - loss);
-            dy[PIN] = R * ts / p.inlet_volume_m3 * (w - drawn);
+            let loss = c.hose_loss * w * w.abs() / (2.0 * rho * area * area);
+            dy[W] = c.hose_gain * (node - y[PIN] - loss);
+            dy[PIN] = c.inlet_gain * (w - drawn);
         }
 
         // Spool: the command (lagged by a valve delay) moves it first-order.
@@ -311,13 +353,11 @@ impl Plant {
                 contact = -push;
                 let xt = y[XT];
                 let mut f_tool = push - p.feed_force_n;
-                let c_collar = 2.0 * 0.7 * (COLLAR_N_PER_M * p.tool_mass_kg).sqrt();
                 if xt < p.x_impact_m {
-                    f_tool += (COLLAR_N_PER_M * (p.x_impact_m - xt) - c_collar * y[VT]).max(0.0);
+                    f_tool += (COLLAR_N_PER_M * (p.x_impact_m - xt) - c.c_collar * y[VT]).max(0.0);
                 } else {
                     let kw = p.workpiece_stiffness_n_per_m;
-                    let cw = 2.0 * 0.5 * (kw * p.tool_mass_kg).sqrt();
-                    f_tool -= kw * (xt - p.x_impact_m) + cw * y[VT];
+                    f_tool -= kw * (xt - p.x_impact_m) + c.c_workpiece * y[VT];
                 }
                 dy[XT] = y[VT];
                 dy[VT] = f_tool / p.tool_mass_kg;

@@ -90,6 +90,10 @@ pub struct FrontEndState {
     accel: Analog,
     noise: Noise,
     started: bool,
+    /// The low-pass filters' gain with the step and bandwidth it was worked
+    /// out for (an exponential per 1 µs step otherwise; the same
+    /// expression, so the same bits).
+    alpha: Option<(f64, f64, f64)>,
 }
 
 impl FrontEndState {
@@ -101,6 +105,7 @@ impl FrontEndState {
             accel: Analog::default(),
             noise: Noise::new(seed),
             started: false,
+            alpha: None,
         }
     }
 
@@ -113,7 +118,15 @@ impl FrontEndState {
             self.accel.res_y = accel_mps2;
             self.started = true;
         }
-        let alpha = 1.0 - (-2.0 * std::f64::consts::PI * self.ch.bandwidth_hz * h).exp();
+        let bw = self.ch.bandwidth_hz;
+        let alpha = match self.alpha {
+            Some((step, band, alpha)) if step.to_bits() == h.to_bits() && band.to_bits() == bw.to_bits() => alpha,
+            _ => {
+                let alpha = 1.0 - (-2.0 * std::f64::consts::PI * bw * h).exp();
+                self.alpha = Some((h, bw, alpha));
+                alpha
+            }
+        };
         let mut a = accel_mps2;
         if let Some(f) = self.ch.resonance_hz {
             // A base-excited mount: second order, semi-implicit Euler (ω·h ≈ 0.1).

@@ -163,7 +163,7 @@ impl Plant for FmuPlant {
         let (settings, outside) = self.settings(nuisance, effects, supply_bar)?;
         let s = self
             .model
-            .run_with_friction(supply_bar * 1e5, &settings, &outside, duration_s)
+            .run_keeping(supply_bar * 1e5, &settings, &outside, duration_s, keep == Keep::All)
             .inspect_err(|e| self.note(e))
             .map_err(|e| e.to_string())?;
         Ok(trace(s, keep))

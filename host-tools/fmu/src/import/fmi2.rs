@@ -230,9 +230,12 @@ impl Instance {
 
     /// Sets the values before initialisation, runs to `stop_s` in steps of
     /// `step_s` and reads `outputs` at t = 0 and after each step, row by
-    /// row. `reset` first when the instance ran before.
+    /// row, into `out` (cleared first; the worker keeps one buffer, so a
+    /// run makes no allocation of its own). `reset` first when the
+    /// instance ran before.
     /// `drive`, if given, is asked before each step for an input to set
     /// (held over the step) from the time and the last row read.
+    #[allow(clippy::too_many_arguments)]
     pub fn run(
         &mut self,
         reset: bool,
@@ -241,7 +244,8 @@ impl Instance {
         step_s: f64,
         steps: usize,
         mut drive: Option<&mut dyn FnMut(f64, &[f64]) -> (Typed, f64)>,
-    ) -> Result<Vec<f64>, String> {
+        out: &mut Vec<f64>,
+    ) -> Result<(), String> {
         let c = self.comp;
         // SAFETY (every call below): the instance is live and the arrays
         // hold the counts passed.
@@ -257,8 +261,10 @@ impl Instance {
             check((self.api.enter_init)(c), "fmi2EnterInitializationMode")?;
             check((self.api.exit_init)(c), "fmi2ExitInitializationMode")?;
         }
-        let mut out = Vec::with_capacity(outputs.len() * (steps + 1));
-        self.read(outputs, 0.0, &mut out)?;
+        let mut rows = Rows::of(outputs);
+        out.clear();
+        out.reserve(outputs.len() * (steps + 1));
+        self.read(&mut rows, 0.0, out)?;
         for k in 0..steps {
             let t = step_s * k as f64;
             if let Some(d) = drive.as_mut() {
@@ -272,9 +278,9 @@ impl Instance {
             // SAFETY: as above.
             let s = unsafe { (self.api.do_step)(c, t, step_s, 1) };
             check_with(s, || format!("fmi2DoStep at t = {t} s"))?;
-            self.read(outputs, step_s * (k + 1) as f64, &mut out)?;
+            self.read(&mut rows, step_s * (k + 1) as f64, out)?;
         }
-        Ok(out)
+        Ok(())
     }
 
     unsafe fn set(&mut self, v: Typed, x: f64) -> Result<(), String> {
@@ -290,7 +296,67 @@ impl Instance {
         check_with(s, || format!("setting value reference {} to {x}", vr_of(v)))
     }
 
-    fn read(&mut self, outputs: &[Typed], t: f64, out: &mut Vec<f64>) -> Result<(), String> {
+    /// One row: each base type's outputs in one `fmi2Get*` call (a call
+    /// per value cost a third of a run of the project's own FMU), then
+    /// placed in the row's order and checked finite.
+    fn read(&mut self, rows: &mut Rows, t: f64, out: &mut Vec<f64>) -> Result<(), String> {
+        let c = self.comp;
+        let n = (rows.real_vr.len(), rows.int_vr.len(), rows.bool_vr.len());
+        // SAFETY: each array holds the count passed; live instance.
+        let s = unsafe {
+            let mut s = 0;
+            if n.0 > 0 {
+                s = s.max((self.api.get_real)(
+                    c,
+                    rows.real_vr.as_ptr(),
+                    n.0,
+                    rows.reals.as_mut_ptr(),
+                ));
+            }
+            if n.1 > 0 {
+                s = s.max((self.api.get_integer)(
+                    c,
+                    rows.int_vr.as_ptr(),
+                    n.1,
+                    rows.ints.as_mut_ptr(),
+                ));
+            }
+            if n.2 > 0 {
+                s = s.max((self.api.get_boolean)(
+                    c,
+                    rows.bool_vr.as_ptr(),
+                    n.2,
+                    rows.bools.as_mut_ptr(),
+                ));
+            }
+            s
+        };
+        if s > 1 {
+            // Which value failed: asked one by one, as the message names it.
+            return Err(self
+                .read_singly(&rows.outputs, t)
+                .err()
+                .unwrap_or_else(|| format!("reading the outputs at t = {t} s returned {}", status_name(s))));
+        }
+        for (j, &(group, k)) in rows.order.iter().enumerate() {
+            let x = match group {
+                Group::Real => rows.reals[k],
+                Group::Integer => f64::from(rows.ints[k]),
+                Group::Boolean => f64::from(rows.bools[k]),
+            };
+            if !x.is_finite() {
+                return Err(format!(
+                    "non-finite output (value reference {}) = {x} at t = {t} s",
+                    vr_of(rows.outputs[j])
+                ));
+            }
+            out.push(x);
+        }
+        Ok(())
+    }
+
+    /// The outputs read one call each: the failing one named.
+    fn read_singly(&mut self, outputs: &[Typed], t: f64) -> Result<(), String> {
         for v in outputs {
             let mut r = 0.0f64;
             let mut i: c_int = 0;
@@ -303,16 +369,56 @@ impl Instance {
                 }
             };
             check_with(s, || format!("reading value reference {} at t = {t} s", vr_of(*v)))?;
-            let x = if matches!(v, Typed::Real(_)) { r } else { f64::from(i) };
-            if !x.is_finite() {
-                return Err(format!(
-                    "non-finite output (value reference {}) = {x} at t = {t} s",
-                    vr_of(*v)
-                ));
-            }
-            out.push(x);
         }
         Ok(())
+    }
+}
+
+#[derive(Clone, Copy)]
+enum Group {
+    Real,
+    Integer,
+    Boolean,
+}
+
+/// The outputs of a row grouped by base type, and where each goes.
+struct Rows {
+    outputs: Vec<Typed>,
+    real_vr: Vec<Vr>,
+    int_vr: Vec<Vr>,
+    bool_vr: Vec<Vr>,
+    reals: Vec<f64>,
+    ints: Vec<c_int>,
+    bools: Vec<c_int>,
+    /// Per column of the row: which group, and the place in it.
+    order: Vec<(Group, usize)>,
+}
+
+impl Rows {
+    fn of(outputs: &[Typed]) -> Self {
+        let mut r = Rows {
+            outputs: outputs.to_vec(),
+            real_vr: Vec::new(),
+            int_vr: Vec::new(),
+            bool_vr: Vec::new(),
+            reals: Vec::new(),
+            ints: Vec::new(),
+            bools: Vec::new(),
+            order: Vec::new(),
+        };
+        for v in outputs {
+            let (kind, group, vr) = match *v {
+                Typed::Real(vr) => (Group::Real, &mut r.real_vr, vr),
+                Typed::Integer(vr) => (Group::Integer, &mut r.int_vr, vr),
+                Typed::Boolean(vr) => (Group::Boolean, &mut r.bool_vr, vr),
+            };
+            group.push(vr);
+            r.order.push((kind, group.len() - 1));
+        }
+        r.reals = vec![0.0; r.real_vr.len()];
+        r.ints = vec![0; r.int_vr.len()];
+        r.bools = vec![0; r.bool_vr.len()];
+        r
     }
 }
 

@@ -301,6 +301,21 @@ impl FmuModel {
         outside: &hammer_sim::Effects,
         duration_s: f64,
     ) -> Result<Signals, FmuError> {
+        self.run_keeping(supply_pa, settings, outside, duration_s, true)
+    }
+
+    /// [`Self::run_with_friction`]; with `all` false only the three
+    /// signals come back (position, velocity and the impacts are None):
+    /// the worker reads and pipes only those (all of them when it drives
+    /// friction, which reads the velocity).
+    pub fn run_keeping(
+        &self,
+        supply_pa: f64,
+        settings: &[(String, f64)],
+        outside: &hammer_sim::Effects,
+        duration_s: f64,
+        all: bool,
+    ) -> Result<Signals, FmuError> {
         let plan = self
             .plan
             .as_ref()
@@ -326,9 +341,19 @@ impl FmuModel {
         let (sv, per_unit, reference) = plan.supply;
         starts.push((sv, from_gauge_pa(supply_pa, per_unit, reference)));
         let drive = self.drive(plan, outside, supply_pa)?;
+        // A run for its three signals reads only those (a third of a run of
+        // the project's own FMU went to reading outputs); the friction
+        // drive needs the velocity, so a driven run reads every output.
+        let read = if all || drive.is_some() {
+            plan.outputs.len()
+        } else {
+            SIGNALS
+        };
+        let send = if all { plan.outputs.len() } else { SIGNALS };
         let request = Request::Run {
             starts,
-            outputs: plan.outputs.clone(),
+            outputs: plan.outputs[..read].to_vec(),
+            send,
             step_s: plan.step_s,
             steps: steps as usize,
             drive,
@@ -359,7 +384,7 @@ impl FmuModel {
                 });
             }
         };
-        Ok(signals(plan, &data))
+        Ok(signals(plan, &data, all))
     }
 }
 
@@ -477,12 +502,17 @@ fn plan(map: &ModelMap, desc: &Description) -> Result<Plan, String> {
     })
 }
 
-fn signals(plan: &Plan, data: &[f64]) -> Signals {
-    let cols = plan.outputs.len();
+/// The columns every run reads first: rear and front pressure, acceleration.
+const SIGNALS: usize = 3;
+
+/// The samples of a run as [`Signals`]; `all`: every mapped output was
+/// sent, else the first [`SIGNALS`].
+fn signals(plan: &Plan, data: &[f64], all: bool) -> Signals {
+    let cols = if all { plan.outputs.len() } else { SIGNALS };
     let column = |j: usize| -> Vec<f64> { data.chunks_exact(cols).map(|row| plan.convs[j].apply(row[j])).collect() };
-    let mut next = 3;
+    let mut next = SIGNALS;
     let mut optional = |on: bool| {
-        on.then(|| {
+        (all && on).then(|| {
             next += 1;
             column(next - 1)
         })

@@ -69,14 +69,23 @@ fn read_answer(out: &mut impl BufRead) -> Option<Answer> {
     };
     let mut data = Vec::new();
     if let Reply::Samples { values } = reply {
-        let mut bytes = vec![0u8; values * 8];
-        if out.read_exact(&mut bytes).is_err() {
-            return None;
+        // Read through one small buffer: the run's bytes are never held
+        // whole beside its values.
+        data.reserve_exact(values);
+        let mut bytes = [0u8; 8192];
+        let mut left = values * 8;
+        while left > 0 {
+            let n = left.min(bytes.len());
+            if out.read_exact(&mut bytes[..n]).is_err() {
+                return None;
+            }
+            data.extend(
+                bytes[..n]
+                    .chunks_exact(8)
+                    .map(|c| f64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]])),
+            );
+            left -= n;
         }
-        data = bytes
-            .chunks_exact(8)
-            .map(|c| f64::from_le_bytes(c.try_into().unwrap_or([0; 8])))
-            .collect();
     }
     Some(Ok((reply, data)))
 }

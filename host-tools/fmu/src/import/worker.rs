@@ -5,8 +5,9 @@
 //!
 //! Protocol: the host writes one JSON [`Request`] per line; the worker
 //! answers each with one JSON [`Reply`] line, a [`Reply::Samples`] followed
-//! by its values as little-endian f64 (row by row: t = 0, then each step),
-//! so a run's samples cross the pipe exactly and without formatting.
+//! by its values as little-endian f64 (row by row: t = 0, then each step;
+//! the columns the request asks back), so a run's samples cross the pipe
+//! exactly and without formatting.
 
 use std::io::{BufRead, Write};
 use std::path::PathBuf;
@@ -26,10 +27,13 @@ pub enum Request {
         preload: Vec<PathBuf>,
     },
     /// One run from t = 0: values set before initialisation, `steps`
-    /// communication steps of `step_s`, `outputs` read at each point.
+    /// communication steps of `step_s`, `outputs` read (and checked
+    /// finite) at each point; the first `send` of them are sent back (a
+    /// driven run reads its velocity without needing it back).
     Run {
         starts: Vec<(Typed, f64)>,
         outputs: Vec<Typed>,
+        send: usize,
         step_s: f64,
         steps: usize,
         drive: Option<Drive>,
@@ -78,15 +82,46 @@ pub enum Reply {
     Failed(String),
 }
 
-fn send(out: &mut impl Write, reply: &Reply, data: &[f64]) -> std::io::Result<()> {
+/// The samples a reply carries: the first `send` of every `row` values.
+struct Columns<'a> {
+    data: &'a [f64],
+    row: usize,
+    send: usize,
+}
+
+impl Columns<'_> {
+    const NONE: Columns<'static> = Columns {
+        data: &[],
+        row: 1,
+        send: 0,
+    };
+
+    fn values(&self) -> usize {
+        self.data.len() / self.row * self.send
+    }
+}
+
+/// Bytes of samples converted at a time: a run's samples (megabytes) are
+/// never copied whole, so the worker allocates nothing per run.
+const CHUNK: usize = 8192;
+
+fn send(out: &mut impl Write, reply: &Reply, samples: Columns) -> std::io::Result<()> {
     let line = serde_json::to_string(reply).map_err(std::io::Error::other)?;
     out.write_all(line.as_bytes())?;
     out.write_all(b"\n")?;
-    let mut bytes = Vec::with_capacity(data.len() * 8);
-    for x in data {
-        bytes.extend(x.to_le_bytes());
+    let mut bytes = [0u8; CHUNK];
+    let mut n = 0;
+    for row in samples.data.chunks_exact(samples.row) {
+        for x in &row[..samples.send] {
+            bytes[n..n + 8].copy_from_slice(&x.to_le_bytes());
+            n += 8;
+            if n == CHUNK {
+                out.write_all(&bytes)?;
+                n = 0;
+            }
+        }
     }
-    out.write_all(&bytes)?;
+    out.write_all(&bytes[..n])?;
     out.flush()
 }
 
@@ -112,6 +147,8 @@ pub fn serve() -> i32 {
     let mut stdout = std::io::BufWriter::new(out);
     let mut instance: Option<Instance> = None;
     let mut ran = false;
+    // Every run's samples, in the one buffer.
+    let mut samples: Vec<f64> = Vec::new();
     for line in stdin.lock().lines() {
         let Ok(line) = line else { return 2 };
         let request: Request = match serde_json::from_str(&line) {
@@ -121,7 +158,7 @@ pub fn serve() -> i32 {
                 return 2;
             }
         };
-        let (reply, data) = match request {
+        let (reply, columns) = match request {
             Request::Open {
                 so,
                 guid,
@@ -135,32 +172,43 @@ pub fn serve() -> i32 {
                 match opened {
                     Ok(i) => {
                         instance = Some(i);
-                        (Reply::Ready, Vec::new())
+                        (Reply::Ready, Columns::NONE)
                     }
-                    Err(e) => (Reply::Failed(e), Vec::new()),
+                    Err(e) => (Reply::Failed(e), Columns::NONE),
                 }
             }
             Request::Run {
                 starts,
                 outputs,
+                send,
                 step_s,
                 steps,
                 drive,
             } => match instance.as_mut() {
-                None => (Reply::Failed("no instance".into()), Vec::new()),
+                None => (Reply::Failed("no instance".into()), Columns::NONE),
+                Some(_) if outputs.is_empty() || send > outputs.len() => {
+                    (Reply::Failed("a run must read its outputs".into()), Columns::NONE)
+                }
                 Some(i) => {
                     let mut law = drive.as_ref().map(Drive::law);
                     let hook = law.as_mut().map(|l| l as &mut dyn FnMut(f64, &[f64]) -> (Typed, f64));
-                    let r = i.run(ran, &starts, &outputs, step_s, steps, hook);
+                    let r = i.run(ran, &starts, &outputs, step_s, steps, hook, &mut samples);
                     ran = true;
                     match r {
-                        Ok(v) => (Reply::Samples { values: v.len() }, v),
-                        Err(e) => (Reply::Failed(e), Vec::new()),
+                        Ok(()) => {
+                            let c = Columns {
+                                data: &samples,
+                                row: outputs.len(),
+                                send,
+                            };
+                            (Reply::Samples { values: c.values() }, c)
+                        }
+                        Err(e) => (Reply::Failed(e), Columns::NONE),
                     }
                 }
             },
         };
-        if send(&mut stdout, &reply, &data).is_err() {
+        if send(&mut stdout, &reply, columns).is_err() {
             return 2;
         }
     }
