@@ -4,12 +4,12 @@
 //! `hammer_fmu::import`, never by hand).
 
 use std::path::PathBuf;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use anyhow::{Context, Result};
 use clap::{Args, Subcommand};
 
-use hammer_fmu::import::{cycling, FmuModel, ModelMap, Options, WorkerCommand};
+use hammer_fmu::import::{cycling, FmuModel, ModelMap, WorkerCommand};
 use hammer_sim::SimConfig;
 use hammer_trace::config::load_toml;
 
@@ -148,21 +148,8 @@ pub(crate) fn open_model(
     threads: usize,
     time_limit_s: f64,
 ) -> Result<(FmuModel, PathBuf)> {
-    let map_path = model_map.map_or_else(|| hammer_fmu::map_path(fmu), std::path::Path::to_path_buf);
-    let map = if model_map.is_none() && !map_path.is_file() {
-        None
-    } else {
-        Some(ModelMap::read(&map_path).map_err(anyhow::Error::msg)?)
-    };
-    if !(time_limit_s > 0.0 && time_limit_s.is_finite()) {
-        anyhow::bail!("the time limit must be positive seconds");
-    }
-    let opts = Options {
-        threads,
-        time_limit: Duration::from_secs_f64(time_limit_s),
-        worker: WorkerCommand::this_program().map_err(anyhow::Error::msg)?,
-    };
-    Ok((FmuModel::open(fmu, map, opts)?, map_path))
+    let worker = WorkerCommand::this_program().map_err(anyhow::Error::msg)?;
+    FmuModel::open_mapped(fmu, model_map, threads, time_limit_s, worker).map_err(anyhow::Error::msg)
 }
 
 /// The map of an FMU opened with one, else the error that says how to give it.

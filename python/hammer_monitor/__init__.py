@@ -213,6 +213,9 @@ def diagnose(
     *,
     nominal_uncertainty: float = 0.2,
     figures: bool = False,
+    model: PathLike | None = None,
+    model_map: PathLike | None = None,
+    model_time_limit_s: float = 60.0,
 ):
     """The sim-to-real gap diagnosis, as ``hammer diagnose`` runs it (docs/diagnosis.md).
 
@@ -234,6 +237,14 @@ def diagnose(
     ``accel_mps2``, ``velocity_mps``) and the stage of each sample, as the
     CLI's figures draw them. A diagnosis takes seconds to minutes; it releases
     the GIL and returns on Ctrl-C.
+
+    ``model`` is your own model as an FMI 2.0 co-simulation FMU, fitted in
+    place of the built-in one (``hammer diagnose --model``, docs/your-model.md),
+    with ``model_map`` its map (default: ``X.map.toml`` beside ``X.fmu``) and
+    ``model_time_limit_s`` the longest one run may take. The FMU runs in
+    worker processes of this Python (``sys.executable``): an FMU that
+    crashes or hangs raises ``ValueError`` naming it, never this process.
+    ``config`` still describes the measured hammer.
     """
     report, waves = _native.diagnose(
         _traces(measured, "measured"),
@@ -242,6 +253,9 @@ def diagnose(
         _path(config),
         float(nominal_uncertainty),
         bool(figures),
+        _path(model),
+        _path(model_map),
+        float(model_time_limit_s),
     )
     report = json.loads(report)
     if not figures:

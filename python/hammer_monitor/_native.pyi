@@ -25,4 +25,8 @@ def diagnose(
     config: str | None = None,
     nominal_uncertainty: float = 0.2,
     figures: bool = False,
+    model: str | None = None,
+    model_map: str | None = None,
+    model_time_limit_s: float = 60.0,
 ) -> tuple[str, str | None]: ...
+def fmu_worker() -> int: ...

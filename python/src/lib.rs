@@ -6,12 +6,15 @@
 //! - [`columns`]: numbers across the boundary (f64 columns as little-endian
 //!   bytes, which numpy reads without a copy per element);
 //! - [`interrupt`]: long calls run without the GIL and honour Ctrl-C;
+//! - [`model`]: a user's FMU as the diagnosis' model, this Python its
+//!   worker process;
 //! - this file: the functions the Python layer (`hammer_monitor/__init__.py`)
 //!   wraps into pyarrow Tables; every refusal is a `ValueError` carrying the
 //!   CLI's message.
 
 mod columns;
 mod interrupt;
+mod model;
 
 use std::path::{Path, PathBuf};
 
@@ -19,7 +22,7 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict};
 
-use hammer_diagnose::engine::{diagnose_against, Options, PointWaves};
+use hammer_diagnose::engine::{diagnose_against, diagnose_with, Options, PointWaves};
 use hammer_diagnose::gap::CycleSignals;
 use hammer_diagnose::input::{read_request, Request};
 use hammer_estimator::CycleReport;
@@ -184,7 +187,8 @@ fn simulate(
 /// `hammer diagnose` on traces: `report.json`'s content as JSON, and with
 /// `figures` the waveforms the CLI draws (per operating point) as JSON.
 #[pyfunction]
-#[pyo3(signature = (measured, reference=Vec::new(), fit_on=Vec::new(), config=None, nominal_uncertainty=0.2, figures=false))]
+#[pyo3(signature = (measured, reference=Vec::new(), fit_on=Vec::new(), config=None, nominal_uncertainty=0.2, figures=false, model=None, model_map=None, model_time_limit_s=60.0))]
+#[allow(clippy::too_many_arguments)]
 fn diagnose(
     py: Python<'_>,
     measured: Vec<(PathBuf, Option<f64>)>,
@@ -193,7 +197,11 @@ fn diagnose(
     config: Option<PathBuf>,
     nominal_uncertainty: f64,
     figures: bool,
+    model: Option<PathBuf>,
+    model_map: Option<PathBuf>,
+    model_time_limit_s: f64,
 ) -> PyResult<(String, Option<String>)> {
+    let worker = model.as_ref().map(|_| model::python_worker(py)).transpose()?;
     let run = move || -> anyhow::Result<(String, Option<String>)> {
         // The CLI's reading of its inputs (commissioning folders included).
         let read = read_request(&Request {
@@ -209,7 +217,14 @@ fn diagnose(
             figures,
             ..Options::default()
         };
-        let outcome = diagnose_against(&inputs, &references, &base, &opts, &|_, _, _| {})?;
+        let quiet = |_: usize, _: usize, _: &str| {};
+        let outcome = match (model, worker) {
+            (Some(fmu), Some(worker)) => {
+                let plant = model::open_plant(&fmu, model_map.as_deref(), opts.threads, model_time_limit_s, worker)?;
+                diagnose_with(&inputs, &references, &base, plant, &opts, &quiet)?
+            }
+            _ => diagnose_against(&inputs, &references, &base, &opts, &quiet)?,
+        };
         let report = serde_json::to_string(&outcome.report)?;
         let waves = figures.then(|| waves_json(&outcome.waves).to_string());
         Ok((report, waves))
@@ -249,5 +264,6 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(estimate_arrays, m)?)?;
     m.add_function(wrap_pyfunction!(simulate, m)?)?;
     m.add_function(wrap_pyfunction!(diagnose, m)?)?;
+    m.add_function(wrap_pyfunction!(model::fmu_worker, m)?)?;
     Ok(())
 }

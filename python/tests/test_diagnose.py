@@ -66,3 +66,30 @@ def test_one_path_on_its_own_is_one_trace(hammer, friction_traces, tmp_path):
         with pytest.raises(ValueError) as e:
             hm.diagnose(given, fit_on=given)
         assert str(e.value) == expected
+
+
+def test_your_own_model_as_an_fmu_is_the_clis_model_diagnosis(hammer, friction_traces, tmp_path):
+    """`model=` is `hammer diagnose --model`: the project's own FMU (its map
+    beside it), fitted to the same traces, gives the CLI's report, run in
+    worker processes of this Python; and on the built-in model's path the
+    same verdict and parameters (the FMU is that model)."""
+    a, b = friction_traces
+    fmu = tmp_path / "hammer.fmu"
+    hammer.run("fmu", "--out", fmu)
+    out = tmp_path / "cli"
+    hammer.run("diagnose", "--measured", a, "--measured", b, "--fit-on", a, "--model", fmu, "--out", out)
+    cli = json.loads((out / "report.json").read_text())
+    report = hm.diagnose([a, b], fit_on=[a], model=fmu)
+    assert report["model"]["name"] == cli["model"]["name"]
+    assert report["model"]["guid"] == cli["model"]["guid"]
+    assert report["verdict"]["effects"] == cli["verdict"]["effects"] == ["coulomb_friction"]
+    assert report["verdict"]["params"] == cli["verdict"]["params"]
+    builtin = hm.diagnose([a, b], fit_on=[a])
+    assert builtin["verdict"]["params"] == report["verdict"]["params"]
+
+
+def test_a_missing_fmu_is_refused_naming_it(friction_traces, tmp_path):
+    a, b = friction_traces
+    missing = tmp_path / "nowhere.fmu"
+    with pytest.raises(ValueError, match="nowhere.fmu"):
+        hm.diagnose([a, b], fit_on=[a], model=missing)

@@ -136,6 +136,36 @@ impl FmuModel {
         }
     }
 
+    /// [`Self::open`] with the map read from `model_map`, or from beside
+    /// the FMU (`X.map.toml`) where one is: how the CLI and the Python
+    /// package open a user's model, in at most `threads` workers started
+    /// by `worker`, each call within `time_limit_s`. Also returns the
+    /// map's path (for a message that it is missing).
+    pub fn open_mapped(
+        fmu: &Path,
+        model_map: Option<&Path>,
+        threads: usize,
+        time_limit_s: f64,
+        worker: WorkerCommand,
+    ) -> Result<(Self, PathBuf), String> {
+        if !(time_limit_s > 0.0 && time_limit_s.is_finite()) {
+            return Err("the time limit must be positive seconds".into());
+        }
+        let map_path = model_map.map_or_else(|| crate::map_path(fmu), Path::to_path_buf);
+        let map = if model_map.is_none() && !map_path.is_file() {
+            None
+        } else {
+            Some(ModelMap::read(&map_path)?)
+        };
+        let opts = Options {
+            threads,
+            time_limit: Duration::from_secs_f64(time_limit_s),
+            worker,
+        };
+        let model = Self::open(fmu, map, opts).map_err(|e| e.to_string())?;
+        Ok((model, map_path))
+    }
+
     /// Opens `fmu` (unpacks, reads its description, checks `map` against
     /// it, loads the binary in a first worker and instantiates it).
     pub fn open(fmu: &Path, map: Option<(ModelMap, String)>, mut opts: Options) -> Result<Self, FmuError> {
