@@ -100,7 +100,7 @@ pub fn diagnose_with(
         dead_volume_rows(&runner.extractor, &hammer)
     };
     let mut grouped = group::group(inputs, &hammer)?;
-    let total_steps = grouped.points.len() + EFFECT_NAMES.len() + 3;
+    let total_steps = grouped.points.len() + EFFECT_NAMES.len() + 4;
     let done = AtomicUsize::new(0);
     let step = |what: &str| {
         let d = done.fetch_add(1, Ordering::Relaxed) + 1;
@@ -140,6 +140,7 @@ pub fn diagnose_with(
     plant_ok(&runner)?;
     let form: Vec<f64> = model_form.iter().map(|m| m.factor).collect();
     let (confirmation, reuse) = confirm::confirm(&fs, &mut ranking, &form, &fit_opts).unzip();
+    step("confirm");
     let detection_floors = floor::floors(&fs, &ranking, &fit_opts);
     step("detection floors");
 
