@@ -161,6 +161,24 @@ impl<'a> FitSet<'a> {
         }
     }
 
+    /// The fit set with `runner` as its model and `nominal_truth` its
+    /// nominal runs (one per fit point), no nuisance profile: a model whose
+    /// nominal values were refitted, read on the same data and weights.
+    pub(crate) fn moved_to<'b>(&self, runner: &'b ModelRunner, nominal_truth: Vec<ModelTrace>) -> FitSet<'b> {
+        FitSet {
+            runner,
+            points: self.points.clone(),
+            nominal_truth,
+            nominal_features: self.nominal_features.clone(),
+            pressures: self.pressures,
+            distinct: self.distinct,
+            sims: AtomicUsize::new(0),
+            nuisance: Vec::new(),
+            against_reference: self.against_reference,
+            reference_var: self.reference_var.clone(),
+        }
+    }
+
     /// The force balance's quantities against the nominal model's.
     pub(crate) fn model_free_stats(&self) -> Vec<ModelFreeStat> {
         self.stats(&MODEL_FREE)
@@ -231,19 +249,9 @@ impl<'a> FitSet<'a> {
     /// The model-form factor of every group of model-based features: the
     /// RMS of `cand`'s whitened, profiled residual over the group, at least 1.
     pub(crate) fn model_form_factors(&self, cand: &Candidate) -> Vec<f64> {
-        let mut sum = [0.0; MODEL_FORM_GROUPS];
-        let mut n = [0usize; MODEL_FORM_GROUPS];
-        if let Some(r) = self.residuals(cand) {
-            for (i, x) in r.iter().take(self.points.len() * N_FEATURES).enumerate() {
-                if let Some(g) = model_form_group(i % N_FEATURES) {
-                    sum[g] += x * x;
-                    n[g] += 1;
-                }
-            }
-        }
-        (0..MODEL_FORM_GROUPS)
-            .map(|g| (sum[g] / n[g].max(1) as f64).sqrt().max(1.0))
-            .collect()
+        let r = self.residuals(cand).unwrap_or_default();
+        let n = r.len().min(self.points.len() * N_FEATURES);
+        form_factors_of(&r[..n], &|_| 1.0)
     }
 
     /// Divides each model-based feature's weight by its group's factor.
@@ -488,6 +496,23 @@ const CONVERGED: f64 = 1e-3;
 /// (the recalibration must meet them), and the force balance's features
 /// are model-free.
 pub(crate) const MODEL_FORM_GROUPS: usize = WAVE_SIGNALS.len();
+
+/// The model-form factor of every waveform from whitened residuals `r`
+/// (point after point), each scaled by `scale(group)` first: the RMS over
+/// the group, at least 1 (the model is never credited beyond the noise).
+pub(crate) fn form_factors_of(r: &[f64], scale: &dyn Fn(usize) -> f64) -> Vec<f64> {
+    let mut sum = [0.0; MODEL_FORM_GROUPS];
+    let mut n = [0usize; MODEL_FORM_GROUPS];
+    for (i, x) in r.iter().enumerate() {
+        if let Some(g) = model_form_group(i % N_FEATURES) {
+            sum[g] += (x * scale(g)).powi(2);
+            n[g] += 1;
+        }
+    }
+    (0..MODEL_FORM_GROUPS)
+        .map(|g| (sum[g] / n[g].max(1) as f64).sqrt().max(1.0))
+        .collect()
+}
 
 pub(crate) fn model_form_group(feature: usize) -> Option<usize> {
     wave_of(feature).map(|(signal, _)| signal)

@@ -20,13 +20,13 @@
 //! values cancel to first order (the record is of the same hammer) and the
 //! check is not run.
 
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::atomic::Ordering;
 
 use super::effect_fit::{at_measured_sizes, fit_over};
 use super::rank::Ranking;
 use crate::effects::free_params;
 use crate::features::N_FEATURES;
-use crate::fitset::{model_form_group, FitSet, Recalibrated, RECALIBRATION_STEPS};
+use crate::fitset::{form_factors_of, model_form_group, FitSet, Recalibrated, RECALIBRATION_STEPS};
 use crate::model::Candidate;
 use crate::options::Options;
 use crate::parallel::parallel;
@@ -130,17 +130,7 @@ fn form_factors(with: &Recalibrated, form: &[f64]) -> Vec<f64> {
     if form.is_empty() {
         return Vec::new();
     }
-    let mut sum = vec![0.0; form.len()];
-    let mut n = vec![0usize; form.len()];
-    for (i, x) in with.residuals.iter().enumerate() {
-        if let Some(g) = model_form_group(i % N_FEATURES).filter(|&g| g < form.len()) {
-            sum[g] += (x * form[g]).powi(2);
-            n[g] += 1;
-        }
-    }
-    (0..form.len())
-        .map(|g| (sum[g] / n[g].max(1) as f64).sqrt().max(1.0))
-        .collect()
+    form_factors_of(&with.residuals, &|g| form.get(g).copied().unwrap_or(1.0))
 }
 
 /// `rc`'s χ² (its prior's terms included) with each waveform's weight
@@ -236,18 +226,7 @@ fn refit(
     let truths = parallel(opts.threads, jobs, &|k| {
         at.runner.truth(fs.points[k].0, &Candidate::default())
     });
-    let moved = FitSet {
-        runner: &at.runner,
-        points: fs.points.clone(),
-        nominal_truth: truths.into_iter().collect::<Option<Vec<_>>>()?,
-        nominal_features: fs.nominal_features.clone(),
-        pressures: fs.pressures,
-        distinct: fs.distinct,
-        sims: AtomicUsize::new(0),
-        nuisance: Vec::new(),
-        against_reference: fs.against_reference,
-        reference_var: fs.reference_var.clone(),
-    };
+    let moved = fs.moved_to(&at.runner, truths.into_iter().collect::<Option<Vec<_>>>()?);
     let held: Vec<FittedParam> = verdict
         .fitted
         .iter()
