@@ -567,7 +567,7 @@ impl Estimator {
             flags.insert(Flags::DISCONNECTED);
         }
         let finite = |x: f32| if math::is_finite(x) { x } else { 0.0 };
-        let r = CycleReport {
+        let mut r = CycleReport {
             seq: self.seq,
             t_impact_us: clock::edge_us(index, self.sample_hz),
             period_s,
@@ -580,6 +580,7 @@ impl Estimator {
             flags,
             ..Default::default()
         };
+        r.mark_chambers_unread();
         self.counters.cycles = self.counters.cycles.wrapping_add(1);
         self.counters.invalid_cycles = self.counters.invalid_cycles.wrapping_add(1);
         self.seq = self.seq.wrapping_add(1);
@@ -646,7 +647,11 @@ impl Estimator {
             drift_score: self.wear.cusum,
             calibration_hash: self.calibration_hash,
             flags: e.flags,
+            ..Default::default()
         };
+        // Read at the cycle's close by a reader that holds its codes (a
+        // board's `hammer_app::chamber_reading`), not here.
+        r.mark_chambers_unread();
         if r.impact_energy_j > 0.0 {
             r.friction_work_ratio = e.friction_work_stroke_j / r.impact_energy_j;
         }

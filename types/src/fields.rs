@@ -23,6 +23,16 @@ pub enum Value {
 }
 
 impl Value {
+    /// The same value, bit for bit (a NaN is the same as itself).
+    pub fn same(self, other: Value) -> bool {
+        match (self, other) {
+            (Value::U32(a), Value::U32(b)) => a == b,
+            (Value::F32(a), Value::F32(b)) => a.to_bits() == b.to_bits(),
+            (Value::F64(a), Value::F64(b)) => a.to_bits() == b.to_bits(),
+            _ => false,
+        }
+    }
+
     pub fn as_f64(self) -> f64 {
         match self {
             Value::U32(v) => v as f64,
@@ -127,6 +137,24 @@ fields! {
     remaining_life_cycles: F32, "cycles", "remaining life";
     drift_score: F32, "σ", "drift score";
     calibration_hash: U32, "", "calibration hash";
+    front_feed_s: F32, "s", "front feed onset after the impact", pm front_feed_uncertainty_s;
+    front_feed_uncertainty_s: F32, "s", "front feed onset uncertainty";
+    front_feed_x_m: F32, "m", "piston position at the front feed";
+    front_feed_p_rear_pa: F32, "Pa", "rear pressure at the front feed";
+    front_feed_p_front_pa: F32, "Pa", "front pressure at the front feed";
+    front_closed_exponent: F32, "1", "front closed-phase exponent", pm front_closed_exponent_uncertainty;
+    front_closed_exponent_uncertainty: F32, "1", "front closed-phase exponent uncertainty";
+    front_feed_area_m2: F32, "m²", "front feed area", pm front_feed_area_uncertainty_m2;
+    front_feed_area_uncertainty_m2: F32, "m²", "front feed area uncertainty";
+    rear_feed_s: F32, "s", "rear feed onset after the impact", pm rear_feed_uncertainty_s;
+    rear_feed_uncertainty_s: F32, "s", "rear feed onset uncertainty";
+    rear_feed_x_m: F32, "m", "piston position at the rear feed";
+    rear_feed_p_rear_pa: F32, "Pa", "rear pressure at the rear feed";
+    rear_feed_p_front_pa: F32, "Pa", "front pressure at the rear feed";
+    rear_closed_exponent: F32, "1", "rear closed-phase exponent", pm rear_closed_exponent_uncertainty;
+    rear_closed_exponent_uncertainty: F32, "1", "rear closed-phase exponent uncertainty";
+    rear_feed_area_m2: F32, "m²", "rear feed area", pm rear_feed_area_uncertainty_m2;
+    rear_feed_area_uncertainty_m2: F32, "m²", "rear feed area uncertainty";
 }
 
 /// The field named `name` (a column of [`FIELDS`]).
@@ -208,12 +236,14 @@ mod tests {
             "Pa" => "_pa",
             "m/s²" => "_mps2",
             "cycles" => "_cycles",
+            "m²" => "_m2",
             other => other,
         }
     }
 
     #[test]
-    fn flags_are_their_bare_u16() {
+    fn flags_are_their_bare_integer() {
         assert_eq!(serde_json::to_string(&Flags(0x0801)).unwrap(), "2049");
+        assert_eq!(serde_json::to_string(&Flags::CHAMBERS_UNREAD).unwrap(), "65536");
     }
 }

@@ -1,4 +1,6 @@
-//! The quality flags of a cycle: one `u16` on the wire.
+//! The quality flags of a cycle: one varint on the wire (a `u32` since
+//! protocol 6; postcard writes a `u16` and a `u32` of one value alike, so a
+//! protocol-5 report's flags read as they are).
 
 use serde::{Deserialize, Serialize};
 
@@ -6,10 +8,10 @@ use serde::{Deserialize, Serialize};
 /// of that cycle are not estimates and must not be used as such; the others
 /// are warnings whose effect is already in the stated uncertainty.
 ///
-/// On the wire (and in JSON) a `Flags` is its bare `u16`.
+/// On the wire (and in JSON) a `Flags` is its bare integer.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Hash, Serialize, Deserialize)]
 #[serde(transparent)]
-pub struct Flags(pub u16);
+pub struct Flags(pub u32);
 
 impl Flags {
     pub const REAR_SATURATED: Flags = Flags(1 << 0);
@@ -42,6 +44,15 @@ impl Flags {
     /// record instead of silence; the other flags name the suspect), or the
     /// cycle did not open at a confirmed impact.
     pub const NO_IMPACT: Flags = Flags(1 << 15);
+    /// The chambers' characteristics (`front_*`, `rear_*` fields) were not
+    /// read for this cycle; they are NaN. Not an invalidating flag: the
+    /// cycle's own numbers stand. Set where the cycle is not a valid one,
+    /// its window (the cycle and the 8 ms after it) is longer than the
+    /// board holds, samples were lost in it, the reading was overtaken by
+    /// the samples (never in a board within its budget), a raw capture held
+    /// the window, or by a reader that does not read them (a host's plain
+    /// estimate, a recording from before protocol 6).
+    pub const CHAMBERS_UNREAD: Flags = Flags(1 << 16);
 
     pub const INVALIDATING: Flags = Flags(
         Self::SENSOR_FAULTS.0
@@ -66,7 +77,7 @@ impl Flags {
             | Self::ACCEL_FAULT.0,
     );
 
-    pub const NAMES: [(Flags, &'static str); 16] = [
+    pub const NAMES: [(Flags, &'static str); 17] = [
         (Self::REAR_SATURATED, "rear_saturated"),
         (Self::FRONT_SATURATED, "front_saturated"),
         (Self::ACCEL_SATURATED, "accel_saturated"),
@@ -83,6 +94,7 @@ impl Flags {
         (Self::DRIFT_ALARM, "drift_alarm"),
         (Self::ACCEL_FAULT, "accel_fault"),
         (Self::NO_IMPACT, "no_impact"),
+        (Self::CHAMBERS_UNREAD, "chambers_unread"),
     ];
 
     pub fn contains(self, other: Flags) -> bool {
@@ -95,6 +107,10 @@ impl Flags {
 
     pub fn insert(&mut self, other: Flags) {
         self.0 |= other.0;
+    }
+
+    pub fn remove(&mut self, other: Flags) {
+        self.0 &= !other.0;
     }
 
     pub fn is_empty(self) -> bool {

@@ -34,7 +34,7 @@ pub use config::{calibration_hash, ChannelCalibration, DeviceConfig, DeviceConfi
 pub use crc::crc32;
 pub use fields::{Field, Value, FIELDS};
 pub use flags::Flags;
-pub use report::CycleReport;
+pub use report::{CycleReport, CycleReportV5, FeedFields};
 pub use sample::{Codes, RawSample};
 
 /// Operating points the wear state remembers at once (bins of supply or peak rear pressure).

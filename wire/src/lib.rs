@@ -36,7 +36,7 @@ pub use msg::*;
 /// the leading delimiter: decoders of either framing read the other's frames
 /// (an extra 0x00 is an empty frame, which they ignore), so a bump would only
 /// make hosts and devices refuse each other needlessly.
-pub const PROTOCOL_VERSION: u16 = 5;
+pub const PROTOCOL_VERSION: u16 = 6;
 /// Largest frame on the wire, both delimiters included. Bounds every buffer.
 pub const MAX_FRAME: usize = 400;
 /// Sample-sets per `Samples` or `Capture` block.

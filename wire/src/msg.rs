@@ -7,7 +7,9 @@ use serde::{Deserialize, Serialize};
 use crate::BLOCK_SAMPLES;
 
 /// The payloads defined once in `hammer-types` (estimator, firmware and host use the same).
-pub use hammer_types::{ChannelCalibration, Codes, CycleReport, DeviceConfig, DeviceConfigV4, Flags, WEAR_STATE_BYTES};
+pub use hammer_types::{
+    ChannelCalibration, Codes, CycleReport, CycleReportV5, DeviceConfig, DeviceConfigV4, Flags, WEAR_STATE_BYTES,
+};
 
 /// A block of consecutive sample-sets; `seq` counts blocks so a lost one shows.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

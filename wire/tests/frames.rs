@@ -42,9 +42,30 @@ fn sample_report() -> CycleReport {
         remaining_life_cycles: 1.0e7,
         drift_score: 0.0,
         calibration_hash: sample_config().calibration_hash(),
+        front_feed_s: 0.0015,
+        front_feed_uncertainty_s: 0.0001,
+        front_feed_x_m: 0.04375,
+        front_feed_p_rear_pa: 312_500.0,
+        front_feed_p_front_pa: 12_500.0,
+        front_closed_exponent: 1.375,
+        front_closed_exponent_uncertainty: 0.0625,
+        front_feed_area_m2: 2.5e-5,
+        front_feed_area_uncertainty_m2: 2.5e-6,
+        rear_feed_s: 0.0175,
+        rear_feed_uncertainty_s: 0.0002,
+        rear_feed_x_m: 0.0125,
+        rear_feed_p_rear_pa: 25_000.0,
+        rear_feed_p_front_pa: 187_500.0,
+        rear_closed_exponent: 1.25,
+        rear_closed_exponent_uncertainty: 0.125,
+        rear_feed_area_m2: 3.0e-5,
+        rear_feed_area_uncertainty_m2: 3.0e-6,
         flags: Flags(0x0800),
     }
 }
+
+/// Protocol 5's `Report` frame of [`sample_report`] (before the chambers).
+const PROTOCOL5_REPORT_FRAME: &str = "000a0107a0c21e1283403d0103aa410103244101032041010328410103803f0103c03f0103c03f010320400103304001036040010388400101023e0101023e0103603f0101063e3333333d04ab9f4804966148010101010103c4400107803f8096184b0101010cb398ca8f0a80100c19e07200";
 
 fn channel(zero_code: f32, scale: f32, gain_uncertainty: f32, offset_uncertainty: f32) -> ChannelCalibration {
     ChannelCalibration {
@@ -87,6 +108,17 @@ fn sample_config() -> DeviceConfig {
     }
 }
 
+/// A frame's checked body (the message's postcard bytes), from its hex.
+fn unframe(hex: &str) -> Vec<u8> {
+    let mut raw: Vec<u8> = (0..hex.len() / 2)
+        .map(|i| u8::from_str_radix(&hex[2 * i..2 * i + 2], 16).unwrap())
+        .collect();
+    let body = &mut raw[1..];
+    let end = body.iter().position(|&b| b == 0).unwrap();
+    let n = hammer_wire::cobs::decode_in_place(&mut body[..end]).unwrap();
+    body[..n - 4].to_vec()
+}
+
 /// `c` without what protocol 5 added: protocol 4's layout.
 fn protocol4(c: &DeviceConfig) -> DeviceConfigV4 {
     let mut buf = [0u8; MAX_FRAME];
@@ -109,7 +141,7 @@ const GOLDEN_CALIBRATION_HASH: u32 = 2_717_027_379;
 /// update docs/wire-protocol.md, and only then update the snapshot.
 #[test]
 fn golden_frames() {
-    assert_eq!(PROTOCOL_VERSION, 5);
+    assert_eq!(PROTOCOL_VERSION, 6);
     assert_eq!(
         hex(&frame(&HostMsg::Hello { protocol_version: 1 })),
         "000106016922de3600"
@@ -125,8 +157,23 @@ fn golden_frames() {
     );
     assert_eq!(
         hex(&frame(&DeviceMsg::Report(sample_report()))),
-        "000a0107a0c21e1283403d0103aa410103244101032041010328410103803f0103c03f0103c03f010320400103304001036040010388400101023e0101023e0103603f0101063e3333333d04ab9f4804966148010101010103c4400107803f8096184b0101010cb398ca8f0a80100c19e07200"
+        "000a0107a0c21e1283403d0103aa410103244101032041010328410103803f0103c03f0103c03f010320400103304001036040010388400101023e0101023e0103603f0101063e3333333d04ab9f4804966148010101010103c4400107803f8096184b01010116b398ca8f0aa69bc43a17b7d1383333333d80969848045043460103b03f0117803d17b7d137acc52736295c8f3c17b75139cdcc4c3c0450c346041b37480103a03f0101103e82a8fb379c5349368010987f602400"
     );
+    // Protocol 6 appended the chambers' characteristics (18 f32) before the
+    // flags, now a u32 written as the same varint: the report's bytes are
+    // protocol 5's with those 72 bytes before the flags. A protocol-5
+    // report (a recording's) reads with the chambers NaN and flagged unread.
+    let p5 = unframe(PROTOCOL5_REPORT_FRAME);
+    let p6 = unframe(&hex(&frame(&DeviceMsg::Report(sample_report()))));
+    assert_eq!(p6.len(), p5.len() + 72);
+    assert_eq!(&p6[..p5.len() - 2], &p5[..p5.len() - 2], "all but the flags' two varint bytes");
+    assert_eq!(&p6[p6.len() - 2..], &p5[p5.len() - 2..], "the flags");
+    let old = hammer_wire::legacy::device_msg(&p5, 5, &sample_config()).expect("a protocol-5 report reads");
+    let DeviceMsg::Report(old) = old else { panic!("{old:?}") };
+    let mut expected = sample_report();
+    expected.mark_chambers_unread();
+    assert_eq!(format!("{old:?}"), format!("{expected:?}"));
+    assert!(old.flags.contains(Flags::CHAMBERS_UNREAD | Flags::ACCEL_ZERO_SHIFT));
     // A configuration, both ways (`Config` answers `GetConfig`, `SetConfig` carries one).
     assert_eq!(hex(&frame(&DeviceMsg::Config(sample_config()))), GOLDEN_CONFIG_FRAME);
     assert_eq!(

@@ -307,7 +307,7 @@ mod tests {
     use super::*;
     use hammer_wire::Alarm;
 
-    fn report(seq: u32, flags: u16) -> Stamped {
+    fn report(seq: u32, flags: u32) -> Stamped {
         Stamped {
             t_us: 1_000_000 + u64::from(seq) * 50_000,
             event: Event::Msg(DeviceMsg::Report(CycleReport {
@@ -320,7 +320,7 @@ mod tests {
     }
 
     /// What the device sends after a report that changes an alarm.
-    fn alarm(kind: AlarmKind, seq: u32, flags: u16) -> Stamped {
+    fn alarm(kind: AlarmKind, seq: u32, flags: u32) -> Stamped {
         Stamped {
             t_us: 1_000_000 + u64::from(seq) * 50_000,
             event: Event::Msg(DeviceMsg::Alarm(Alarm {
