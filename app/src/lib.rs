@@ -8,6 +8,8 @@
 //!   link transmit) and the [`Shared`] state between them;
 //! - [`monitor`]: the synchronous, sans-IO core: samples in, estimator,
 //!   reports, alarms, captures and wear persistence out; commands applied;
+//! - [`chambers`]: the chambers' characteristics read at each cycle's
+//!   close into its report, which waits for them (a task below sampling);
 //! - [`packed`]: sample-sets at 12 bits a code, for the capture buffer;
 //! - [`persisted`]: the configuration record the boards store;
 //! - [`reset`]: the reset cause as a board keeps it through a reset;
@@ -31,6 +33,7 @@
 #![allow(async_fn_in_trait)]
 
 pub mod board;
+pub mod chambers;
 pub mod monitor;
 pub mod packed;
 pub mod persisted;

@@ -417,6 +417,11 @@ impl Config {
         }
     }
 
+    /// The sample rate in whole Hz: the reports' sample clock.
+    pub fn sample_hz(&self) -> u64 {
+        (math::round(self.sample_rate_hz) as u64).max(1)
+    }
+
     pub fn dt_s(&self) -> f32 {
         1.0 / self.sample_rate_hz
     }

@@ -24,14 +24,16 @@
 //! - [`wear`]: the wear index, the drift CUSUM and their saved state;
 //! - [`math`]: the one path for transcendental functions and float widths (host = target);
 //! - [`chambers`]: the valve's switching, the fill and the closed phases of
-//!   both chambers from one cycle's samples (host side: not on the board).
+//!   both chambers from one cycle's samples (on the host from raw traces;
+//!   on a board at each cycle's close, `chambers::at_close`);
+//! - [`clock`]: a sample's index as its time and back.
 //!
 //! The report and its flags are `hammer_types`' (re-exported here).
 #![no_std]
 #![forbid(unsafe_code)]
 
 pub mod chambers;
-mod clock;
+pub mod clock;
 pub mod config;
 pub mod cycle;
 pub mod device;
@@ -47,7 +49,7 @@ pub use config::{ChamberConfig, ChannelCal, ChannelSpec, Config, ConfigError, We
 pub use geometry::Geometry;
 /// The canonical types the estimator produces and reads, defined once in
 /// `hammer-types` and shared with the wire, the firmware and the host.
-pub use hammer_types::{fields, ChannelCalibration, Codes, CycleReport, DeviceConfig, Flags, RawSample};
+pub use hammer_types::{fields, ChannelCalibration, Codes, CycleReport, DeviceConfig, FeedFields, Flags, RawSample};
 pub use wear::{WearState, WearStateError};
 
 use cycle::{CycleAcc, Derived};
@@ -203,7 +205,7 @@ impl Estimator {
             friction_guess: 0.0,
             seq: 0,
             calibration_hash: cfg.calibration_hash(),
-            sample_hz: (math::round(cfg.sample_rate_hz) as u64).max(1),
+            sample_hz: cfg.sample_hz(),
             wear: WearState::default(),
             counters: Counters::default(),
             cfg,
@@ -219,6 +221,13 @@ impl Estimator {
     /// through `counters().impacts`) starts that many samples back.
     pub fn samples_since_impact(&self) -> u64 {
         self.next_index.wrapping_sub(self.cycle_start)
+    }
+
+    /// The index the next sample-set will have: samples counted from the
+    /// first, lost ones included (a report's impact is the edge of its
+    /// index, [`clock::edge_us`]). Starts over at 0 with a new configuration.
+    pub fn next_index(&self) -> u64 {
+        self.next_index
     }
 
     pub fn counters(&self) -> Counters {

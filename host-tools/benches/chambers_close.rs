@@ -118,19 +118,20 @@ fn main() {
          {bar} bar with coulomb friction, M instructions per reading:"
     );
     println!(
-        "  {:>5} {:>7} {:>7} {:>12} {:>12} {:>12}",
-        "cycle", "sets", "window", "room 12000", "room=window", "one track"
+        "  {:>5} {:>7} {:>7} {:>12} {:>12} {:>12} {:>12}",
+        "cycle", "sets", "window", "room 12000", "room=window", "one track", "one, no room"
     );
-    let mut figures: Vec<[f64; 3]> = Vec::new();
+    let mut figures: Vec<[f64; 4]> = Vec::new();
     for k in 0..read {
         let w = |j: usize| word(1 + k * BENCH_RECORD_WORDS + j);
         let (seq, open, close, present) = (w(0), w(1) as usize, w(2) as usize, w(3));
-        let t = [w(4), w(5), w(6)].map(|c| f64::from(c) * INSTRUCTIONS_PER_CYCLE / 1e6);
+        let t = [w(4), w(5), w(6), w(7)].map(|c| f64::from(c) * INSTRUCTIONS_PER_CYCLE / 1e6);
         assert_eq!(
             present & 0x100,
             0,
             "cycle {seq}: the reading in the window's room differs"
         );
+        assert_eq!(present & 0x200, 0, "cycle {seq}: the reading without a room differs");
         let report = reports
             .iter()
             .find(|r| r.seq == seq)
@@ -151,11 +152,12 @@ fn main() {
         }
         let window = hammer_estimator::chambers::at_close::window_samples(close - open, config.dt_s());
         println!(
-            "  {seq:>5} {:>7} {window:>7} {:>12.2} {:>12.2} {:>12.2}",
+            "  {seq:>5} {:>7} {window:>7} {:>12.2} {:>12.2} {:>12.2} {:>12.2}",
             close - open,
             t[0],
             t[1],
-            t[2]
+            t[2],
+            t[3]
         );
         figures.push(t);
     }
@@ -166,10 +168,12 @@ fn main() {
     };
     println!(
         "  median of {read}: two tracks {:.2} M with a room of {LOG_CACHE} floats, {:.2} M with a room as long \
-         as the window; one track {:.2} M (room = window); every two-track reading the host's, bit for bit",
+         as the window; one track {:.2} M (room = window), {:.2} M without a room; every two-track reading \
+         the host's, bit for bit, and every one-track reading the same with and without a room",
         median(0),
         median(1),
-        median(2)
+        median(2),
+        median(3)
     );
     if plugin.is_some() {
         split(&profile);

@@ -166,7 +166,11 @@ fn golden_frames() {
     let p5 = unframe(PROTOCOL5_REPORT_FRAME);
     let p6 = unframe(&hex(&frame(&DeviceMsg::Report(sample_report()))));
     assert_eq!(p6.len(), p5.len() + 72);
-    assert_eq!(&p6[..p5.len() - 2], &p5[..p5.len() - 2], "all but the flags' two varint bytes");
+    assert_eq!(
+        &p6[..p5.len() - 2],
+        &p5[..p5.len() - 2],
+        "all but the flags' two varint bytes"
+    );
     assert_eq!(&p6[p6.len() - 2..], &p5[p5.len() - 2..], "the flags");
     let old = hammer_wire::legacy::device_msg(&p5, 5, &sample_config()).expect("a protocol-5 report reads");
     let DeviceMsg::Report(old) = old else { panic!("{old:?}") };

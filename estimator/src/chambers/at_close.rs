@@ -28,8 +28,10 @@
 //! longer than the room gives `None`, never a reading of part of it.
 
 use super::track::{self, PhaseFriction, Piston};
-use super::{characterise_with, each, ChamberGeometry, Characteristics, Part, Series, Window, LOOK_AFTER_S, P_ATM_PA};
-use crate::{ChannelCal, Config, CycleReport, RawSample};
+use super::{
+    characterise_with, each, ChamberGeometry, Characteristics, Feed, Part, Series, Window, LOOK_AFTER_S, P_ATM_PA,
+};
+use crate::{ChannelCal, Config, CycleReport, FeedFields, RawSample};
 
 /// Samples kept after [`LOOK_AFTER_S`] past the closing impact (the host's
 /// capture reader reads as far).
@@ -207,13 +209,7 @@ pub fn characterise_cycle<C: Codes + ?Sized>(
     let look = look_after(dt);
     let following = (close + look + AFTER_MARGIN).min(codes.len().checked_sub(1)?);
     let n = following + 1;
-    if !(work.x_m.len() >= n
-        && work.room.len() > close
-        && report.is_valid()
-        && 0 < close
-        && close + look / 2 <= following
-        && geo.is_valid())
-    {
+    if !(work.x_m.len() >= n && report.is_valid() && 0 < close && close + look / 2 <= following && geo.is_valid()) {
         return None;
     }
     // The pressures, read back by the channels' group delay.
@@ -242,7 +238,12 @@ pub fn characterise_cycle<C: Codes + ?Sized>(
     let mut read = |by_force: bool| {
         x.fill(f32::NAN);
         x[..a_end].fill(impact);
-        {
+        let balanced = if by_force {
+            close + 1
+        } else {
+            blank.clamp(a_end, close + 1)
+        };
+        if room.len() > close {
             // The track's source once a sample, in the room the closed fits'
             // logarithms take after it (the track reads it three times
             // over): the accelerometer's, its zero shift's decay carried
@@ -251,11 +252,6 @@ pub fn characterise_cycle<C: Codes + ?Sized>(
             // or all of the force balance's track), friction's sign split
             // at the turn as it is read.
             let source = &mut room[..=close];
-            let balanced = if by_force {
-                close + 1
-            } else {
-                blank.clamp(a_end, close + 1)
-            };
             if balanced <= close {
                 track::accelerometer(
                     &accel,
@@ -278,6 +274,27 @@ pub fn characterise_cycle<C: Codes + ?Sized>(
                     with_friction.acceleration(s, i, turn)
                 } else {
                     s
+                }
+            };
+            track::closed(dt, impact, a_end, close, x, acc);
+        } else {
+            // No room for the source: each of the track's three passes
+            // reads it from the codes, in order, the zero shift's decay
+            // carried from `a_end` as `track::accelerometer` carries it
+            // (through the force balance's samples too), so the values are
+            // the room's, bit for bit, at about 1.5 times the work.
+            let mut decay = track::Decay::new(report.accel_zero_shift_mps2, tau, dt);
+            let mut next = usize::MAX;
+            let acc = |i: usize, turn: usize| {
+                if i != next {
+                    decay.start(0, i);
+                }
+                next = i + 1;
+                let shift = decay.step();
+                if i < balanced {
+                    with_friction.acceleration(track::pressure_force(&p1, &p2, &piston, i), i, turn)
+                } else {
+                    accel.value(i) - shift
                 }
             };
             track::closed(dt, impact, a_end, close, x, acc);
@@ -305,6 +322,22 @@ pub fn characterise_cycle<C: Codes + ?Sized>(
     let by_force = if track_term { Some(read(true)) } else { None };
     let value = read(false);
     Some(by_force.map_or(value, |f| value.widened(&f)))
+}
+
+/// One chamber's reading as a report carries it ([`FeedFields::NAN`] where
+/// the chamber showed nothing to read).
+pub fn fields(feed: Option<Feed>) -> FeedFields {
+    feed.map_or(FeedFields::NAN, |f| FeedFields {
+        feed_s: f.onset_s,
+        feed_uncertainty_s: f.onset_uncertainty_s,
+        feed_x_m: f.x_m,
+        feed_p_rear_pa: f.p_rear_pa,
+        feed_p_front_pa: f.p_front_pa,
+        closed_exponent: f.closed_exponent,
+        closed_exponent_uncertainty: f.closed_exponent_uncertainty,
+        feed_area_m2: f.feed_area_m2,
+        feed_area_uncertainty_m2: f.feed_area_uncertainty_m2,
+    })
 }
 
 /// The first sample after the impact at `i` where the accelerometer has

@@ -40,7 +40,19 @@ pub struct PhaseFriction {
 /// index, which splits friction's sign): `x[open] = x[close] = impact_m`,
 /// the start velocity set by the closure. Other samples are left as they are.
 #[inline(always)]
-pub fn closed(dt_s: f32, impact_m: f32, open: usize, close: usize, x: &mut [f32], accel: impl Fn(usize, usize) -> f32) {
+///
+/// Each of the three passes asks for `open`, then every later sample in
+/// order, so a source may carry state from one sample to the next and
+/// start over when asked for `open` again (`at_close`'s reading without a
+/// room for the source).
+pub fn closed(
+    dt_s: f32,
+    impact_m: f32,
+    open: usize,
+    close: usize,
+    x: &mut [f32],
+    mut accel: impl FnMut(usize, usize) -> f32,
+) {
     if !(open < close && close < x.len() && dt_s > 0.0) {
         return;
     }
@@ -170,21 +182,51 @@ pub fn accelerometer<A: super::Series + ?Sized>(
     from: usize,
     out: &mut [f32],
 ) {
-    let q = if tau_s > 0.0 && zero_shift_mps2.is_finite() {
-        crate::math::exp(-dt_s / tau_s)
-    } else {
-        0.0
-    };
-    let zs = if zero_shift_mps2.is_finite() {
-        zero_shift_mps2
-    } else {
-        0.0
-    };
-    let mut shift = zs * crate::math::powi(q, from.saturating_sub(open) as u32);
+    let mut decay = Decay::new(zero_shift_mps2, tau_s, dt_s);
+    decay.start(open, from);
     accel_mps2.read_into(from, out);
     for v in out.iter_mut() {
-        *v -= shift;
-        shift *= q;
+        *v -= decay.step();
+    }
+}
+
+/// The fitted zero shift as it decays from its impact, sample after
+/// sample: one multiplication a sample, the same chain of roundings
+/// wherever it is carried ([`accelerometer`], or a reading that computes
+/// the source as it goes).
+#[derive(Debug, Clone, Copy)]
+pub struct Decay {
+    q: f32,
+    zs: f32,
+    shift: f32,
+}
+
+impl Decay {
+    pub fn new(zero_shift_mps2: f32, tau_s: f32, dt_s: f32) -> Self {
+        let finite = zero_shift_mps2.is_finite();
+        Self {
+            q: if tau_s > 0.0 && finite {
+                crate::math::exp(-dt_s / tau_s)
+            } else {
+                0.0
+            },
+            zs: if finite { zero_shift_mps2 } else { 0.0 },
+            shift: 0.0,
+        }
+    }
+
+    /// Starts at sample `from` of a cycle opened at `open`.
+    #[inline]
+    pub fn start(&mut self, open: usize, from: usize) {
+        self.shift = self.zs * crate::math::powi(self.q, from.saturating_sub(open) as u32);
+    }
+
+    /// The shift at the current sample; moves on to the next.
+    #[inline(always)]
+    pub fn step(&mut self) -> f32 {
+        let s = self.shift;
+        self.shift *= self.q;
+        s
     }
 }
 

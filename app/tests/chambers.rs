@@ -1,0 +1,229 @@
+//! The chambers' reading at each cycle's close (`hammer_app::chambers`),
+//! on the host: against the reading of the same kept codes done by hand,
+//! whatever the blocks, and what it does with cycles it cannot read.
+
+use hammer_app::chambers::{ChamberReader, DECIMATION, LONGEST_CYCLE_S};
+use hammer_estimator::chambers::at_close::{characterise_cycle, fields, window_samples, Work};
+use hammer_estimator::chambers::ChamberGeometry;
+use hammer_estimator::{Config, CycleReport, Estimator, Flags, RawSample};
+use hammer_sim::simulate::simulate;
+use hammer_sim::SimConfig;
+use hammer_wire::DeviceMsg;
+
+/// A simulated hammer's codes and the configuration that reads them
+/// (the supply pressure given, so the feed areas are read too).
+fn hammer(bar: f64, seconds: f64) -> (Vec<RawSample>, Config) {
+    let mut cfg = SimConfig::nominal(bar);
+    cfg.solver.duration_s = seconds;
+    cfg.effects.apply_spec("coulomb_friction").unwrap();
+    let sim = simulate(&cfg).unwrap();
+    (sim.measured.codes, cfg.estimator_config(Some(bar)).unwrap())
+}
+
+/// The estimator's reports through a reader, the samples in blocks of
+/// `block` sets as a board's sampling task hands them over: each block,
+/// then the reports it closed.
+fn through_reader(codes: &[RawSample], cfg: &Config, block: usize) -> (Vec<CycleReport>, ChamberReader) {
+    let mut est = Estimator::new(*cfg).unwrap();
+    let mut reader = ChamberReader::new(cfg);
+    let mut out = vec![];
+    for b in codes.chunks(block) {
+        let first = est.next_index();
+        let mut closed = vec![];
+        est.push_block(b, |r| closed.push(r));
+        reader.push_samples(first, b, &mut |m| out.push(m));
+        for r in closed {
+            reader.push(DeviceMsg::Report(r), &mut |m| out.push(m));
+        }
+    }
+    reader.flush(&mut |m| out.push(m));
+    let reports = out
+        .into_iter()
+        .map(|m| match m {
+            DeviceMsg::Report(r) => r,
+            other => panic!("only reports were pushed: {other:?}"),
+        })
+        .collect();
+    (reports, reader)
+}
+
+/// The mean of each pair, rounded half to even, written out again here.
+fn kept(codes: &[RawSample]) -> Vec<RawSample> {
+    let m = |a: u16, b: u16| ((f64::from(a) + f64::from(b)) / 2.0).round_ties_even() as u16;
+    codes
+        .chunks_exact(2)
+        .map(|p| RawSample {
+            rear: m(p[0].rear, p[1].rear),
+            front: m(p[0].front, p[1].front),
+            accel: m(p[0].accel, p[1].accel),
+        })
+        .collect()
+}
+
+/// Every report leaves, in order, as the estimator made it but for its
+/// characteristics; a cycle between two valid reports is read, and its
+/// values are `at_close`'s on the kept codes, bit for bit; the blocks'
+/// sizes change nothing.
+#[test]
+fn each_cycle_is_read_into_its_report_as_at_close_reads_the_kept_codes() {
+    for bar in [4.0, 7.0] {
+        let (codes, cfg) = hammer(bar, 0.6);
+        let mut est = Estimator::new(cfg).unwrap();
+        let mut expected = vec![];
+        est.push_block(&codes, |r| expected.push(r));
+        let (reports, reader) = through_reader(&codes, &cfg, 128);
+        assert_eq!(reports.len(), expected.len());
+        for (r, e) in reports.iter().zip(&expected) {
+            let mut bare = *r;
+            bare.mark_chambers_unread();
+            assert_eq!(
+                bare, *e,
+                "{bar} bar, cycle {}: the estimator's report but for the chambers",
+                e.seq
+            );
+        }
+        // The blocks of a board's DMA, or one sample at a time: the same bytes.
+        for block in [37, 256] {
+            assert_eq!(
+                through_reader(&codes, &cfg, block).0,
+                reports,
+                "{bar} bar, blocks of {block}"
+            );
+        }
+        // By hand: the kept codes, the configuration at the kept rate.
+        let half = kept(&codes);
+        let mut slow = cfg;
+        slow.sample_rate_hz /= DECIMATION as f32;
+        let geo = ChamberGeometry::of(&cfg);
+        let (mut x, mut room) = (vec![0.0f32; 4_000], vec![0.0f32; 4_000]);
+        let at = |r: &CycleReport| (r.t_impact_us * 100_000 + 1_000_000) / 1_000_000 / DECIMATION;
+        let mut read = 0;
+        for pair in expected.windows(2) {
+            let (prev, cur) = (&pair[0], &pair[1]);
+            let got = reports.iter().find(|r| r.seq == cur.seq).unwrap();
+            let (open, close) = (at(prev) as usize, at(cur) as usize);
+            let end = open + window_samples(close - open, slow.dt_s());
+            let c = (prev.is_valid() && cur.is_valid() && end <= half.len())
+                .then(|| {
+                    let mut work = Work {
+                        x_m: &mut x,
+                        room: &mut room,
+                    };
+                    characterise_cycle(&slow, &geo, &half[open..end], close - open, cur, false, &mut work)
+                })
+                .flatten();
+            let Some(c) = c else {
+                assert!(got.flags.contains(Flags::CHAMBERS_UNREAD), "cycle {}", cur.seq);
+                assert!(got.front_feed_s.is_nan() && got.rear_closed_exponent.is_nan());
+                continue;
+            };
+            read += 1;
+            assert!(!got.flags.contains(Flags::CHAMBERS_UNREAD), "cycle {}", cur.seq);
+            let (f, r) = (fields(c.front), fields(c.rear));
+            assert_eq!(format!("{:?}", got.front_feed()), format!("{f:?}"), "cycle {}", cur.seq);
+            assert_eq!(format!("{:?}", got.rear_feed()), format!("{r:?}"), "cycle {}", cur.seq);
+        }
+        assert_eq!(reader.counters.read, read);
+        // Every cycle but the first (no opening report) and the last (its
+        // 8 ms after it not in the trace) is read, and both chambers in it.
+        assert!(
+            read as usize + 2 >= expected.len(),
+            "{bar} bar: {read} of {}",
+            expected.len()
+        );
+        let both = reports
+            .iter()
+            .filter(|r| r.front_feed_s.is_finite() && r.rear_feed_s.is_finite() && r.front_feed_area_m2 > 0.0)
+            .count();
+        assert_eq!(both, read as usize, "{bar} bar: a read cycle without both feeds");
+        println!("{bar} bar: {read} of {} cycles read", expected.len());
+    }
+}
+
+/// Samples lost inside a cycle's window leave it unread (never a reading
+/// of stale codes); a report waits for the 8 ms after its impact, and a
+/// stream that ends lets what waits go, unread.
+#[test]
+fn a_gap_in_the_window_leaves_the_cycle_unread_and_a_report_waits_for_its_tail() {
+    let (codes, cfg) = hammer(5.0, 0.5);
+    let mut est = Estimator::new(cfg).unwrap();
+    let mut reports = vec![];
+    est.push_block(&codes, |r| reports.push(r));
+    let valid: Vec<&CycleReport> = reports.iter().filter(|r| r.is_valid()).collect();
+    let (a, b) = (valid[2], valid[3]);
+    assert_eq!(a.seq + 1, b.seq);
+    let index = |r: &CycleReport| ((r.t_impact_us * 100_000 + 1_000_000) / 1_000_000) as usize;
+    // Feed up to b's impact, then lose 50 sets in the 8 ms after it.
+    let mut reader = ChamberReader::new(&cfg);
+    let mut out = vec![];
+    let mut est = Estimator::new(cfg).unwrap();
+    let lost_at = index(b) + 200;
+    let mut pushed_b = false;
+    for (k, chunk) in codes[..index(b) + 2_000].chunks(100).enumerate() {
+        let first = (k * 100) as u64;
+        if (lost_at..lost_at + 50).contains(&(first as usize)) {
+            continue;
+        }
+        let mut closed = vec![];
+        est.push_block(chunk, |r| closed.push(r));
+        reader.push_samples(first, chunk, &mut |m| out.push(m));
+        for r in closed {
+            pushed_b |= r.seq == b.seq;
+            reader.push(DeviceMsg::Report(r), &mut |m| out.push(m));
+            if r.seq == b.seq {
+                // Its 8 ms have not arrived: it waits.
+                assert!(!out.iter().any(|m| matches!(m, DeviceMsg::Report(x) if x.seq == b.seq)));
+            }
+        }
+    }
+    assert!(pushed_b);
+    let got = |seq: u32, out: &[DeviceMsg]| {
+        out.iter()
+            .find_map(|m| match m {
+                DeviceMsg::Report(r) if r.seq == seq => Some(*r),
+                _ => None,
+            })
+            .expect("the report left")
+    };
+    assert!(
+        !got(a.seq, &out).flags.contains(Flags::CHAMBERS_UNREAD),
+        "a's window is whole"
+    );
+    let lost = got(b.seq, &out);
+    assert!(lost.flags.contains(Flags::CHAMBERS_UNREAD) && lost.front_feed_s.is_nan());
+    assert!(reader.counters.overtaken >= 1);
+    // The end of the stream: what waits leaves, unread, in order.
+    let before = out.len();
+    reader.flush(&mut |m| out.push(m));
+    let seqs: Vec<u32> = out
+        .iter()
+        .filter_map(|m| match m {
+            DeviceMsg::Report(r) => Some(r.seq),
+            _ => None,
+        })
+        .collect();
+    assert!(seqs.windows(2).all(|w| w[1] == w[0] + 1), "{seqs:?}");
+    assert!(out[before..]
+        .iter()
+        .all(|m| matches!(m, DeviceMsg::Report(r) if r.flags.contains(Flags::CHAMBERS_UNREAD))));
+}
+
+/// A cycle longer than the window is reported unread, never read in part.
+#[test]
+fn a_cycle_longer_than_the_window_is_unread() {
+    let (codes, cfg) = hammer(5.0, 0.4);
+    let mut est = Estimator::new(cfg).unwrap();
+    let mut reports = vec![];
+    est.push_block(&codes, |r| reports.push(r));
+    let (prev, mut cur) = (reports[2], reports[3]);
+    assert!(prev.is_valid() && cur.is_valid());
+    // The same cycle, its closing impact moved past the longest read.
+    cur.t_impact_us = prev.t_impact_us + (LONGEST_CYCLE_S as f64 * 1.1e6) as u64;
+    let mut reader = ChamberReader::new(&cfg);
+    let mut out = vec![];
+    reader.push(DeviceMsg::Report(prev), &mut |m| out.push(m));
+    reader.push(DeviceMsg::Report(cur), &mut |m| out.push(m));
+    // It leaves at once (nothing to wait for), unread.
+    assert_eq!(out.len(), 2, "{out:?}");
+    assert!(matches!(out[1], DeviceMsg::Report(r) if r.flags.contains(Flags::CHAMBERS_UNREAD)));
+}
