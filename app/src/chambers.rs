@@ -31,7 +31,11 @@ use hammer_estimator::chambers::at_close::{characterise_cycle, fields, window_sa
 use hammer_estimator::chambers::ChamberGeometry;
 use hammer_estimator::clock::index_at_edge_us;
 use hammer_estimator::{Config, CycleReport, RawSample};
-use hammer_wire::DeviceMsg;
+use hammer_wire::{DeviceMsg, BLOCK_SAMPLES};
+
+use core::ops::DerefMut;
+
+use hammer_estimator::{ConfigError, Estimator};
 
 use crate::packed::{self, Packed};
 
@@ -53,7 +57,148 @@ pub const TRACK_FLOATS: usize = 2_965;
 /// closed phase; a longer phase's are computed as read, the same figures).
 pub const ROOM_FLOATS: usize = 2_501;
 /// Messages waiting behind a report that waits for its reading.
-pub const WAITING: usize = 8;
+pub const WAITING: usize = 4;
+
+/// Full-rate sample-sets the sampling task reads at a time (its block).
+pub const READER_BLOCK: usize = 4 * BLOCK_SAMPLES;
+/// Blocks a board keeps for its reader: the samples that arrive while it
+/// reads a 50 ms cycle's window (about 1.6 M instructions, 9.4 ms at
+/// 170 MHz: 940 sets, eight blocks), and two more. The sampling task reads
+/// the ADC's samples straight into a free one (no copy: the sampling loop
+/// pays nothing a set for the reader); with none free, into its own, and
+/// the reader sees a gap.
+pub const READER_BLOCKS: usize = 12;
+/// Messages waiting for the reader: reports, alarms, a configuration.
+pub const READER_MESSAGES: usize = 3;
+
+/// Sample-sets from the full-rate index `first` on: `sets[..len]`.
+#[derive(Clone, Copy)]
+pub struct Block {
+    pub first: u64,
+    pub len: u32,
+    pub sets: [RawSample; READER_BLOCK],
+}
+
+impl Block {
+    pub const EMPTY: Block = Block {
+        first: 0,
+        len: 0,
+        sets: [RawSample {
+            rear: 0,
+            front: 0,
+            accel: 0,
+        }; READER_BLOCK],
+    };
+}
+
+/// What the sampling task hands the reader besides samples, in order.
+pub enum ToReader {
+    /// A report, or a message that leaves behind the reports before it.
+    Msg(DeviceMsg),
+    /// The estimator's new configuration (its indices start over).
+    Config(Config),
+}
+
+impl<R: DerefMut<Target = ReaderRoom>> ChamberReader<R> {
+    /// Takes one message from the sampling task.
+    pub fn take(&mut self, m: ToReader, out: &mut impl FnMut(DeviceMsg)) {
+        match m {
+            ToReader::Msg(m) => self.push(m, out),
+            ToReader::Config(c) => self.configure(&c, out),
+        }
+    }
+
+    /// Takes one block of samples from the sampling task.
+    pub fn take_block(&mut self, b: &Block, out: &mut impl FnMut(DeviceMsg)) {
+        let n = (b.len as usize).min(READER_BLOCK);
+        self.push_samples(b.first, &b.sets[..n], out);
+    }
+}
+
+/// The sampling side of the message channel to the reader: it never waits
+/// (the sampling task must not) and never reorders. While the channel is
+/// full, messages wait in a small backlog; one that finds the backlog full
+/// too goes straight out, unread.
+#[derive(Default)]
+pub struct Feed {
+    backlog: heapless::Deque<ToReader, 4>,
+    /// Blocks the reader never got (no free block to read into).
+    pub dropped_blocks: u32,
+    /// Messages that went out past the reader.
+    pub bypassed: u32,
+}
+
+impl Feed {
+    /// A message to the reader (a report, an alarm, a configuration).
+    pub fn msg<M: embassy_sync::blocking_mutex::raw::RawMutex, const N: usize>(
+        &mut self,
+        ch: &embassy_sync::channel::Channel<M, ToReader, N>,
+        m: ToReader,
+        out: &mut impl FnMut(DeviceMsg),
+    ) {
+        self.drain(ch);
+        let m = if self.backlog.is_empty() {
+            match ch.try_send(m) {
+                Ok(()) => return,
+                Err(embassy_sync::channel::TrySendError::Full(m)) => m,
+            }
+        } else {
+            m
+        };
+        if let Err(m) = self.backlog.push_back(m) {
+            self.bypassed = self.bypassed.wrapping_add(1);
+            if let ToReader::Msg(m) = m {
+                out(m);
+            }
+        }
+    }
+
+    /// The backlog into the channel, as far as it has room.
+    pub fn drain<M: embassy_sync::blocking_mutex::raw::RawMutex, const N: usize>(
+        &mut self,
+        ch: &embassy_sync::channel::Channel<M, ToReader, N>,
+    ) {
+        while let Some(m) = self.backlog.pop_front() {
+            if let Err(embassy_sync::channel::TrySendError::Full(m)) = ch.try_send(m) {
+                let _ = self.backlog.push_front(m);
+                return;
+            }
+        }
+    }
+}
+
+/// Full-rate sample-sets to kept ones: each pair averaged, from an even
+/// index on; a gap (a block that does not follow the last) drops a half
+/// pair and starts over at the next whole one.
+#[derive(Default)]
+pub struct Decimator {
+    expected: u64,
+    half: Option<RawSample>,
+}
+
+impl Decimator {
+    /// The kept sets of `block` (full-rate index `first` on) through `out`,
+    /// in order and without a gap between them; returns the kept index of
+    /// the first.
+    pub fn keep(&mut self, mut first: u64, mut block: &[RawSample], mut out: impl FnMut(RawSample)) -> u64 {
+        if first != self.expected {
+            self.half = None;
+            let start = first.div_ceil(DECIMATION) * DECIMATION;
+            let skip = ((start - first) as usize).min(block.len());
+            block = &block[skip..];
+            first += skip as u64;
+        }
+        let at = (first - u64::from(self.half.is_some())) / DECIMATION;
+        for &s in block {
+            match self.half.take() {
+                None => self.half = Some(s),
+                Some(a) => out(mean(a, s)),
+            }
+        }
+        self.expected = first + block.len() as u64;
+        at
+    }
+}
 
 /// A report and where its cycle lies in the kept sets, if it is to be read.
 struct Waiting {
@@ -80,47 +225,67 @@ pub struct ReaderCounters {
     pub overtaken: u32,
 }
 
-pub struct ChamberReader {
+/// The reader's large buffers (~36 KB): the ring of kept codes, the track
+/// and its room. `const`-constructible, so a board keeps them in a
+/// `ConstStaticCell` built at link time, never on a stack.
+pub struct ReaderRoom {
+    ring: Packed<RING_SETS, RING_BYTES>,
+    x_m: [f32; TRACK_FLOATS],
+    room: [f32; ROOM_FLOATS],
+}
+
+impl ReaderRoom {
+    pub const fn new() -> Self {
+        Self {
+            ring: Packed::new(),
+            x_m: [0.0; TRACK_FLOATS],
+            room: [0.0; ROOM_FLOATS],
+        }
+    }
+}
+
+impl Default for ReaderRoom {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// Generic over where its [`ReaderRoom`] lives: a board's
+/// `&'static mut` in a `ConstStaticCell`, a host's `Box`.
+pub struct ChamberReader<R: DerefMut<Target = ReaderRoom>> {
     /// The reading's configuration: the board's at the kept rate.
     cfg: Config,
     geo: ChamberGeometry,
     /// The reports' sample clock, whole Hz.
     rate_hz: u64,
-    ring: Packed<RING_SETS, RING_BYTES>,
-    /// The kept index of the next set into the ring.
+    /// The ring (slot = kept index modulo [`RING_SETS`]), track and room.
+    buf: R,
+    decimator: Decimator,
+    /// The kept index of the next set into the ring, and its slot.
     next: u64,
+    slot: usize,
     /// The ring holds every set from this kept index on (a gap restarts it).
     continuous_from: u64,
-    /// The full-rate index of the next sample-set expected.
-    expected: u64,
-    /// The first of a pair, waiting for its second.
-    half: Option<RawSample>,
-    x_m: [f32; TRACK_FLOATS],
-    room: [f32; ROOM_FLOATS],
     waiting: heapless::Deque<Waiting, WAITING>,
     last: Option<Last>,
     pub counters: ReaderCounters,
 }
 
-impl ChamberReader {
-    pub fn new(cfg: &Config) -> Self {
-        let mut r = Self {
-            cfg: *cfg,
+impl<R: DerefMut<Target = ReaderRoom>> ChamberReader<R> {
+    pub fn new(cfg: &Config, buf: R) -> Self {
+        Self {
+            cfg: at_kept_rate(cfg),
             geo: ChamberGeometry::of(cfg),
-            rate_hz: 1,
-            ring: Packed::new(),
+            rate_hz: cfg.sample_hz(),
+            buf,
+            decimator: Decimator::default(),
             next: 0,
+            slot: 0,
             continuous_from: 0,
-            expected: 0,
-            half: None,
-            x_m: [0.0; TRACK_FLOATS],
-            room: [0.0; ROOM_FLOATS],
             waiting: heapless::Deque::new(),
             last: None,
             counters: ReaderCounters::default(),
-        };
-        r.reset(cfg);
-        r
+        }
     }
 
     /// A new configuration: the estimator starts its indices over, so the
@@ -131,48 +296,48 @@ impl ChamberReader {
     }
 
     fn reset(&mut self, cfg: &Config) {
-        self.cfg = *cfg;
-        self.cfg.sample_rate_hz = cfg.sample_rate_hz / DECIMATION as f32;
+        self.cfg = at_kept_rate(cfg);
         self.geo = ChamberGeometry::of(cfg);
         self.rate_hz = cfg.sample_hz();
         self.last = None;
-        self.half = None;
-        self.expected = 0;
+        self.decimator = Decimator::default();
         self.next = 0;
+        self.slot = 0;
         self.continuous_from = 0;
     }
 
     /// Sample-sets from the full-rate index `first` on (the estimator's
-    /// [`hammer_estimator::Estimator::next_index`] before it took them).
-    /// Messages waiting for these samples leave through `out`.
-    pub fn push_samples(&mut self, mut first: u64, mut block: &[RawSample], out: &mut impl FnMut(DeviceMsg)) {
-        if block.is_empty() {
-            return;
-        }
-        if first != self.expected {
-            // Samples lost (or a new count): the kept sets start over at
-            // the next whole pair.
-            self.half = None;
-            let start = first.div_ceil(DECIMATION) * DECIMATION;
-            let skip = ((start - first) as usize).min(block.len());
-            block = &block[skip..];
-            first += skip as u64;
-            self.next = start / DECIMATION;
-            self.continuous_from = self.next;
-        }
-        let mut slot = (self.next % RING_SETS as u64) as usize;
-        for &s in block {
-            match self.half.take() {
-                None => self.half = Some(s),
-                Some(a) => {
-                    self.ring.set(slot, mean(a, s));
-                    self.next += 1;
-                    slot = if slot + 1 == RING_SETS { 0 } else { slot + 1 };
-                    self.release(out);
-                }
+    /// [`hammer_estimator::Estimator::next_index`] before it took them),
+    /// kept in pairs ([`Decimator`]).
+    pub fn push_samples(&mut self, first: u64, block: &[RawSample], out: &mut impl FnMut(DeviceMsg)) {
+        let mut kept = heapless::Vec::<RawSample, { READER_BLOCK / 2 + 1 }>::new();
+        for (n, part) in block.chunks(READER_BLOCK).enumerate() {
+            kept.clear();
+            let at = self.decimator.keep(first + (n * READER_BLOCK) as u64, part, |set| {
+                let _ = kept.push(set);
+            });
+            for (i, &set) in kept.iter().enumerate() {
+                self.push_kept(at + i as u64, set, out);
             }
         }
-        self.expected = first + block.len() as u64;
+    }
+
+    /// The kept set of kept index `k` (full-rate sets `2k` and `2k + 1`,
+    /// [`Decimator`]); a `k` that does not follow the last starts the ring
+    /// over (samples were lost). Messages waiting for it leave through
+    /// `out`. A report must arrive before the sets run 400 past its impact
+    /// (a board hands them over [`READER_BLOCK`] at a time): the ring then
+    /// holds its window, however the sets were split.
+    pub fn push_kept(&mut self, k: u64, set: RawSample, out: &mut impl FnMut(DeviceMsg)) {
+        if k != self.next {
+            self.next = k;
+            self.slot = (k % RING_SETS as u64) as usize;
+            self.continuous_from = k;
+        }
+        self.buf.ring.set(self.slot, set);
+        self.next += 1;
+        self.slot = if self.slot + 1 == RING_SETS { 0 } else { self.slot + 1 };
+        self.release(out);
     }
 
     /// A message from the monitor: a report waits for its cycle's reading;
@@ -232,15 +397,13 @@ impl ChamberReader {
             };
             let kept = open >= self.continuous_from && self.next - open <= RING_SETS as u64;
             let c = if kept {
+                let ReaderRoom { ring, x_m, room } = &mut *self.buf;
                 let codes = Window {
-                    ring: &self.ring,
+                    ring,
                     start: (open % RING_SETS as u64) as usize,
                     len: (end - open) as usize,
                 };
-                let mut work = Work {
-                    x_m: &mut self.x_m,
-                    room: &mut self.room,
-                };
+                let mut work = Work { x_m, room };
                 characterise_cycle(
                     &self.cfg,
                     &self.geo,
@@ -276,13 +439,22 @@ impl ChamberReader {
     }
 }
 
+/// `cfg` at the rate of the kept sets.
+fn at_kept_rate(cfg: &Config) -> Config {
+    Config {
+        sample_rate_hz: cfg.sample_rate_hz / DECIMATION as f32,
+        ..*cfg
+    }
+}
+
 /// The mean of two sample-sets, each code rounded half to even.
 fn mean(a: RawSample, b: RawSample) -> RawSample {
     let m = |x: u16, y: u16| {
         let s = u32::from(x) + u32::from(y);
-        let h = s / 2;
-        // An odd sum's half: to the even neighbour, so no bias.
-        (if s % 2 == 1 && h % 2 == 1 { h + 1 } else { h }) as u16
+        let h = s >> 1;
+        // An odd sum's half goes to the even neighbour (up where the half
+        // is odd), so the means carry no bias.
+        (h + (s & h & 1)) as u16
     };
     RawSample {
         rear: m(a.rear, b.rear),
@@ -306,5 +478,63 @@ impl Codes for Window<'_> {
     fn get(&self, i: usize) -> RawSample {
         let j = self.start + i;
         self.ring.get(if j >= RING_SETS { j - RING_SETS } else { j })
+    }
+}
+
+/// A host's copy of a board's pipeline over the same codes: the estimator,
+/// then the chambers' reader. The reports are the board's, bit for bit
+/// (the parity that the soak and the emulated board's tests check), and
+/// what `hammer estimate` reports.
+pub struct Pipeline<R: DerefMut<Target = ReaderRoom>> {
+    est: Estimator,
+    reader: ChamberReader<R>,
+}
+
+impl<R: DerefMut<Target = ReaderRoom>> Pipeline<R> {
+    pub fn new(cfg: Config, room: R) -> Result<Self, ConfigError> {
+        Ok(Self {
+            est: Estimator::new(cfg)?,
+            reader: ChamberReader::new(&cfg, room),
+        })
+    }
+
+    /// Sample-sets in order; `out` gets each report once it is read. Taken
+    /// [`READER_BLOCK`] at a time, each block then the reports it closed, as
+    /// a board's sampling task hands them to its reader: a report reaches
+    /// the reader before the samples run past its window.
+    pub fn push_block(&mut self, block: &[RawSample], out: &mut impl FnMut(CycleReport)) {
+        let mut emit = |m: DeviceMsg| {
+            if let DeviceMsg::Report(r) = m {
+                out(r)
+            }
+        };
+        for part in block.chunks(READER_BLOCK) {
+            let Self { est, reader } = self;
+            reader.push_samples(est.next_index(), part, &mut emit);
+            est.push_block(part, |r| reader.push(DeviceMsg::Report(r), &mut emit));
+        }
+    }
+
+    /// Samples lost (a gap, as the board's `push_gap`).
+    pub fn push_gap(&mut self, missing: u32) {
+        self.est.push_gap(missing);
+    }
+
+    /// The end of the stream: the reports still waiting for the samples
+    /// after their impact, unread.
+    pub fn finish(&mut self, out: &mut impl FnMut(CycleReport)) {
+        self.reader.flush(&mut |m| {
+            if let DeviceMsg::Report(r) = m {
+                out(r)
+            }
+        });
+    }
+
+    pub fn estimator(&self) -> &Estimator {
+        &self.est
+    }
+
+    pub fn counters(&self) -> ReaderCounters {
+        self.reader.counters
     }
 }

@@ -4,8 +4,8 @@
 //!
 //! Module map (data flows down the list):
 //! - [`board`]: the four traits a board implements (samples, link out, link in, clock);
-//! - [`tasks`]: the async tasks over those traits (sampling, link receive,
-//!   link transmit) and the [`Shared`] state between them;
+//! - [`tasks`]: the async tasks over those traits (sampling, the chambers'
+//!   reading, link receive, link transmit) and the [`Shared`] state between them;
 //! - [`monitor`]: the synchronous, sans-IO core: samples in, estimator,
 //!   reports, alarms, captures and wear persistence out; commands applied;
 //! - [`chambers`]: the chambers' characteristics read at each cycle's
@@ -20,8 +20,9 @@
 //!
 //! How to add a board: implement the four traits of [`board`] over its
 //! peripherals in a firmware binary (`firmware/src/main.rs` is the reference
-//! board, `firmware/emulated/` the emulated one), spawn [`sampling`], [`link_rx`]
-//! and [`link_tx`] with one [`Shared`], and add it to `cargo xtask firmware`.
+//! board, `firmware/emulated/` the emulated one), spawn [`sampling`], [`reading`]
+//! (below sampling's priority), [`link_rx`] and [`link_tx`] with one
+//! [`Shared`], and add it to `cargo xtask firmware`.
 //!
 //! How to add a wire message: append a variant to `hammer_wire`'s `HostMsg`
 //! or `DeviceMsg` (never reorder; see `docs/wire-protocol.md` for when to
@@ -44,6 +45,7 @@ pub mod supply;
 pub mod tasks;
 
 pub use board::{Clock, LinkRx, LinkTx, Overrun, Record, SampleSource, Store};
+pub use chambers::{ChamberReader, ReaderRoom};
 pub use monitor::{Monitor, CAPTURE_SAMPLES, FIRMWARE_VERSION};
 pub use supervisor::{Duty, Supervisor, Watch};
-pub use tasks::{link_rx, link_tx, persisting, sampling, LinkSamples, Shared};
+pub use tasks::{link_rx, link_tx, persisting, reading, sampling, LinkSamples, Shared};

@@ -15,8 +15,10 @@ use hammer_wire::{
 };
 
 use crate::board::{Clock, LinkRx, LinkTx, Overrun, SampleSource, Store};
+use crate::chambers::{Block, ChamberReader, Feed, ReaderRoom, ToReader, READER_BLOCK, READER_MESSAGES};
 use crate::monitor::{LinkCounters, Monitor};
 use crate::supervisor::{Duty, Supervisor};
+use embassy_sync::zerocopy_channel;
 
 /// How often the device sends a `Status` without being asked.
 pub const STATUS_PERIOD_US: u64 = 1_000_000;
@@ -71,6 +73,10 @@ pub struct Shared<M: RawMutex> {
     /// Sample blocks that arrive over the link (boards without an ADC). Two:
     /// the link task waits while both are taken, which holds the host back.
     pub samples: Channel<M, SampleBlock, 2>,
+    /// The sampling task's reports, alarms and configurations to the
+    /// chambers' reader ([`reading`]), which sends the reports on once read
+    /// (the samples go through a board's blocks, [`sampling`]).
+    pub to_reader: Channel<M, ToReader, READER_MESSAGES>,
     pub link: LinkAtomics,
     /// The latest wear state to persist. A board with flash stores it from a
     /// low-priority task (a page erase must never stall sampling); a board
@@ -96,6 +102,7 @@ impl<M: RawMutex> Shared<M> {
             commands: Channel::new(),
             outgoing: Channel::new(),
             samples: Channel::new(),
+            to_reader: Channel::new(),
             link: LinkAtomics::new(),
             wear_snapshot: Signal::new(),
             config_snapshot: Signal::new(),
@@ -138,13 +145,17 @@ impl<M: RawMutex> Default for Shared<M> {
 /// Sampling → estimator → outgoing queue; applies commands between blocks
 /// (the source's `read` must be cancel-safe: a command may interrupt it),
 /// streams capture chunks when the queue has room, sends a periodic status.
+/// Reads each block straight into a free one of the chambers' reader's
+/// (`blocks`, [`reading`]), and hands it over after the estimator took it.
 pub async fn sampling<S: SampleSource, M: RawMutex, C: Clock>(
     source: &mut S,
     monitor: &mut Monitor,
     shared: &Shared<M>,
     clock: &C,
+    blocks: &mut zerocopy_channel::Sender<'_, M, Block>,
 ) -> ! {
-    let mut buf = [RawSample::default(); 4 * BLOCK_SAMPLES];
+    // Where a block goes when the reader has none free.
+    let mut own = [RawSample::default(); READER_BLOCK];
     let mut window_start = clock.now_us();
     let mut busy_us = 0u64;
     let mut busy_total_us = 0u64;
@@ -152,15 +163,42 @@ pub async fn sampling<S: SampleSource, M: RawMutex, C: Clock>(
     let mut next_status = window_start + STATUS_PERIOD_US;
     let mut saved_at_cycle = 0u32;
     let mut config_hash = monitor.config_hash();
+    let mut feed = Feed::default();
     loop {
+        let at = monitor.estimator().next_index();
+        let mut slot = blocks.try_send();
         // Commands are answered even when no samples flow.
-        let first = select(source.read(&mut buf), shared.commands.receive()).await;
+        let first = {
+            let buf = match slot.as_deref_mut() {
+                Some(b) => &mut b.sets[..],
+                None => &mut own[..],
+            };
+            select(source.read(buf), shared.commands.receive()).await
+        };
         shared.supervisor.beat(Duty::Sampling);
         let t0 = clock.now_us();
-        let mut emit = |m| shared.send(m);
+        // Reports and their alarms go out through the chambers' reader,
+        // which holds each report until its cycle is read.
+        let mut emit = |m: DeviceMsg| match m {
+            DeviceMsg::Report(_) | DeviceMsg::Alarm(_) => {
+                feed.msg(&shared.to_reader, ToReader::Msg(m), &mut |m| shared.send(m))
+            }
+            m => shared.send(m),
+        };
+        let (mut handed, got_samples) = (false, matches!(first, Either::First(Ok(_))));
         let mut pending = None;
         match first {
-            Either::First(Ok(n)) => monitor.on_samples(&buf[..n.min(buf.len())], &mut emit),
+            Either::First(Ok(n)) => {
+                let n = n.min(READER_BLOCK);
+                let block = match slot.as_deref_mut() {
+                    Some(b) => {
+                        (b.first, b.len, handed) = (at, n as u32, true);
+                        &b.sets[..n]
+                    }
+                    None => &own[..n],
+                };
+                monitor.on_samples(block, &mut emit)
+            }
             Either::First(Err(Overrun { lost })) => monitor.on_overrun(lost),
             Either::Second(cmd) => pending = Some(cmd),
         }
@@ -183,9 +221,19 @@ pub async fn sampling<S: SampleSource, M: RawMutex, C: Clock>(
                 None => break,
             }
         }
+        drop(slot);
+        if handed {
+            blocks.send_done();
+        } else if got_samples {
+            feed.dropped_blocks = feed.dropped_blocks.wrapping_add(1);
+        }
         if monitor.config_hash() != config_hash {
             config_hash = monitor.config_hash();
             shared.config_snapshot.signal(DeviceConfig::from(monitor.config()));
+            // The reader follows: the new estimator counts its samples from 0.
+            feed.msg(&shared.to_reader, ToReader::Config(*monitor.config()), &mut |m| {
+                shared.send(m)
+            });
         }
         let cycles = monitor.estimator().wear_state().cycles;
         if cycles.wrapping_sub(saved_at_cycle) >= WEAR_SAVE_CYCLES {
@@ -201,12 +249,46 @@ pub async fn sampling<S: SampleSource, M: RawMutex, C: Clock>(
             window_start = t1;
             busy_us = 0;
             next_status = t1 + STATUS_PERIOD_US;
-            emit(DeviceMsg::Status(shared.with_board_figures(monitor.status(
+            shared.send(DeviceMsg::Status(shared.with_board_figures(monitor.status(
                 t1,
                 load_permille,
                 busy_total_us,
                 shared.link.snapshot(),
             ))));
+        }
+    }
+}
+
+/// The chambers' reader: takes the sampling task's blocks and messages,
+/// reads each cycle once the 8 ms after it have arrived, and sends the
+/// reports on. A board runs it below the sampling task's priority (a
+/// reading takes about 1.6 M instructions, 10 ms at 170 MHz); samples keep
+/// arriving meanwhile, in the blocks ([`crate::chambers::READER_BLOCKS`]).
+/// Messages first: a report or a configuration reaches the reader before
+/// the samples read after it.
+pub async fn reading<M: RawMutex, R: core::ops::DerefMut<Target = ReaderRoom>>(
+    reader: &mut ChamberReader<R>,
+    shared: &Shared<M>,
+    blocks: &mut zerocopy_channel::Receiver<'_, M, Block>,
+) -> ! {
+    loop {
+        let mut out = |m| shared.send(m);
+        if let Ok(m) = shared.to_reader.try_receive() {
+            reader.take(m, &mut out);
+            continue;
+        }
+        let took_block = match select(shared.to_reader.receive(), blocks.receive()).await {
+            Either::First(m) => {
+                reader.take(m, &mut out);
+                false
+            }
+            Either::Second(b) => {
+                reader.take_block(b, &mut out);
+                true
+            }
+        };
+        if took_block {
+            blocks.receive_done();
         }
     }
 }

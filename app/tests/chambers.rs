@@ -2,7 +2,7 @@
 //! on the host: against the reading of the same kept codes done by hand,
 //! whatever the blocks, and what it does with cycles it cannot read.
 
-use hammer_app::chambers::{ChamberReader, DECIMATION, LONGEST_CYCLE_S};
+use hammer_app::chambers::{ChamberReader, Pipeline, ReaderCounters, ReaderRoom, DECIMATION, LONGEST_CYCLE_S};
 use hammer_estimator::chambers::at_close::{characterise_cycle, fields, window_samples, Work};
 use hammer_estimator::chambers::ChamberGeometry;
 use hammer_estimator::{Config, CycleReport, Estimator, Flags, RawSample};
@@ -20,31 +20,17 @@ fn hammer(bar: f64, seconds: f64) -> (Vec<RawSample>, Config) {
     (sim.measured.codes, cfg.estimator_config(Some(bar)).unwrap())
 }
 
-/// The estimator's reports through a reader, the samples in blocks of
-/// `block` sets as a board's sampling task hands them over: each block,
-/// then the reports it closed.
-fn through_reader(codes: &[RawSample], cfg: &Config, block: usize) -> (Vec<CycleReport>, ChamberReader) {
-    let mut est = Estimator::new(*cfg).unwrap();
-    let mut reader = ChamberReader::new(cfg);
-    let mut out = vec![];
+/// The estimator's reports through a reader (a host's [`Pipeline`], which
+/// hands them over as a board's sampling task does), the samples given in
+/// blocks of `block` sets.
+fn through_reader(codes: &[RawSample], cfg: &Config, block: usize) -> (Vec<CycleReport>, ReaderCounters) {
+    let mut p = Pipeline::new(*cfg, Box::new(ReaderRoom::new())).unwrap();
+    let mut reports = vec![];
     for b in codes.chunks(block) {
-        let first = est.next_index();
-        let mut closed = vec![];
-        est.push_block(b, |r| closed.push(r));
-        reader.push_samples(first, b, &mut |m| out.push(m));
-        for r in closed {
-            reader.push(DeviceMsg::Report(r), &mut |m| out.push(m));
-        }
+        p.push_block(b, &mut |r| reports.push(r));
     }
-    reader.flush(&mut |m| out.push(m));
-    let reports = out
-        .into_iter()
-        .map(|m| match m {
-            DeviceMsg::Report(r) => r,
-            other => panic!("only reports were pushed: {other:?}"),
-        })
-        .collect();
-    (reports, reader)
+    p.finish(&mut |r| reports.push(r));
+    (reports, p.counters())
 }
 
 /// The mean of each pair, rounded half to even, written out again here.
@@ -123,7 +109,7 @@ fn each_cycle_is_read_into_its_report_as_at_close_reads_the_kept_codes() {
             assert_eq!(format!("{:?}", got.front_feed()), format!("{f:?}"), "cycle {}", cur.seq);
             assert_eq!(format!("{:?}", got.rear_feed()), format!("{r:?}"), "cycle {}", cur.seq);
         }
-        assert_eq!(reader.counters.read, read);
+        assert_eq!(reader.read, read);
         // Every cycle but the first (no opening report) and the last (its
         // 8 ms after it not in the trace) is read, and both chambers in it.
         assert!(
@@ -153,27 +139,21 @@ fn a_gap_in_the_window_leaves_the_cycle_unread_and_a_report_waits_for_its_tail()
     let (a, b) = (valid[2], valid[3]);
     assert_eq!(a.seq + 1, b.seq);
     let index = |r: &CycleReport| ((r.t_impact_us * 100_000 + 1_000_000) / 1_000_000) as usize;
-    // Feed up to b's impact, then lose 50 sets in the 8 ms after it.
-    let mut reader = ChamberReader::new(&cfg);
+    // Feed up to b's impact, then lose 100 sets in the 8 ms after it.
+    let mut p = Pipeline::new(cfg, Box::new(ReaderRoom::new())).unwrap();
     let mut out = vec![];
-    let mut est = Estimator::new(cfg).unwrap();
     let lost_at = index(b) + 200;
     let mut pushed_b = false;
     for (k, chunk) in codes[..index(b) + 2_000].chunks(100).enumerate() {
-        let first = (k * 100) as u64;
-        if (lost_at..lost_at + 50).contains(&(first as usize)) {
+        if (lost_at..lost_at + 100).contains(&(k * 100)) {
+            p.push_gap(chunk.len() as u32);
             continue;
         }
-        let mut closed = vec![];
-        est.push_block(chunk, |r| closed.push(r));
-        reader.push_samples(first, chunk, &mut |m| out.push(m));
-        for r in closed {
-            pushed_b |= r.seq == b.seq;
-            reader.push(DeviceMsg::Report(r), &mut |m| out.push(m));
-            if r.seq == b.seq {
-                // Its 8 ms have not arrived: it waits.
-                assert!(!out.iter().any(|m| matches!(m, DeviceMsg::Report(x) if x.seq == b.seq)));
-            }
+        p.push_block(chunk, &mut |r| out.push(DeviceMsg::Report(r)));
+        if !pushed_b && p.estimator().counters().cycles > b.seq {
+            // b closed in this block; its 8 ms have not arrived: it waits.
+            pushed_b = true;
+            assert!(!out.iter().any(|m| matches!(m, DeviceMsg::Report(x) if x.seq == b.seq)));
         }
     }
     assert!(pushed_b);
@@ -191,10 +171,10 @@ fn a_gap_in_the_window_leaves_the_cycle_unread_and_a_report_waits_for_its_tail()
     );
     let lost = got(b.seq, &out);
     assert!(lost.flags.contains(Flags::CHAMBERS_UNREAD) && lost.front_feed_s.is_nan());
-    assert!(reader.counters.overtaken >= 1);
+    assert!(p.counters().overtaken >= 1);
     // The end of the stream: what waits leaves, unread, in order.
     let before = out.len();
-    reader.flush(&mut |m| out.push(m));
+    p.finish(&mut |r| out.push(DeviceMsg::Report(r)));
     let seqs: Vec<u32> = out
         .iter()
         .filter_map(|m| match m {
@@ -219,7 +199,7 @@ fn a_cycle_longer_than_the_window_is_unread() {
     assert!(prev.is_valid() && cur.is_valid());
     // The same cycle, its closing impact moved past the longest read.
     cur.t_impact_us = prev.t_impact_us + (LONGEST_CYCLE_S as f64 * 1.1e6) as u64;
-    let mut reader = ChamberReader::new(&cfg);
+    let mut reader = ChamberReader::new(&cfg, Box::new(ReaderRoom::new()));
     let mut out = vec![];
     reader.push(DeviceMsg::Report(prev), &mut |m| out.push(m));
     reader.push(DeviceMsg::Report(cur), &mut |m| out.push(m));

@@ -37,11 +37,13 @@ use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_stm32::{bind_interrupts, dma, pac, usart, Config};
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_time::{Duration, Instant, Ticker, Timer};
-use hammer_app::{persisted, Monitor, Shared};
+use embassy_sync::zerocopy_channel;
+use hammer_app::chambers::{Block, READER_BLOCKS};
+use hammer_app::{persisted, ChamberReader, Monitor, ReaderRoom, Shared};
 use hammer_estimator::wear::WEAR_STATE_BYTES;
 use hammer_estimator::ConfigError;
 use hammer_wire::{DeviceMsg, HostMsg, WearBlob};
-use static_cell::StaticCell;
+use static_cell::{ConstStaticCell, StaticCell};
 
 use crate::clock::BoardClock;
 use crate::sampler::Sampler;
@@ -74,6 +76,17 @@ bind_interrupts!(struct Irqs {
 static SHARED: Shared<CriticalSectionRawMutex> = Shared::new();
 /// ~40 KB with its capture buffer: far too big for a task's stack frame.
 static MONITOR: StaticCell<Monitor> = StaticCell::new();
+/// The chambers' reader's ring of kept codes, track and room (~36 KB,
+/// `hammer_app::chambers`), built at link time: never on a stack.
+static READER_ROOM: ConstStaticCell<ReaderRoom> = ConstStaticCell::new(ReaderRoom::new());
+static READER: StaticCell<ChamberReader<&'static mut ReaderRoom>> = StaticCell::new();
+/// The blocks the sampling task reads the ADC's samples into and the
+/// reader takes them from (~7.7 KB, `hammer_app::chambers::READER_BLOCKS`).
+static BLOCKS: ConstStaticCell<[Block; READER_BLOCKS]> = ConstStaticCell::new([Block::EMPTY; READER_BLOCKS]);
+static BLOCK_CHANNEL: StaticCell<zerocopy_channel::Channel<'static, CriticalSectionRawMutex, Block>> =
+    StaticCell::new();
+type BlockSender = zerocopy_channel::Sender<'static, CriticalSectionRawMutex, Block>;
+type BlockReceiver = zerocopy_channel::Receiver<'static, CriticalSectionRawMutex, Block>;
 static ADC_RING: StaticCell<[u16; sampler::DMA_WORDS]> = StaticCell::new();
 static UART_RX_RING: StaticCell<[u8; link::RX_RING]> = StaticCell::new();
 
@@ -128,8 +141,15 @@ fn clock_config() -> Config {
 
 /// The app's sample → estimator → report loop, at interrupt priority.
 #[embassy_executor::task]
-async fn sampling(mut source: Sampler, monitor: &'static mut Monitor) {
-    hammer_app::sampling(&mut source, monitor, &SHARED, &BoardClock).await
+async fn sampling(mut source: Sampler, monitor: &'static mut Monitor, mut blocks: BlockSender) {
+    hammer_app::sampling(&mut source, monitor, &SHARED, &BoardClock, &mut blocks).await
+}
+
+/// The chambers' reading at each cycle's close, in thread mode: below the
+/// sampling task, which preempts it from its interrupt executor.
+#[embassy_executor::task]
+async fn reading(reader: &'static mut ChamberReader<&'static mut ReaderRoom>, mut blocks: BlockReceiver) {
+    hammer_app::reading(reader, &SHARED, &mut blocks).await
 }
 
 #[embassy_executor::task]
@@ -360,8 +380,13 @@ async fn main(spawner: Spawner) {
     // The priority must be set before `start`, which unmasks the interrupt.
     interrupt::UART4.set_priority(Priority::P6);
     let dsp = DSP_EXECUTOR.start(interrupt::UART4);
-    dsp.spawn(unwrap!(sampling(source, monitor)));
+    let (blocks_tx, blocks_rx) = BLOCK_CHANNEL
+        .init(zerocopy_channel::Channel::new(BLOCKS.take()))
+        .split();
+    dsp.spawn(unwrap!(sampling(source, monitor, blocks_tx)));
 
+    let reader = READER.init(ChamberReader::new(&cfg, READER_ROOM.take()));
+    spawner.spawn(unwrap!(reading(reader, blocks_rx)));
     spawner.spawn(unwrap!(link_rx(rx)));
     spawner.spawn(unwrap!(link_tx(tx)));
     spawner.spawn(unwrap!(watchdog(wdg, store.is_some())));

@@ -50,13 +50,30 @@ pub fn start_native_board(cfg: hammer_estimator::Config) -> std::io::Result<Unix
     let mut rx = SocketRx(device.try_clone()?);
     let mut tx = SocketTx(device);
     let mut monitor = Box::new(monitor);
+    let mut reader = hammer_app::ChamberReader::new(&cfg, Box::<hammer_app::ReaderRoom>::default());
+    let blocks: &'static mut [hammer_app::chambers::Block] =
+        Box::leak(vec![hammer_app::chambers::Block::EMPTY; hammer_app::chambers::READER_BLOCKS].into_boxed_slice());
+    let channel = Box::leak(Box::new(embassy_sync::zerocopy_channel::Channel::<
+        CriticalSectionRawMutex,
+        _,
+    >::new(blocks)));
+    let (mut blocks_tx, mut blocks_rx) = channel.split();
     std::thread::Builder::new()
         .name("board-sampling".into())
         .spawn(move || {
             let clock = HostClock(Instant::now());
             let mut source = LinkSamples::new(shared);
-            futures::executor::block_on(hammer_app::sampling(&mut source, &mut monitor, shared, &clock))
+            futures::executor::block_on(hammer_app::sampling(
+                &mut source,
+                &mut monitor,
+                shared,
+                &clock,
+                &mut blocks_tx,
+            ))
         })?;
+    std::thread::Builder::new()
+        .name("board-chambers".into())
+        .spawn(move || futures::executor::block_on(hammer_app::reading(&mut reader, shared, &mut blocks_rx)))?;
     std::thread::Builder::new()
         .name("board-link-rx".into())
         .spawn(move || futures::executor::block_on(hammer_app::link_rx(&mut rx, shared)))?;

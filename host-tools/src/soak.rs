@@ -15,7 +15,8 @@ use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use hammer_estimator::{Config, Estimator};
+use hammer_app::chambers::{Pipeline, ReaderRoom};
+use hammer_estimator::Config;
 use hammer_wire::{CycleReport, DeviceConfig, DeviceMsg, HostMsg, Status};
 
 use crate::client::Client;
@@ -192,12 +193,13 @@ pub fn run(args: &SoakArgs, progress: bool) -> Result<Soak> {
         seed: args.seed,
         ..DemoArgs::for_capture(args.supply_bar)
     };
-    // The host estimator sees what the board's ADC delivers, in order.
+    // The host's estimator and chambers' reader see what the board's ADC
+    // delivers, in order.
     let (expected_tx, expected) = mpsc::channel::<CycleReport>();
-    let mut host =
-        Estimator::new(Config::default()).map_err(|e| anyhow::anyhow!("default estimator configuration: {e:?}"))?;
+    let mut host = Pipeline::new(Config::default(), Box::<ReaderRoom>::default())
+        .map_err(|e| anyhow::anyhow!("default estimator configuration: {e:?}"))?;
     let mut full_rate = FullRate::start_tapped(&demo, None, move |sets| {
-        host.push_block(sets, |r| {
+        host.push_block(sets, &mut |r| {
             let _ = expected_tx.send(r);
         })
     })?;

@@ -42,10 +42,12 @@ use cortex_m_rt::{entry, exception, ExceptionFrame};
 use cortex_m_semihosting::debug;
 use embassy_executor::raw;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
-use hammer_app::{persisted, LinkSamples, Monitor, Overrun, Record, SampleSource, Shared};
+use embassy_sync::zerocopy_channel;
+use hammer_app::chambers::{Block, READER_BLOCKS};
+use hammer_app::{persisted, ChamberReader, LinkSamples, Monitor, Overrun, ReaderRoom, Record, SampleSource, Shared};
 use hammer_estimator::RawSample;
 use hammer_wire::{HostMsg, WearBlob};
-use static_cell::StaticCell;
+use static_cell::{ConstStaticCell, StaticCell};
 
 use crate::adc::{NoStimulus, StimulusAdc};
 use crate::clock::SysTickClock;
@@ -61,6 +63,16 @@ type Mutex = CriticalSectionRawMutex;
 pub(crate) static SHARED: Shared<Mutex> = Shared::new();
 /// The monitor holds a ~40 KB capture buffer: a static, not a task's stack.
 static MONITOR: StaticCell<Monitor> = StaticCell::new();
+/// The chambers' reader's ring of kept codes, track and room (~36 KB),
+/// built at link time: never on a stack.
+static READER_ROOM: ConstStaticCell<ReaderRoom> = ConstStaticCell::new(ReaderRoom::new());
+static READER: StaticCell<ChamberReader<&'static mut ReaderRoom>> = StaticCell::new();
+/// The blocks the sampling task reads its samples into and the reader
+/// takes them from (`hammer_app::chambers::READER_BLOCKS`).
+static BLOCKS: ConstStaticCell<[Block; READER_BLOCKS]> = ConstStaticCell::new([Block::EMPTY; READER_BLOCKS]);
+static BLOCK_CHANNEL: StaticCell<zerocopy_channel::Channel<'static, Mutex, Block>> = StaticCell::new();
+type BlockSender = zerocopy_channel::Sender<'static, Mutex, Block>;
+type BlockReceiver = zerocopy_channel::Receiver<'static, Mutex, Block>;
 static CLOCK: StaticCell<SysTickClock> = StaticCell::new();
 static EXECUTOR: StaticCell<raw::Executor> = StaticCell::new();
 
@@ -80,9 +92,21 @@ impl SampleSource for Samples {
 }
 
 #[embassy_executor::task]
-async fn sampling(monitor: &'static mut Monitor, clock: &'static SysTickClock, samples: Samples) -> ! {
+async fn sampling(
+    monitor: &'static mut Monitor,
+    clock: &'static SysTickClock,
+    samples: Samples,
+    mut blocks: BlockSender,
+) -> ! {
     let mut source = Paced::new(samples, &SHARED);
-    hammer_app::sampling(&mut source, monitor, &SHARED, clock).await
+    hammer_app::sampling(&mut source, monitor, &SHARED, clock, &mut blocks).await
+}
+
+/// The chambers' reading at each cycle's close, in thread mode: below the
+/// sampling task's interrupt-priority executor, which preempts it.
+#[embassy_executor::task]
+async fn reading(reader: &'static mut ChamberReader<&'static mut ReaderRoom>, mut blocks: BlockReceiver) -> ! {
+    hammer_app::reading(reader, &SHARED, &mut blocks).await
 }
 
 #[embassy_executor::task]
@@ -135,11 +159,19 @@ fn main() -> ! {
         Err(NoStimulus::Mismatch) => panic!("the host's sample stimulus has another layout than this firmware's"),
     };
 
-    // The pender ignores the context; the executor is the only one.
+    // Thread mode: everything but sampling (its pender context is null).
     let executor: &'static raw::Executor = EXECUTOR.init(raw::Executor::new(core::ptr::null_mut()));
     let spawner = executor.spawner();
     // Each task has a pool of one and is spawned once, so spawning cannot fail.
-    spawner.spawn(sampling(monitor, clock, samples).expect("sampling task spawned once"));
+    // Sampling preempts thread mode, as on the reference board.
+    let mut nvic = core.NVIC;
+    let sampling_spawner = executor::start_sampling(&mut nvic);
+    let (blocks_tx, blocks_rx) = BLOCK_CHANNEL
+        .init(zerocopy_channel::Channel::new(BLOCKS.take()))
+        .split();
+    sampling_spawner.spawn(sampling(monitor, clock, samples, blocks_tx).expect("sampling task spawned once"));
+    let reader = READER.init(ChamberReader::new(&cfg, READER_ROOM.take()));
+    spawner.spawn(reading(reader, blocks_rx).expect("reading task spawned once"));
     spawner.spawn(link_rx(rx).expect("link_rx task spawned once"));
     spawner.spawn(link_tx(tx).expect("link_tx task spawned once"));
     spawner.spawn(persistence().expect("persistence task spawned once"));

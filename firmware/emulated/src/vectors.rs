@@ -1,7 +1,7 @@
 //! The interrupt half of the vector table, which a PAC would normally supply.
 //!
 //! QEMU's mps2-an386 gives the NVIC 32 external interrupts (hw/arm/mps2.c,
-//! `num-irq` 32). This board uses UART0's two and TIMER0's; every other line points at
+//! `num-irq` 32). This board uses UART0's two, TIMER0's and one for its sampling executor; every other line points at
 //! cortex-m-rt's `DefaultHandler`, so an unexpected interrupt ends up in a
 //! known place instead of jumping through a null vector.
 
@@ -17,6 +17,9 @@ pub enum Interrupt {
     Uart0Tx = 1,
     /// TIMER0 (`cmsdk_apb_timer_create(0x40000000, … 8)`): the ADC's DMA halves.
     Timer0 = 8,
+    /// No device drives it: pended by software to poll the sampling
+    /// task's executor (`executor.rs`).
+    Dsp = 31,
 }
 
 // SAFETY: the discriminants are valid IRQ numbers on this board (< 32).
@@ -41,5 +44,6 @@ static __INTERRUPTS: [unsafe extern "C" fn(); IRQ_COUNT] = {
     table[Interrupt::Uart0Rx as usize] = crate::uart::on_rx_interrupt;
     table[Interrupt::Uart0Tx as usize] = crate::uart::on_tx_interrupt;
     table[Interrupt::Timer0 as usize] = crate::adc::on_timer_interrupt;
+    table[Interrupt::Dsp as usize] = crate::executor::on_dsp_interrupt;
     table
 };
