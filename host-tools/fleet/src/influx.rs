@@ -571,6 +571,37 @@ mod tests {
         assert_eq!(p.fields.len(), FIELDS.len() - 1 + 2);
     }
 
+    /// Unread chambers (NaN) are left out, not written as a NaN that would
+    /// make InfluxDB refuse the whole line; read ones are there to the bit.
+    #[test]
+    fn the_chambers_are_fields_when_read_and_left_out_when_not() {
+        use crate::records::tests::{read_front, CHAMBERS};
+        let mut unread = report(4);
+        unread.mark_chambers_unread();
+        let read = read_front(report(5));
+        for r in [unread, read] {
+            let l = line("rig", None, None, &r, 1);
+            assert!(!l.contains("NaN") && !l.contains("inf"), "{l}");
+            let p = parse(&l).unwrap();
+            let field = |k: &str| p.fields.iter().find(|(n, _)| n == k).map(|(_, v)| v.clone());
+            for (name, _) in CHAMBERS {
+                let want = FIELDS.iter().find(|f| f.name == name).unwrap().value(&r);
+                let Value::F32(want) = want else { panic!("{name}") };
+                match field(name) {
+                    Some(v) => assert_eq!(v.parse::<f32>().unwrap().to_bits(), want.to_bits(), "{name}"),
+                    None => assert!(want.is_nan(), "{name} ({want}) is missing"),
+                }
+            }
+            let (chambers, finite) = CHAMBERS.iter().fold((0, 0), |(n, k), (name, _)| {
+                let v = FIELDS.iter().find(|f| f.name == *name).unwrap().f64(&r);
+                (n + usize::from(field(name).is_some()), k + usize::from(v.is_finite()))
+            });
+            assert_eq!(chambers, finite);
+            assert_eq!(p.fields.len(), FIELDS.len() - 1 - 18 + finite + 2, "{l}");
+        }
+        assert!(line("rig", None, None, &unread, 1).contains(r#"flags="implausible|chambers_unread""#));
+    }
+
     #[test]
     fn device_time_keeps_its_spacing_and_a_reset_device_is_anchored_again() {
         let mut a = Anchor::default();
