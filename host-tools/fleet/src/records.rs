@@ -238,7 +238,11 @@ pub(crate) mod tests {
             assert_eq!(unit(name), u, "{name}");
         }
         let cells = |r: &CycleReport| -> Vec<(String, String)> {
-            header.iter().cloned().zip(csv_record(r).split(',').map(String::from)).collect()
+            header
+                .iter()
+                .cloned()
+                .zip(csv_record(r).split(',').map(String::from))
+                .collect()
         };
         let cell = |cells: &[(String, String)], k: &str| cells.iter().find(|(c, _)| c == k).unwrap().1.clone();
         // Unread: every characteristic NaN, "NaN" in the CSV (read back as
@@ -252,7 +256,10 @@ pub(crate) mod tests {
             assert!(json[name].is_null(), "{name}: {}", json[name]);
         }
         assert_eq!(cell(&csv, "flags"), "accel_zero_shift|chambers_unread");
-        assert_eq!(json["flags"], serde_json::json!(["accel_zero_shift", "chambers_unread"]));
+        assert_eq!(
+            json["flags"],
+            serde_json::json!(["accel_zero_shift", "chambers_unread"])
+        );
         assert_eq!(json["valid"], serde_json::json!(true), "unread is no invalid cycle");
         // Read: each value at full precision, back to the same bits.
         let r = read_front(sample());
