@@ -613,6 +613,9 @@ fn the_dashboard_shows_the_reports_a_device_sends() {
     for title in ["Friction (N)", "Impact energy (J)", "Frequency (Hz)"] {
         assert!(s.contains(title), "{title} chart:\n{s}");
     }
+    // The latest report's chambers, which the estimator alone leaves unread.
+    assert!(s.contains(&format!("Chambers, cycle {}", last.seq)), "{s}");
+    assert_eq!(s.matches("n/a (unread)").count(), 6, "{s}");
 
     // Pause: the view holds still while reports go on arriving.
     tmux.keys("p");
