@@ -12,8 +12,9 @@ use hammer_estimator::CycleReport;
 pub use crate::records::{csv_header, csv_record, json_record as jsonl_record};
 use crate::records::{flag_list, shown};
 
-/// The table's columns: (field, decimals, with its uncertainty).
-pub const TABLE: [(&str, usize, bool); 10] = [
+/// The table's columns: (field, decimals, with its uncertainty). The
+/// chambers' feed onsets close it, `n/a` where not read (`chambers_unread`).
+pub const TABLE: [(&str, usize, bool); 12] = [
     ("seq", 0, false),
     ("t_impact_s", 4, false),
     ("frequency_hz", 3, false),
@@ -24,6 +25,8 @@ pub const TABLE: [(&str, usize, bool); 10] = [
     ("impact_energy_frictionless_j", 3, false),
     ("stroke_m", 4, false),
     ("wear_index_j", 1, false),
+    ("front_feed_s", 6, true),
+    ("rear_feed_s", 6, true),
 ];
 
 fn cell(r: &CycleReport, name: &str, decimals: usize, pm: bool) -> String {
@@ -85,4 +88,36 @@ pub fn table(reports: &[CycleReport]) -> String {
         let _ = writeln!(s, "summary: no valid cycle among {}", reports.len());
     }
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_table_shows_the_feed_onsets_and_n_a_where_unread() {
+        let mut unread = CycleReport {
+            seq: 1,
+            friction_n: 10.0,
+            ..Default::default()
+        };
+        unread.mark_chambers_unread();
+        let read = CycleReport {
+            seq: 2,
+            front_feed_s: 1.57e-3,
+            front_feed_uncertainty_s: 3.6e-5,
+            rear_feed_s: -2.5e-4,
+            rear_feed_uncertainty_s: f32::NAN,
+            ..Default::default()
+        };
+        let t = table(&[unread, read]);
+        let lines: Vec<&str> = t.lines().collect();
+        assert!(
+            lines[0].contains(" front_feed_s ") && lines[0].contains(" rear_feed_s "),
+            "{t}"
+        );
+        let unread: Vec<&str> = lines[1].split_whitespace().collect();
+        assert_eq!(unread[unread.len() - 3..], ["n/a", "n/a", "chambers_unread"], "{t}");
+        assert!(lines[2].ends_with(" 0.001570 ± 0.000036 -0.000250 ± n/a  -"), "{t}");
+    }
 }

@@ -199,7 +199,12 @@ fn estimate_prints_one_record_per_cycle_in_each_format() {
     }
     let last = records.last().unwrap();
     assert!((last["friction_n"].as_f64().unwrap() - 14.55).abs() < 0.3, "{last}");
-    assert!(last["flags"].as_array().unwrap().is_empty());
+    // A host's plain estimate reads no chambers: NaN (null), flagged so.
+    assert_eq!(last["flags"], serde_json::json!(["chambers_unread"]), "{last}");
+    assert!(
+        last["front_feed_s"].is_null() && last["rear_feed_area_uncertainty_m2"].is_null(),
+        "{last}"
+    );
 
     // The CSV: the same columns as the JSON (every field, unit-suffixed names), the same numbers.
     let (code, out, _) = hammer(&["estimate", trace.to_str().unwrap(), "--format", "csv"]);
@@ -210,9 +215,19 @@ fn estimate_prints_one_record_per_cycle_in_each_format() {
     );
     assert_eq!(out.lines().count(), truth_cycles + 1);
     let header: Vec<&str> = out.lines().next().unwrap().split(',').collect();
+    let hash = header.iter().position(|c| *c == "calibration_hash").unwrap();
     assert_eq!(
-        &header[header.len() - 4..],
-        ["drift_score", "calibration_hash", "valid", "flags"]
+        &header[hash - 1..hash + 3],
+        [
+            "drift_score",
+            "calibration_hash",
+            "front_feed_s",
+            "front_feed_uncertainty_s"
+        ]
+    );
+    assert_eq!(
+        &header[header.len() - 3..],
+        ["rear_feed_area_uncertainty_m2", "valid", "flags"]
     );
     // One trace, one calibration: every record names the same one.
     let cal = &records[0]["calibration_hash"];

@@ -306,21 +306,27 @@ impl Lines {
     }
 }
 
+/// Reads a child's pipe to its end on a thread of its own.
+fn drain<R: Read + Send + 'static>(pipe: Option<R>) -> std::thread::JoinHandle<String> {
+    std::thread::spawn(move || {
+        let mut s = String::new();
+        if let Some(mut p) = pipe {
+            let _ = p.read_to_string(&mut s);
+        }
+        s
+    })
+}
+
 impl Kill {
-    /// Waits for exit; returns (status, stdout, stderr).
+    /// Waits for exit; returns (status, stdout, stderr). The pipes are read
+    /// while it runs: a child that printed more than a pipe holds (64 KiB,
+    /// 400 report lines) would wait on it and never exit.
     fn finish(mut self, timeout: Duration) -> (std::process::ExitStatus, String, String) {
         let deadline = Instant::now() + timeout;
+        let (out, err) = (drain(self.0.stdout.take()), drain(self.0.stderr.take()));
         loop {
             if let Some(st) = self.0.try_wait().unwrap() {
-                let mut out = String::new();
-                let mut err = String::new();
-                if let Some(mut o) = self.0.stdout.take() {
-                    o.read_to_string(&mut out).unwrap();
-                }
-                if let Some(mut e) = self.0.stderr.take() {
-                    e.read_to_string(&mut err).unwrap();
-                }
-                return (st, out, err);
+                return (st, out.join().unwrap(), err.join().unwrap());
             }
             assert!(Instant::now() < deadline, "hammer did not exit within {timeout:?}");
             std::thread::sleep(Duration::from_millis(20));
@@ -607,6 +613,9 @@ fn the_dashboard_shows_the_reports_a_device_sends() {
     for title in ["Friction (N)", "Impact energy (J)", "Frequency (Hz)"] {
         assert!(s.contains(title), "{title} chart:\n{s}");
     }
+    // The latest report's chambers, which the estimator alone leaves unread.
+    assert!(s.contains(&format!("Chambers, cycle {}", last.seq)), "{s}");
+    assert_eq!(s.matches("n/a (unread)").count(), 6, "{s}");
 
     // Pause: the view holds still while reports go on arriving.
     tmux.keys("p");

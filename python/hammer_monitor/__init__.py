@@ -54,7 +54,16 @@ def _records_table(result: tuple[Sequence[str], str | None]) -> pa.Table:
         warnings.warn(no_valid, NoValidCycle, stacklevel=3)
     rows = [json.loads(line) for line in lines]
     names = estimate_columns()
-    return pa.table({name: pa.array([r.get(name) for r in rows]) for name in names})
+    return pa.table({name: _column([r.get(name) for r in rows]) for name in names})
+
+
+def _column(values: list) -> pa.Array:
+    """A column of the records. The JSON's null is a NaN (the chambers'
+    characteristics until read): a column null throughout is still float64,
+    not Arrow's null type, and reads as NaN in NumPy and pandas."""
+    if all(v is None for v in values):
+        return pa.array(values, type=pa.float64())
+    return pa.array(values)
 
 
 def read_trace(path: PathLike, map: PathLike | None = None) -> pa.Table:

@@ -46,6 +46,39 @@ def test_columns_are_the_csv_columns_in_order(hammer, simulated):
     assert hm.estimate(simulated).column_names == header.split(",") == hm.estimate_columns()
 
 
+CHAMBERS = [
+    f"{chamber}_{name}"
+    for chamber in ("front", "rear")
+    for name in (
+        "feed_s",
+        "feed_uncertainty_s",
+        "feed_x_m",
+        "feed_p_rear_pa",
+        "feed_p_front_pa",
+        "closed_exponent",
+        "closed_exponent_uncertainty",
+        "feed_area_m2",
+        "feed_area_uncertainty_m2",
+    )
+]
+
+
+def test_the_chambers_are_float_columns_null_where_unread(hammer, simulated):
+    # A host's plain estimate does not read the chambers: NaN, null in the
+    # JSON, flagged; still float64 columns, NaN in NumPy.
+    cli = hammer.jsonl("estimate", simulated, "--format", "jsonl")
+    table = hm.estimate(simulated)
+    for name in CHAMBERS:
+        assert name in table.column_names, name
+        assert table.schema.field(name).type == pa.float64(), name
+        values = table.column(name).to_numpy(zero_copy_only=False)
+        unread = [r[name] is None for r in cli]
+        assert np.array_equal(np.isnan(values), unread), name
+    for row in table.to_pylist():
+        if "chambers_unread" in row["flags"]:
+            assert all(row[name] is None for name in CHAMBERS), row
+
+
 def test_supply_pressure_and_config_are_the_cli_flags(hammer, simulated, tmp_path):
     config = tmp_path / "hammer.toml"
     config.write_text("[estimator]\nimpact_threshold_mps2 = 3000.0\n")

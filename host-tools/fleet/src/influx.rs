@@ -18,7 +18,8 @@
 //! every InfluxDB write API, so no precision parameter is needed.
 //!
 //! Destinations ([`Destination::parse`]): a file (appended), `udp://HOST:PORT`
-//! (one datagram per batch, kept under 1 400 bytes), or `http(s)://…` (the
+//! (one datagram per batch, kept under 1 400 bytes; a longer line goes as
+//! lines of its series and time, which InfluxDB merges), or `http(s)://…` (the
 //! URL of a write endpoint, e.g. `http://localhost:8086/api/v2/write?org=o&bucket=b`
 //! or `…/write?db=hammer`; the body gzip-compressed). The token, from
 //! `INFLUX_TOKEN` or `--influx-token-file`, becomes an `Authorization:
@@ -357,13 +358,13 @@ impl Writer {
             Destination::Udp(addr) => {
                 let sock = self.udp.as_ref().expect("opened");
                 let mut datagram = String::new();
-                for l in batch {
+                for l in batch.iter().flat_map(|l| shared_out(l, UDP_MAX - 1)) {
                     if !datagram.is_empty() && datagram.len() + l.len() + 1 > UDP_MAX {
                         sock.send(datagram.as_bytes())
                             .with_context(|| format!("udp://{addr}"))?;
                         datagram.clear();
                     }
-                    datagram += l;
+                    datagram += &l;
                     datagram.push('\n');
                 }
                 sock.send(datagram.as_bytes())
@@ -454,6 +455,42 @@ fn exchange(mut s: impl Read + Write, head: &[u8], body: &[u8]) -> Result<()> {
         bail!("{} {body}", status.trim());
     }
     Ok(())
+}
+
+/// `line` as lines of at most `max` bytes, one datagram each (a report
+/// with its chambers read is about 1.5 KB): the same series and time, its
+/// fields shared out in order. InfluxDB merges the fields of one series at
+/// one time into one point, so the point is whole once all have arrived. A
+/// line that fits is left as it is. This module's lines only: no space in
+/// a field, no comma in a string field (numbers, booleans, flag names).
+fn shared_out(line: &str, max: usize) -> Vec<String> {
+    let mut esc = false;
+    let series_end = line.char_indices().find_map(|(i, c)| {
+        let end = c == ' ' && !esc;
+        esc = c == '\\' && !esc;
+        end.then_some(i)
+    });
+    let (Some(s), Some(t)) = (series_end, line.rfind(' ')) else {
+        return vec![line.to_string()];
+    };
+    if line.len() <= max || t <= s {
+        return vec![line.to_string()];
+    }
+    let (series, time) = (&line[..s], &line[t..]);
+    let mut out = vec![];
+    let mut fields = String::new();
+    for f in line[s + 1..t].split(',') {
+        if !fields.is_empty() && series.len() + 1 + fields.len() + 1 + f.len() + time.len() > max {
+            out.push(format!("{series} {fields}{time}"));
+            fields.clear();
+        }
+        if !fields.is_empty() {
+            fields.push(',');
+        }
+        fields.push_str(f);
+    }
+    out.push(format!("{series} {fields}{time}"));
+    out
 }
 
 /// A parsed line (for tests and tools): measurement, tags, fields as text, timestamp.
@@ -571,6 +608,37 @@ mod tests {
         assert_eq!(p.fields.len(), FIELDS.len() - 1 + 2);
     }
 
+    /// Unread chambers (NaN) are left out, not written as a NaN that would
+    /// make InfluxDB refuse the whole line; read ones are there to the bit.
+    #[test]
+    fn the_chambers_are_fields_when_read_and_left_out_when_not() {
+        use crate::records::tests::{read_front, CHAMBERS};
+        let mut unread = report(4);
+        unread.mark_chambers_unread();
+        let read = read_front(report(5));
+        for r in [unread, read] {
+            let l = line("rig", None, None, &r, 1);
+            assert!(!l.contains("NaN") && !l.contains("inf"), "{l}");
+            let p = parse(&l).unwrap();
+            let field = |k: &str| p.fields.iter().find(|(n, _)| n == k).map(|(_, v)| v.clone());
+            for (name, _) in CHAMBERS {
+                let want = FIELDS.iter().find(|f| f.name == name).unwrap().value(&r);
+                let Value::F32(want) = want else { panic!("{name}") };
+                match field(name) {
+                    Some(v) => assert_eq!(v.parse::<f32>().unwrap().to_bits(), want.to_bits(), "{name}"),
+                    None => assert!(want.is_nan(), "{name} ({want}) is missing"),
+                }
+            }
+            let (chambers, finite) = CHAMBERS.iter().fold((0, 0), |(n, k), (name, _)| {
+                let v = FIELDS.iter().find(|f| f.name == *name).unwrap().f64(&r);
+                (n + usize::from(field(name).is_some()), k + usize::from(v.is_finite()))
+            });
+            assert_eq!(chambers, finite);
+            assert_eq!(p.fields.len(), FIELDS.len() - 1 - 18 + finite + 2, "{l}");
+        }
+        assert!(line("rig", None, None, &unread, 1).contains(r#"flags="implausible|chambers_unread""#));
+    }
+
     #[test]
     fn device_time_keeps_its_spacing_and_a_reset_device_is_anchored_again() {
         let mut a = Anchor::default();
@@ -661,6 +729,83 @@ mod tests {
         let seqs: Vec<String> = got.iter().map(|p| p.fields[0].1.clone()).collect();
         assert_eq!(seqs, (0..20).map(|k| format!("{k}i")).collect::<Vec<_>>());
         assert_eq!(w.lines, 20);
+    }
+
+    /// A report with its chambers read makes a line over a datagram: it
+    /// goes as lines of its series and time, each field once.
+    #[test]
+    fn a_line_over_a_datagram_is_shared_out_whole() {
+        // Every number as long as an f32 prints, as a running hammer's are.
+        let r = CycleReport {
+            seq: 123_456,
+            t_impact_us: 12_345_678_901,
+            period_s: 0.046_812_345,
+            frequency_hz: 21.362_345,
+            friction_stroke_n: 10.236_917,
+            friction_backhaul_n: 11.234_567,
+            friction_uncertainty_n: 1.123_456_7,
+            friction_stroke_uncertainty_n: 1.234_567_8,
+            friction_backhaul_uncertainty_n: 1.345_678_9,
+            impact_velocity_mps: 8.123_456_7,
+            impact_velocity_frictionless_mps: 8.234_567_8,
+            impact_energy_frictionless_j: 4.912_345_6,
+            impact_energy_uncertainty_j: 0.166_123_45,
+            impact_energy_frictionless_uncertainty_j: 0.180_123_45,
+            friction_work_j: 0.452_345_67,
+            friction_work_ratio: 0.100_523_45,
+            stroke_m: 0.061_234_567,
+            peak_rear_pa: 412_345.66,
+            peak_front_pa: 398_765.44,
+            accel_zero_shift_mps2: 1.234_567_8,
+            wear_index_j: 123_456.79,
+            wear_remaining_fraction: 0.997_654_3,
+            remaining_life_cycles: 1.234_567_9e8,
+            drift_score: 0.123_456_79,
+            rear_feed_s: 2.345_678_9e-3,
+            rear_feed_uncertainty_s: 3.456_789e-5,
+            rear_feed_x_m: 0.012_345_67,
+            rear_feed_p_rear_pa: 123_456.79,
+            rear_feed_p_front_pa: 234_567.89,
+            rear_closed_exponent: 1.234_567_8,
+            rear_closed_exponent_uncertainty: 0.012_345_67,
+            rear_feed_area_m2: 1.234_567_8e-5,
+            rear_feed_area_uncertainty_m2: 1.234_567_8e-7,
+            ..crate::records::tests::read_front(report(9))
+        };
+        let whole = line("rig 4,a", Some("lab"), Some(4.0), &r, 1_764_000_000_000_000_123);
+        assert!(whole.len() > UDP_MAX, "{} bytes: make the report longer", whole.len());
+        let server = UdpSocket::bind("127.0.0.1:0").unwrap();
+        server.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+        let addr = server.local_addr().unwrap();
+        let mut w = Writer::open(Destination::Udp(addr.to_string()), &HttpArgs::default()).unwrap();
+        w.push(whole.clone()).unwrap();
+        w.push(line("rig", None, None, &report(10), 7)).unwrap();
+        w.flush().unwrap();
+        let want = parse(&whole).unwrap();
+        let (mut fields, mut buf, mut short) = (vec![], [0u8; 4096], None);
+        while short.is_none() {
+            let n = server.recv(&mut buf).unwrap();
+            assert!(n <= UDP_MAX, "{n} bytes");
+            for l in std::str::from_utf8(&buf[..n]).unwrap().lines() {
+                let p = parse(l).unwrap();
+                if p.t_ns == 7 {
+                    short = Some(p);
+                    continue;
+                }
+                assert_eq!(
+                    (&p.measurement, &p.tags, p.t_ns),
+                    (&want.measurement, &want.tags, want.t_ns)
+                );
+                fields.extend(p.fields);
+            }
+        }
+        assert_eq!(fields, want.fields, "every field once, in order");
+        assert_eq!(
+            short.unwrap().fields.len(),
+            FIELDS.len() - 1 + 2,
+            "a short line as it is"
+        );
+        assert_eq!(shared_out("no fields", 4), ["no fields"]);
     }
 
     #[test]

@@ -502,6 +502,51 @@ mod tests {
         let _ = std::fs::remove_dir_all(&dir);
     }
 
+    /// The chambers' columns, FLOAT like every f32 field; unread (NaN) they
+    /// hold NaN, as every NaN field does, and read back to the bit.
+    #[test]
+    fn the_chambers_are_columns_and_read_back_read_or_not() {
+        use crate::records::tests::{read_front, CHAMBERS};
+        let schema = parse_message_type(&schema_text()).unwrap();
+        for (name, _) in CHAMBERS {
+            let f = schema.get_fields().iter().find(|f| f.name() == name);
+            let f = f.unwrap_or_else(|| panic!("no column {name}"));
+            assert_eq!(f.get_physical_type(), parquet::basic::Type::FLOAT, "{name}");
+        }
+        let path = std::env::temp_dir().join(format!("hammer-parquet-chambers-{}.parquet", std::process::id()));
+        let mut unread = report(1, 10.0);
+        unread.mark_chambers_unread();
+        let reports = [unread, read_front(report(2, 11.0))];
+        let rows: Vec<Row> = reports
+            .iter()
+            .map(|r| Row {
+                device: "d".into(),
+                host_time_us: None,
+                report: *r,
+            })
+            .collect();
+        write(File::create(&path).unwrap(), &rows).unwrap();
+        let back = read(&path).unwrap();
+        let _ = std::fs::remove_file(&path);
+        assert_eq!(back.len(), 2);
+        let at = |name: &str| FIELDS.iter().position(|f| f.name == name).unwrap();
+        for (b, r) in back.iter().zip(&reports) {
+            assert!(b.holds(r), "{b:?} vs {r:?}");
+            for (name, _) in CHAMBERS {
+                assert!(
+                    b.values[at(name)].same(FIELDS[at(name)].value(r)),
+                    "{name}: {:?}",
+                    b.values[at(name)]
+                );
+            }
+        }
+        assert!(matches!(back[0].values[at("front_feed_s")], Value::F32(v) if v.is_nan()));
+        assert_eq!(back[1].values[at("front_feed_s")], Value::F32(1.57e-3));
+        assert!(matches!(back[1].values[at("rear_feed_s")], Value::F32(v) if v.is_nan()));
+        assert_eq!(back[0].flags, "chambers_unread");
+        assert_eq!(back[1].flags, "-");
+    }
+
     #[test]
     fn a_partitioned_dataset_splits_by_device_and_date_and_loses_nothing() {
         let dir = std::env::temp_dir().join(format!("hammer-parquet-ds-{}", std::process::id()));

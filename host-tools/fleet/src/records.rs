@@ -94,8 +94,9 @@ pub fn unit(name: &str) -> &'static str {
     field(name).map_or("", |f| f.unit)
 }
 
-/// What a report line says, in order: (label, field, decimals).
-pub const LINE: [(&str, &str, usize); 7] = [
+/// What a report line says, in order: (label, field, decimals). The
+/// chambers' feed onsets close it (`n/a` until read: `chambers_unread`).
+pub const LINE: [(&str, &str, usize); 9] = [
     ("t", "t_impact_s", 6),
     ("friction", "friction_n", 2),
     ("energy", "impact_energy_j", 3),
@@ -103,10 +104,12 @@ pub const LINE: [(&str, &str, usize); 7] = [
     ("", "frequency_hz", 2),
     ("wear", "wear_index_j", 1),
     ("drift", "drift_score", 2),
+    ("front feed", "front_feed_s", 6),
+    ("rear feed", "rear_feed_s", 6),
 ];
 
 /// One line per report, for headless runs (the monitor's and the demo's):
-/// `cycle     12  t 1.234567 s  friction 12.34 ± 1.12 N  energy 4.616 ± 0.166 J  w/o friction 5.299 ± 0.180 J  21.79 Hz  wear 6.1 J  drift 0.00 σ  flags -`
+/// `cycle     12  t 1.234567 s  friction 12.34 ± 1.12 N  energy 4.616 ± 0.166 J  w/o friction 5.299 ± 0.180 J  21.79 Hz  wear 6.1 J  drift 0.00 σ  front feed 0.001570 ± 0.000036 s  rear feed n/a s  flags -`
 pub fn report_line(r: &CycleReport) -> String {
     let mut s = format!("cycle {:>6}", r.seq);
     for (label, name, decimals) in LINE {
@@ -128,7 +131,7 @@ pub fn report_line(r: &CycleReport) -> String {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
     fn sample() -> CycleReport {
@@ -177,12 +180,123 @@ mod tests {
         assert!(header.contains(",wear_index_j,"), "{header}");
     }
 
+    /// The chambers' characteristics (protocol 6) and their units.
+    pub const CHAMBERS: [(&str, &str); 18] = [
+        ("front_feed_s", "s"),
+        ("front_feed_uncertainty_s", "s"),
+        ("front_feed_x_m", "m"),
+        ("front_feed_p_rear_pa", "Pa"),
+        ("front_feed_p_front_pa", "Pa"),
+        ("front_closed_exponent", "1"),
+        ("front_closed_exponent_uncertainty", "1"),
+        ("front_feed_area_m2", "m²"),
+        ("front_feed_area_uncertainty_m2", "m²"),
+        ("rear_feed_s", "s"),
+        ("rear_feed_uncertainty_s", "s"),
+        ("rear_feed_x_m", "m"),
+        ("rear_feed_p_rear_pa", "Pa"),
+        ("rear_feed_p_front_pa", "Pa"),
+        ("rear_closed_exponent", "1"),
+        ("rear_closed_exponent_uncertainty", "1"),
+        ("rear_feed_area_m2", "m²"),
+        ("rear_feed_area_uncertainty_m2", "m²"),
+    ];
+
+    /// `r` with the front chamber read and the rear read with nothing to
+    /// read (NaN), not flagged unread.
+    pub fn read_front(r: CycleReport) -> CycleReport {
+        let mut r = CycleReport {
+            front_feed_s: 1.57e-3,
+            front_feed_uncertainty_s: 3.6e-5,
+            front_feed_x_m: 0.0412,
+            front_feed_p_rear_pa: 2.13e5,
+            front_feed_p_front_pa: 1.2e4,
+            front_closed_exponent: 1.32,
+            front_closed_exponent_uncertainty: 0.021,
+            front_feed_area_m2: 1.23e-5,
+            front_feed_area_uncertainty_m2: 5.6e-7,
+            rear_feed_s: f32::NAN,
+            rear_feed_uncertainty_s: f32::NAN,
+            rear_feed_x_m: f32::NAN,
+            rear_feed_p_rear_pa: f32::NAN,
+            rear_feed_p_front_pa: f32::NAN,
+            rear_closed_exponent: f32::NAN,
+            rear_closed_exponent_uncertainty: f32::NAN,
+            rear_feed_area_m2: f32::NAN,
+            rear_feed_area_uncertainty_m2: f32::NAN,
+            ..r
+        };
+        r.flags.remove(Flags::CHAMBERS_UNREAD);
+        r
+    }
+
+    #[test]
+    fn the_chambers_are_in_every_record_and_a_nan_reads_back_as_missing() {
+        let header: Vec<String> = csv_header().split(',').map(String::from).collect();
+        for (name, u) in CHAMBERS {
+            assert!(header.iter().any(|c| c == name), "{name} is no CSV column");
+            assert_eq!(unit(name), u, "{name}");
+        }
+        let cells = |r: &CycleReport| -> Vec<(String, String)> {
+            header
+                .iter()
+                .cloned()
+                .zip(csv_record(r).split(',').map(String::from))
+                .collect()
+        };
+        let cell = |cells: &[(String, String)], k: &str| cells.iter().find(|(c, _)| c == k).unwrap().1.clone();
+        // Unread: every characteristic NaN, "NaN" in the CSV (read back as
+        // NaN by Rust, pandas, NumPy), null in the JSON, and flagged.
+        let mut unread = sample();
+        unread.mark_chambers_unread();
+        let (csv, json) = (cells(&unread), json_record(&unread));
+        for (name, _) in CHAMBERS {
+            assert_eq!(cell(&csv, name), "NaN", "{name}");
+            assert!(cell(&csv, name).parse::<f32>().unwrap().is_nan());
+            assert!(json[name].is_null(), "{name}: {}", json[name]);
+        }
+        assert_eq!(cell(&csv, "flags"), "accel_zero_shift|chambers_unread");
+        assert_eq!(
+            json["flags"],
+            serde_json::json!(["accel_zero_shift", "chambers_unread"])
+        );
+        assert_eq!(json["valid"], serde_json::json!(true), "unread is no invalid cycle");
+        // Read: each value at full precision, back to the same bits.
+        let r = read_front(sample());
+        let (csv, json) = (cells(&r), json_record(&r));
+        for (name, _) in CHAMBERS {
+            let f = field(name).unwrap();
+            let Value::F32(v) = f.value(&r) else { panic!("{name}") };
+            let back: f32 = cell(&csv, name).parse().unwrap();
+            assert_eq!(back.to_bits(), v.to_bits(), "{name}: {}", cell(&csv, name));
+            match json[name].as_f64() {
+                Some(j) => assert_eq!(j as f32, v, "{name}"),
+                None => assert!(v.is_nan() && json[name].is_null(), "{name}"),
+            }
+        }
+        assert_eq!(cell(&csv, "front_feed_s"), "0.00157");
+        assert_eq!(cell(&csv, "rear_feed_s"), "NaN");
+        assert_eq!(cell(&csv, "flags"), "accel_zero_shift");
+        // The line: the onsets with their U, n/a where not read.
+        let line = report_line(&r);
+        assert!(
+            line.contains("  front feed 0.001570 ± 0.000036 s  rear feed n/a s  flags accel_zero_shift"),
+            "{line}"
+        );
+        let line = report_line(&unread);
+        assert!(
+            line.contains("  front feed n/a s  rear feed n/a s  flags accel_zero_shift|chambers_unread"),
+            "{line}"
+        );
+    }
+
     #[test]
     fn the_line_reads_like_the_dashboard() {
         assert_eq!(
             report_line(&sample()),
             "cycle     12  t 1.234567 s  friction 12.34 ± 1.12 N  energy 4.616 ± 0.166 J  \
-             w/o friction 5.299 ± 0.180 J  21.79 Hz  wear 6.1 J  drift 0.00 σ  flags accel_zero_shift"
+             w/o friction 5.299 ± 0.180 J  21.79 Hz  wear 6.1 J  drift 0.00 σ  \
+             front feed 0.000000 ± 0.000000 s  rear feed 0.000000 ± 0.000000 s  flags accel_zero_shift"
         );
         let bad = CycleReport {
             friction_n: f32::NAN,

@@ -527,7 +527,7 @@ mod tests {
     #[test]
     fn csv_rows_have_a_value_per_column() {
         // The layout cycles.csv had before the columns came from the table of report fields,
-        // plus the calibration hash (protocol 3).
+        // plus the calibration hash (protocol 3) and the chambers' characteristics (protocol 6).
         assert_eq!(
             cycles_header(),
             "host_time,host_unix_s,seq,t_impact_s,period_s,frequency_hz,friction_n,\
@@ -535,7 +535,19 @@ friction_stroke_n,friction_backhaul_n,friction_uncertainty_n,friction_stroke_unc
 friction_backhaul_uncertainty_n,impact_velocity_mps,impact_velocity_frictionless_mps,impact_energy_j,\
 impact_energy_frictionless_j,impact_energy_uncertainty_j,impact_energy_frictionless_uncertainty_j,\
 friction_work_j,friction_work_ratio,stroke_m,peak_rear_pa,peak_front_pa,accel_zero_shift_mps2,wear_index_j,\
-wear_remaining_fraction,remaining_life_cycles,drift_score,calibration_hash,valid,flags"
+wear_remaining_fraction,remaining_life_cycles,drift_score,calibration_hash,\
+front_feed_s,front_feed_uncertainty_s,front_feed_x_m,front_feed_p_rear_pa,front_feed_p_front_pa,\
+front_closed_exponent,front_closed_exponent_uncertainty,front_feed_area_m2,front_feed_area_uncertainty_m2,\
+rear_feed_s,rear_feed_uncertainty_s,rear_feed_x_m,rear_feed_p_rear_pa,rear_feed_p_front_pa,\
+rear_closed_exponent,rear_closed_exponent_uncertainty,rear_feed_area_m2,rear_feed_area_uncertainty_m2,valid,flags"
+        );
+        // Unread chambers: NaN, which a CSV reader (pandas, NumPy, Rust) reads back as NaN.
+        let mut unread = CycleReport::default();
+        unread.mark_chambers_unread();
+        let row = csv_row(1_700_000_000_123_456, &unread);
+        assert!(
+            row.ends_with(&format!("{}true,chambers_unread", "NaN,".repeat(18))),
+            "{row}"
         );
         let row = csv_row(1_700_000_000_123_456, &CycleReport::default());
         assert_eq!(row.split(',').count(), cycles_header().split(',').count());

@@ -11,6 +11,7 @@
 //! what a replay shows is what the live dashboard showed.
 
 pub mod app;
+pub mod chambers_panel;
 pub mod connect;
 pub mod drift;
 pub mod drift_panel;

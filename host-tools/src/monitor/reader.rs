@@ -548,7 +548,8 @@ mod tests {
     }
 
     /// A recording made with a protocol-4 board (before the chambers joined
-    /// the configuration) replays: its reports as they were, its `Config`
+    /// the configuration) replays: its reports as they were (the chambers
+    /// unread, as protocol 5's), its `Config`
     /// (the frame protocol 4 sent, pinned in `wire/tests/frames.rs` then)
     /// with the default chambers; a live link refuses that board.
     #[test]
@@ -559,7 +560,14 @@ mod tests {
             .collect();
         let stream = |i: &mut Ingest| {
             let mut out = vec![];
-            for bytes in [frame(&hello(4)), v4.clone(), frame(&report(0)), frame(&report(1))] {
+            // Protocol 4's reports are protocol 5's.
+            let old = |seq| {
+                protocol5_report(&hammer_wire::CycleReport {
+                    seq,
+                    ..Default::default()
+                })
+            };
+            for bytes in [frame(&hello(4)), v4.clone(), old(0), old(1)] {
                 i.feed(1, &bytes, &mut |e| out.push(e.event));
             }
             out.into_iter()
@@ -578,18 +586,128 @@ mod tests {
             (c.front_dead_m3, c.pressure_group_delay_s),
             (default.front_dead_m3, default.pressure_group_delay_s)
         );
-        assert_eq!(&ev[2..], &[Event::Msg(report(0)), Event::Msg(report(1))]);
+        let unread = |m: DeviceMsg| match m {
+            DeviceMsg::Report(mut r) => {
+                r.mark_chambers_unread();
+                Event::Msg(DeviceMsg::Report(r))
+            }
+            m => Event::Msg(m),
+        };
+        assert_eq!(&ev[2..], &[unread(report(0)), unread(report(1))]);
         // Live, the same bytes are a board of another protocol: not read
-        // (its configuration does not even decode in this one).
+        // (its configuration and reports do not even decode in this one).
         let ev = stream(&mut Ingest::new());
         assert!(
-            matches!(ev[..], [Event::VersionMismatch { device: 4 }, Event::FrameError { .. }]),
+            matches!(
+                ev[..],
+                [
+                    Event::VersionMismatch { device: 4 },
+                    Event::FrameError { .. },
+                    Event::FrameError { .. },
+                    Event::FrameError { .. }
+                ]
+            ),
             "{ev:?}"
         );
         // A protocol this host cannot read is not read in a replay either.
         let mut i = Ingest::for_replay();
         let ev = run(&mut i, &[hello(3), report(0)]);
         assert_eq!(ev, vec![Event::VersionMismatch { device: 3 }]);
+    }
+
+    /// Frames `body` as it is (a message of another protocol's layout).
+    fn raw_frame(body: &[u8]) -> Vec<u8> {
+        struct Raw<'a>(&'a [u8]);
+        impl serde::Serialize for Raw<'_> {
+            fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+                use serde::ser::SerializeTuple;
+                let mut t = s.serialize_tuple(self.0.len())?;
+                for b in self.0 {
+                    t.serialize_element(b)?;
+                }
+                t.end()
+            }
+        }
+        let mut buf = [0u8; hammer_wire::MAX_FRAME];
+        let n = hammer_wire::encode(&Raw(body), &mut buf).unwrap();
+        buf[..n].to_vec()
+    }
+
+    /// `r` as a protocol-5 board sent it: this protocol's body without the
+    /// chambers' 72 bytes, which lie just before the flags' varint
+    /// (`wire/tests/frames.rs` pins that layout against protocol 5's frame).
+    fn protocol5_report(r: &hammer_wire::CycleReport) -> Vec<u8> {
+        let mut f = frame(&DeviceMsg::Report(*r));
+        let end = f.len() - 1;
+        let n = hammer_wire::cobs::decode_in_place(&mut f[1..end]).unwrap();
+        let body = &f[1..1 + n - 4];
+        let flags = (1..).find(|k| r.flags.0 >> (7 * k) == 0).unwrap();
+        let chambers = body.len() - flags - 72..body.len() - flags;
+        let v5: Vec<u8> = body[..chambers.start]
+            .iter()
+            .chain(&body[chambers.end..])
+            .copied()
+            .collect();
+        raw_frame(&v5)
+    }
+
+    /// A recording made with a protocol-5 board (before the report carried
+    /// the chambers' characteristics) replays: its reports with every field
+    /// as sent, the chambers NaN and flagged `chambers_unread`; a live link
+    /// refuses that board.
+    #[test]
+    fn a_replayed_protocol_5_recording_is_read_with_its_chambers_unread() {
+        use hammer_wire::{CycleReport, Flags};
+        let sent: Vec<CycleReport> = (0..2)
+            .map(|seq| CycleReport {
+                seq,
+                t_impact_us: 47_000 * u64::from(seq + 1),
+                friction_n: 10.25,
+                friction_uncertainty_n: 1.125,
+                impact_energy_j: 4.5,
+                drift_score: 0.5,
+                calibration_hash: 0xDEAD_BEEF,
+                flags: Flags::ACCEL_ZERO_SHIFT,
+                ..Default::default()
+            })
+            .collect();
+        let config = hammer_wire::DeviceConfig::from(&hammer_estimator::Config::default());
+        let stream = |i: &mut Ingest| {
+            let mut out = vec![];
+            let mut frames = vec![frame(&hello(5)), frame(&DeviceMsg::Config(config))];
+            frames.extend(sent.iter().map(protocol5_report));
+            for bytes in frames {
+                i.feed(1, &bytes, &mut |e| out.push(e.event));
+            }
+            out.into_iter()
+                .filter(|e| !matches!(e, Event::Stats(_)))
+                .collect::<Vec<_>>()
+        };
+        let ev = stream(&mut Ingest::for_replay());
+        assert!(matches!(&ev[0], Event::Device(i) if i.protocol_version == 5), "{ev:?}");
+        // The configuration as it is (protocol 6 left it unchanged; NaN
+        // supply pressure, so compared by its hash).
+        let Event::Msg(DeviceMsg::Config(c)) = &ev[1] else {
+            panic!("{ev:?}")
+        };
+        assert_eq!(hammer_wire::config_hash(c), hammer_wire::config_hash(&config));
+        assert_eq!(ev.len(), 4, "{ev:?}");
+        for (e, s) in ev[2..].iter().zip(&sent) {
+            let Event::Msg(DeviceMsg::Report(r)) = e else {
+                panic!("{ev:?}")
+            };
+            let mut expected = *s;
+            expected.mark_chambers_unread();
+            assert_eq!(*r, expected);
+            assert!(r.front_feed_s.is_nan() && r.rear_feed_area_uncertainty_m2.is_nan());
+            assert!(r.flags.contains(Flags::CHAMBERS_UNREAD | Flags::ACCEL_ZERO_SHIFT));
+            assert!(r.is_valid(), "unread chambers do not invalidate a cycle");
+        }
+        // Live, a protocol-5 board is refused at its Hello, and its reports
+        // (shorter than this protocol's) are not read as this protocol's.
+        let ev = stream(&mut Ingest::new());
+        assert!(matches!(ev[0], Event::VersionMismatch { device: 5 }), "{ev:?}");
+        assert!(!ev.iter().any(|e| matches!(e, Event::Msg(_))), "{ev:?}");
     }
 
     #[test]

@@ -132,6 +132,12 @@ pub fn ui_in(f: &mut Frame, area: Rect, app: &App) {
         }
         None => f.render_widget(device_panel(v), device),
     }
+    // The latest report's chambers above the charts: one row per chamber.
+    let [chambers, right] = Layout::vertical([Constraint::Length(5), Constraint::Min(6)]).areas(right);
+    f.render_widget(
+        super::chambers_panel::chambers_panel(v.last.as_ref().map(|(_, r)| r)),
+        chambers,
+    );
     charts(f, app, v, right);
     f.render_widget(events_panel(v, events.height.saturating_sub(2) as usize), events);
     f.render_widget(footer_line(app), footer);
@@ -755,6 +761,10 @@ mod tests {
         for (w, h) in [(80, 24), (40, 10), (10, 5), (1, 1)] {
             screen(&app, w, h);
         }
+        // The latest report's chambers (zeros here).
+        assert!(s.contains("Chambers, cycle 4"), "{s}");
+        let front = s.lines().find(|l| l.contains("│front ")).unwrap();
+        assert!(front.contains("0.000 ± 0.000 ms"), "{s}");
         // A drift reading gets its panel, and an alarm its banner.
         app.toggle_pause();
         let mut w = crate::drift::Window::new(
@@ -801,5 +811,63 @@ mod tests {
             took < Duration::from_millis(200),
             "a frame with a full history took {took:?}"
         );
+    }
+
+    /// The chambers' panel shows the latest report's characteristics, each
+    /// ± its U in the drift panel's units, `n/a (unread)` where not read.
+    #[test]
+    fn the_chambers_of_the_latest_report_are_shown() {
+        let mut app = App::new("x".into(), false, 300.0);
+        let mut report = |r: CycleReport| {
+            app.on_event(&Stamped {
+                t_us: app.now_us,
+                event: Event::Msg(DeviceMsg::Report(r)),
+            });
+            screen(&app, 160, 50)
+        };
+        let mut unread = CycleReport {
+            seq: 7,
+            ..Default::default()
+        };
+        unread.mark_chambers_unread();
+        let s = report(unread);
+        let row = |s: &str, chamber: &str| {
+            s.lines()
+                .find(|l| l.contains(&format!("│{chamber} ")))
+                .unwrap()
+                .to_string()
+        };
+        assert!(s.contains("Chambers, cycle 7") && s.contains("feed onset"), "{s}");
+        for chamber in ["front", "rear"] {
+            assert_eq!(row(&s, chamber).matches("n/a (unread)").count(), 3, "{s}");
+        }
+        let read = CycleReport {
+            seq: 8,
+            front_feed_s: 1.57e-3,
+            front_feed_uncertainty_s: 3.6e-5,
+            front_closed_exponent: 1.32,
+            front_closed_exponent_uncertainty: 0.021,
+            front_feed_area_m2: 1.23e-5,
+            front_feed_area_uncertainty_m2: 5.6e-7,
+            rear_feed_s: -2.5e-4,
+            rear_feed_uncertainty_s: 4e-5,
+            rear_closed_exponent: f32::NAN,
+            rear_closed_exponent_uncertainty: f32::NAN,
+            rear_feed_area_m2: f32::NAN,
+            rear_feed_area_uncertainty_m2: f32::NAN,
+            ..Default::default()
+        };
+        let s = report(read);
+        let front = row(&s, "front");
+        assert!(
+            front.contains("1.570 ± 0.036 ms") && front.contains("1.320 ± 0.021") && front.contains("12.30 ± 0.56 mm²"),
+            "{s}"
+        );
+        let rear = row(&s, "rear");
+        assert!(
+            rear.contains("-0.250 ± 0.040 ms") && rear.matches("n/a").count() == 2,
+            "{s}"
+        );
+        assert!(!rear.contains("unread"), "{s}");
     }
 }
