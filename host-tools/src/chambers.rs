@@ -47,7 +47,11 @@ impl Family {
 /// A run's measured and true characteristics, cycle by cycle, and when the
 /// spool opened each port (the true crossings), from the trace's start.
 pub struct Compared {
+    /// The host's reading of the raw trace (two tracks, full rate).
     pub measured: Vec<CycleFeeds>,
+    /// What the board reports: its reading at each cycle's close
+    /// (`hammer_app::chambers`: one track, half rate), on the same codes.
+    pub board: Vec<CycleFeeds>,
     pub truth: Vec<CycleFeeds>,
     /// Times the front and the rear supply port began to open.
     pub front_port_opens_s: Vec<f64>,
@@ -85,7 +89,20 @@ pub fn run(family: Family, bar: f64, effects: &Effects, seconds: f64, seed: u64)
             }
         };
     let spool = column(&trace, if family == Family::Model { "valve_m" } else { "spool" });
-    let reports = estimation::run(&estimation::to_codes(&trace, &config), config).expect("estimator");
+    let codes = estimation::to_codes(&trace, &config);
+    let reports = estimation::run(&codes, config).expect("estimator");
+    // The board as it is configured for this hammer: its chambers and the
+    // pressures' delay, as the host's reading below takes them.
+    let mut on_board = config;
+    on_board.chambers = hammer_estimator::ChamberConfig {
+        rear_dead_m3: chambers.rear_dead_m3 as f32,
+        front_dead_m3: chambers.front_dead_m3 as f32,
+        rear_outlet_m: chambers.rear_outlet_m as f32,
+        front_outlet_m: chambers.front_outlet_m as f32,
+        pressure_group_delay_s: cfg.sensors.front.group_delay_s(trace.dt_s) as f32,
+    };
+    on_board.geometry.travel_m = chambers.impact_position_m as f32;
+    let board = board_feeds(&codes, on_board);
     let measured = Signals {
         dt_s: trace.dt_s,
         p_rear_pa: &trace.p_rear_pa,
@@ -106,11 +123,50 @@ pub fn run(family: Family, bar: f64, effects: &Effects, seconds: f64, seed: u64)
         pressure_lag_s: 0.0,
     };
     Compared {
+        board,
         measured: characterise_cycles(&measured, &reports, &config, &chambers),
         truth: characterise_cycles(&truth, &reports, &config, &chambers),
         front_port_opens_s: opening_times_s(trace.dt_s, spool.len(), |i| front_open(spool[i])),
         rear_port_opens_s: opening_times_s(trace.dt_s, spool.len(), |i| rear_open(spool[i])),
     }
+}
+
+/// The board's reports over `codes`: each cycle's characteristics as its
+/// report carries them (a chamber with a NaN onset is one not read).
+pub fn board_feeds(codes: &[hammer_estimator::RawSample], config: hammer_estimator::Config) -> Vec<CycleFeeds> {
+    use hammer_app::chambers::{Pipeline, ReaderRoom};
+    let mut p = Pipeline::new(config, Box::<ReaderRoom>::default()).expect("the estimator's configuration");
+    let mut out = Vec::new();
+    let feed = |f: hammer_estimator::FeedFields| {
+        f.feed_s.is_finite().then_some(Feed {
+            onset_s: f.feed_s,
+            onset_uncertainty_s: f.feed_uncertainty_s,
+            x_m: f.feed_x_m,
+            p_rear_pa: f.feed_p_rear_pa,
+            p_front_pa: f.feed_p_front_pa,
+            closed_exponent: f.closed_exponent,
+            closed_exponent_uncertainty: f.closed_exponent_uncertainty,
+            feed_area_m2: f.feed_area_m2,
+            feed_area_uncertainty_m2: f.feed_area_uncertainty_m2,
+            dead_volume_offset_m3: f32::NAN,
+        })
+    };
+    let mut take = |r: hammer_estimator::CycleReport| {
+        if !r.flags.contains(hammer_estimator::Flags::CHAMBERS_UNREAD) {
+            out.push(CycleFeeds {
+                seq: r.seq,
+                t_impact_s: r.t_impact_s(),
+                feeds: Characteristics {
+                    front: feed(r.front_feed()),
+                    rear: feed(r.rear_feed()),
+                    charge: None,
+                },
+            });
+        }
+    };
+    p.push_block(codes, &mut take);
+    p.finish(&mut take);
+    out
 }
 
 /// The aims for a characteristic's expanded uncertainty: a feed's
@@ -192,9 +248,18 @@ pub struct Tally {
 
 impl Tally {
     pub fn of(c: &Compared) -> Tally {
+        Self::of_reading(&c.measured, &c.truth)
+    }
+
+    /// The board's reading against the truth.
+    pub fn of_board(c: &Compared) -> Tally {
+        Self::of_reading(&c.board, &c.truth)
+    }
+
+    fn of_reading(measured: &[CycleFeeds], truth: &[CycleFeeds]) -> Tally {
         let mut t = Tally::default();
-        for m in &c.measured {
-            let Some(tr) = c.truth.iter().find(|x| x.seq == m.seq) else {
+        for m in measured {
+            let Some(tr) = truth.iter().find(|x| x.seq == m.seq) else {
                 continue;
             };
             t.cycles += 1;
@@ -287,9 +352,10 @@ impl Tally {
     }
 }
 
-/// [`run`] and [`Tally::of`] in one.
-pub fn compare(family: Family, bar: f64, effects: &Effects, seconds: f64, seed: u64) -> Tally {
-    Tally::of(&run(family, bar, effects, seconds, seed))
+/// [`run`], then [`Tally::of`] and [`Tally::of_board`].
+pub fn compare(family: Family, bar: f64, effects: &Effects, seconds: f64, seed: u64) -> (Tally, Tally) {
+    let c = run(family, bar, effects, seconds, seed);
+    (Tally::of(&c), Tally::of_board(&c))
 }
 
 /// Mean onset of a chamber over the cycles that have one.

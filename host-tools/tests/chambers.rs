@@ -96,7 +96,7 @@ fn the_stated_uncertainties_cover_the_truth_in_most_cycles() {
     for family in [Family::Model, Family::Variant] {
         for bar in [4.0, 7.0] {
             for spec in CHECKED_EFFECTS {
-                total.add(&compare(family, bar, &effects(spec), 0.5, 7));
+                total.add(&compare(family, bar, &effects(spec), 0.5, 7).0);
             }
         }
     }

@@ -9,7 +9,8 @@
 
 use std::time::Duration;
 
-use hammer_estimator::{Config, Estimator, RawSample};
+use hammer_app::chambers::{Pipeline, ReaderRoom};
+use hammer_estimator::{Config, RawSample};
 use hammer_host::client::Client;
 use hammer_host::emulator::{firmware_elf, Emulator, Icount};
 use hammer_host::stimulus::Stimulus;
@@ -151,9 +152,12 @@ fn reports_from_the_emulated_board_equal_the_host_estimator_bit_for_bit() {
         let device_cfg = Config::default();
         // The ADC delivers whole DMA halves: the tail short of one never comes.
         let delivered = samples.len() / BLOCK_SETS as usize * BLOCK_SETS as usize;
-        let mut host = Estimator::new(device_cfg).unwrap();
+        // The host's copy of the board's pipeline: the estimator, then the
+        // chambers' reader (the last report waits for samples that never come).
+        let mut host = Pipeline::new(device_cfg, Box::new(ReaderRoom::new())).unwrap();
         let mut expected = vec![];
-        host.push_block(&samples[..delivered], |r| expected.push(r));
+        host.push_block(&samples[..delivered], &mut |r| expected.push(r));
+        assert!(host.counters().read >= 3, "{bar} bar: {:?}", host.counters());
 
         let last_seq = expected.last().unwrap().seq;
         let (done, more) = link
