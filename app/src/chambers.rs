@@ -67,7 +67,7 @@ pub const READER_BLOCK: usize = 4 * BLOCK_SAMPLES;
 /// the ADC's samples straight into a free one (no copy: the sampling loop
 /// pays nothing a set for the reader); with none free, into its own, and
 /// the reader sees a gap.
-pub const READER_BLOCKS: usize = 12;
+pub const READER_BLOCKS: usize = 13;
 /// Messages waiting for the reader: reports, alarms, a configuration.
 pub const READER_MESSAGES: usize = 3;
 
@@ -122,8 +122,6 @@ impl<R: DerefMut<Target = ReaderRoom>> ChamberReader<R> {
 #[derive(Default)]
 pub struct Feed {
     backlog: heapless::Deque<ToReader, 4>,
-    /// Blocks the reader never got (no free block to read into).
-    pub dropped_blocks: u32,
     /// Messages that went out past the reader.
     pub bypassed: u32,
 }
@@ -478,6 +476,11 @@ impl Codes for Window<'_> {
     fn get(&self, i: usize) -> RawSample {
         let j = self.start + i;
         self.ring.get(if j >= RING_SETS { j - RING_SETS } else { j })
+    }
+    #[inline(always)]
+    fn code(&self, i: usize, ch: usize) -> u16 {
+        let j = self.start + i;
+        self.ring.code(if j >= RING_SETS { j - RING_SETS } else { j }, ch)
     }
 }
 

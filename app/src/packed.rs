@@ -45,6 +45,20 @@ impl<const N: usize, const B: usize> Packed<N, B> {
         }
     }
 
+    /// Code `ch` (0 rear, 1 front, 2 accelerometer) of set `i` alone (0
+    /// past `N`): two bytes read, where [`Self::get`] decodes all three.
+    #[inline]
+    pub fn code(&self, i: usize, ch: usize) -> u16 {
+        if i >= N || ch > 2 {
+            return 0;
+        }
+        let (byte, shift) = Self::at(i, ch);
+        match self.bytes.get(byte..byte + 2) {
+            Some(b) => (u16::from_le_bytes([b[0], b[1]]) >> shift) & 0x0fff,
+            None => 0,
+        }
+    }
+
     /// Set `i` (zeros past `N`). Its 36 bits read in one piece: the five
     /// bytes from its first (a board's chambers' reading reads each set
     /// many times).
@@ -135,6 +149,15 @@ mod tests {
         );
         p.set(N, set(1));
         assert_eq!(p.get(N), RawSample::default());
+        // One code at a time reads what the whole set reads.
+        for i in 1..N {
+            let s = p.get(i);
+            assert_eq!(
+                [p.code(i, 0), p.code(i, 1), p.code(i, 2)],
+                [s.rear, s.front, s.accel],
+                "set {i}"
+            );
+        }
         assert_eq!(bytes_for(5600), 25_200);
     }
 }

@@ -23,7 +23,7 @@ use embassy_sync::zerocopy_channel;
 /// How often the device sends a `Status` without being asked.
 pub const STATUS_PERIOD_US: u64 = 1_000_000;
 /// Outgoing messages waiting for the link.
-pub const OUTGOING: usize = 16;
+pub const OUTGOING: usize = 12;
 /// Valid cycles between two wear-state snapshots for non-volatile storage
 /// (about 5 minutes at 20 Hz: a power cut loses at most that much wear).
 pub const WEAR_SAVE_CYCLES: u32 = 6_000;
@@ -94,6 +94,13 @@ pub struct Shared<M: RawMutex> {
     /// VDDA as the board last measured it ([`crate::supply::vdda_v`]),
     /// an `f32`'s bits; 0 where not measured.
     pub vdda_v_bits: AtomicU32,
+    /// The chambers' reader's figures ([`reading`], [`sampling`]): cycles
+    /// read and reports sent unread, the most blocks ever waiting for it,
+    /// and the blocks it never got.
+    pub chambers_read: AtomicU32,
+    pub chambers_unread: AtomicU32,
+    pub reader_blocks_peak: AtomicU32,
+    pub reader_blocks_dropped: AtomicU32,
 }
 
 impl<M: RawMutex> Shared<M> {
@@ -110,6 +117,10 @@ impl<M: RawMutex> Shared<M> {
             stack_used_bytes: AtomicU32::new(0),
             stack_reserved_bytes: AtomicU32::new(0),
             vdda_v_bits: AtomicU32::new(0),
+            chambers_read: AtomicU32::new(0),
+            chambers_unread: AtomicU32::new(0),
+            reader_blocks_peak: AtomicU32::new(0),
+            reader_blocks_dropped: AtomicU32::new(0),
         }
     }
 
@@ -225,7 +236,7 @@ pub async fn sampling<S: SampleSource, M: RawMutex, C: Clock>(
         if handed {
             blocks.send_done();
         } else if got_samples {
-            feed.dropped_blocks = feed.dropped_blocks.wrapping_add(1);
+            shared.reader_blocks_dropped.fetch_add(1, Ordering::Relaxed);
         }
         if monitor.config_hash() != config_hash {
             config_hash = monitor.config_hash();
@@ -289,7 +300,13 @@ pub async fn reading<M: RawMutex, R: core::ops::DerefMut<Target = ReaderRoom>>(
         };
         if took_block {
             blocks.receive_done();
+            // Waiting now, and the one just read.
+            shared
+                .reader_blocks_peak
+                .fetch_max(blocks.len() as u32 + 1, Ordering::Relaxed);
         }
+        shared.chambers_read.store(reader.counters.read, Ordering::Relaxed);
+        shared.chambers_unread.store(reader.counters.unread, Ordering::Relaxed);
     }
 }
 

@@ -60,6 +60,12 @@ pub struct Soak {
     /// The deepest the board's stack has been, and the stack region, bytes.
     pub stack_used_bytes: u32,
     pub stack_reserved_bytes: u32,
+    /// The chambers' reader: cycles read, reports sent unread, the most
+    /// blocks waiting for it, and those it never got.
+    pub chambers_read: u32,
+    pub chambers_unread: u32,
+    pub reader_blocks_peak: u32,
+    pub reader_blocks_dropped: u32,
     /// Guest µs the core was awake / since boot (accumulated across wraps).
     pub busy_us: u64,
     pub uptime_us: u64,
@@ -96,6 +102,7 @@ impl Soak {
             && self.lost_sets == 0
             && self.reports_lost == 0
             && self.frames_dropped_on_board == 0
+            && self.reader_blocks_dropped == 0
             && self.mismatches == 0
             && self.status.is_some_and(|s| s.dropped_samples == 0)
             && self.reports > 0
@@ -145,6 +152,14 @@ impl Soak {
             self.stack_used_bytes,
             self.stack_reserved_bytes,
             self.stack_reserved_bytes.saturating_sub(self.stack_used_bytes)
+        );
+        out += &format!(
+            "  chambers: {} cycles read, {} reports unread; the reader's blocks: at most {} of {} waiting, {} never got\n",
+            self.chambers_read,
+            self.chambers_unread,
+            self.reader_blocks_peak,
+            hammer_app::chambers::READER_BLOCKS,
+            self.reader_blocks_dropped
         );
         out += if self.clean() {
             "  verdict: clean"
@@ -294,6 +309,10 @@ pub fn run(args: &SoakArgs, progress: bool) -> Result<Soak> {
     soak.latency_max_us = c.latency_max_us;
     soak.stack_used_bytes = c.stack_used_bytes;
     soak.stack_reserved_bytes = c.stack_reserved_bytes;
+    soak.chambers_read = c.chambers_read;
+    soak.chambers_unread = c.chambers_unread;
+    soak.reader_blocks_peak = c.reader_blocks_peak;
+    soak.reader_blocks_dropped = c.reader_blocks_dropped;
     soak.busy_us = unwrap.busy_us;
     soak.uptime_us = unwrap.uptime_us;
     soak.reports_lost = link.lost_reports;

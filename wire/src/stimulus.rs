@@ -41,7 +41,7 @@ pub const SET_BYTES: usize = 6;
 /// "HSTM", little-endian.
 pub const MAGIC: u32 = u32::from_le_bytes(*b"HSTM");
 /// Bumped on any change of the header's layout or meaning.
-pub const VERSION: u32 = 3;
+pub const VERSION: u32 = 4;
 /// The reference board's DMA half-buffer (firmware/src/sampler.rs), so the
 /// emulated board sees the same block size and has the same slack.
 pub const BLOCK_SETS: u32 = 256;
@@ -158,6 +158,13 @@ pub struct Header {
     /// time it asks for samples, clears it and executes an undefined
     /// instruction, to show the fault record a real fault leaves.
     pub fault: AtomicU32,
+    /// Board: the chambers' reader (`hammer_app::chambers`): cycles read,
+    /// reports sent unread, the most sample blocks ever waiting for it and
+    /// the blocks it never got (none free when the sampling task read).
+    pub chambers_read: AtomicU32,
+    pub chambers_unread: AtomicU32,
+    pub reader_blocks_peak: AtomicU32,
+    pub reader_blocks_dropped: AtomicU32,
 }
 
 /// The emulated chip's factory calibration of its internal reference, the

@@ -77,6 +77,18 @@ pub trait Codes {
     fn is_empty(&self) -> bool {
         self.len() == 0
     }
+    /// Channel `ch` (0 rear, 1 front, 2 accelerometer) of set `i`: what a
+    /// reading asks for, one channel at a time (a packed ring decodes only
+    /// that code).
+    #[inline(always)]
+    fn code(&self, i: usize, ch: usize) -> u16 {
+        let s = self.get(i);
+        match ch {
+            0 => s.rear,
+            1 => s.front,
+            _ => s.accel,
+        }
+    }
 }
 
 impl Codes for [RawSample] {
@@ -106,9 +118,9 @@ struct Channel<'a, C: Codes + ?Sized> {
 /// A sample-set's channels.
 #[derive(Clone, Copy)]
 enum Pick {
-    Rear,
-    Front,
-    Accel,
+    Rear = 0,
+    Front = 1,
+    Accel = 2,
 }
 
 impl<'a, C: Codes + ?Sized> Channel<'a, C> {
@@ -128,12 +140,7 @@ impl<'a, C: Codes + ?Sized> Channel<'a, C> {
 
     #[inline(always)]
     fn value(&self, i: usize) -> f32 {
-        let s = self.codes.get(i);
-        self.cal.value(match self.ch {
-            Pick::Rear => s.rear,
-            Pick::Front => s.front,
-            Pick::Accel => s.accel,
-        })
+        self.cal.value(self.codes.code(i, self.ch as usize))
     }
 }
 

@@ -209,6 +209,14 @@ impl StimulusAdc {
             .store(shared.stack_used_bytes.load(Ordering::Relaxed), Ordering::Relaxed);
         h.stack_reserved_bytes
             .store(shared.stack_reserved_bytes.load(Ordering::Relaxed), Ordering::Relaxed);
+        for (to, from) in [
+            (&h.chambers_read, &shared.chambers_read),
+            (&h.chambers_unread, &shared.chambers_unread),
+            (&h.reader_blocks_peak, &shared.reader_blocks_peak),
+            (&h.reader_blocks_dropped, &shared.reader_blocks_dropped),
+        ] {
+            to.store(from.load(Ordering::Relaxed), Ordering::Relaxed);
+        }
         h.uptime_us.store(uptime as u32, Ordering::Relaxed);
         h.busy_us.store(busy as u32, Ordering::Relaxed);
     }

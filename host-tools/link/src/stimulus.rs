@@ -32,6 +32,10 @@ pub struct Counters {
     pub stack_used_bytes: u32,
     pub stack_reserved_bytes: u32,
     pub loop_cycles: u32,
+    pub chambers_read: u32,
+    pub chambers_unread: u32,
+    pub reader_blocks_peak: u32,
+    pub reader_blocks_dropped: u32,
 }
 
 /// The shared file and its mapping; removed when dropped.
@@ -213,6 +217,10 @@ impl Stimulus {
             stack_used_bytes: l(&h.stack_used_bytes),
             stack_reserved_bytes: l(&h.stack_reserved_bytes),
             loop_cycles: l(&h.loop_cycles),
+            chambers_read: l(&h.chambers_read),
+            chambers_unread: l(&h.chambers_unread),
+            reader_blocks_peak: l(&h.reader_blocks_peak),
+            reader_blocks_dropped: l(&h.reader_blocks_dropped),
         }
     }
 }
