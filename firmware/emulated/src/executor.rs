@@ -43,7 +43,10 @@ fn pender(context: *mut ()) {
 /// spawner.
 pub fn start_sampling(nvic: &mut NVIC) -> embassy_executor::Spawner {
     let executor: &'static raw::Executor = SAMPLING.init(raw::Executor::new(SAMPLING_CONTEXT));
-    SAMPLING_EXECUTOR.store(executor as *const raw::Executor as *mut raw::Executor, Ordering::Release);
+    SAMPLING_EXECUTOR.store(
+        executor as *const raw::Executor as *mut raw::Executor,
+        Ordering::Release,
+    );
     // SAFETY: setting a priority and unmasking an interrupt whose handler
     // (below) only polls the executor stored above.
     unsafe {
