@@ -199,12 +199,30 @@ fn estimate_prints_one_record_per_cycle_in_each_format() {
     }
     let last = records.last().unwrap();
     assert!((last["friction_n"].as_f64().unwrap() - 14.55).abs() < 0.3, "{last}");
-    // A host's plain estimate reads no chambers: NaN (null), flagged so.
-    assert_eq!(last["flags"], serde_json::json!(["chambers_unread"]), "{last}");
+    // The chambers as a board reads them: every cycle after a valid one
+    // whose 8 ms after it the trace holds (the first has no start: NaN,
+    // null, flagged so).
+    let first = &records[0];
+    assert_eq!(first["flags"], serde_json::json!(["chambers_unread"]), "{first}");
     assert!(
-        last["front_feed_s"].is_null() && last["rear_feed_area_uncertainty_m2"].is_null(),
-        "{last}"
+        first["front_feed_s"].is_null() && first["rear_feed_area_uncertainty_m2"].is_null(),
+        "{first}"
     );
+    let read: Vec<&serde_json::Value> = records
+        .iter()
+        .filter(|r| r["front_feed_s"].as_f64().is_some_and(f64::is_finite))
+        .collect();
+    assert!(
+        read.len() + 2 >= records.len(),
+        "{} of {} read",
+        read.len(),
+        records.len()
+    );
+    for r in &read {
+        assert_eq!(r["flags"], serde_json::json!([]), "{r}");
+        let n = r["front_closed_exponent"].as_f64().unwrap();
+        assert!((1.0..1.5).contains(&n), "{r}");
+    }
 
     // The CSV: the same columns as the JSON (every field, unit-suffixed names), the same numbers.
     let (code, out, _) = hammer(&["estimate", trace.to_str().unwrap(), "--format", "csv"]);

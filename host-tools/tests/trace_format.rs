@@ -199,7 +199,8 @@ fn a_line_without_end_is_refused_in_bounded_memory() {
 }
 
 /// The streamed estimation (what `hammer estimate` runs) gives the very
-/// reports of the in-memory path; a gap flags its cycle and only its cycle.
+/// reports of the in-memory path, and reads the chambers into them as a
+/// board does; a gap flags its cycle and only its cycle.
 #[test]
 fn streamed_estimation_matches_the_in_memory_path_and_flags_gaps() {
     use hammer_sim::estimation::{open_for_estimation, stream_estimation};
@@ -215,7 +216,18 @@ fn streamed_estimation_matches_the_in_memory_path_and_flags_gaps() {
     let mut streamed = Vec::new();
     let summary = stream_estimation(&path, &SimConfig::default(), None, |r| streamed.push(r)).unwrap();
     assert!(in_memory.len() >= 5, "{} cycles", in_memory.len());
-    assert_eq!(streamed, in_memory);
+    let unread = hammer_estimator::Flags::CHAMBERS_UNREAD;
+    assert!(streamed.iter().filter(|r| !r.flags.contains(unread)).count() + 2 >= streamed.len());
+    let bare = |rs: &[hammer_estimator::CycleReport]| -> Vec<hammer_estimator::CycleReport> {
+        rs.iter()
+            .map(|r| {
+                let mut r = *r;
+                r.mark_chambers_unread();
+                r
+            })
+            .collect()
+    };
+    assert_eq!(bare(&streamed), in_memory);
     assert_eq!(summary.samples as usize, whole.trace.len());
     assert_eq!(summary.missing_samples, 0);
 
@@ -257,7 +269,7 @@ fn streamed_estimation_matches_the_in_memory_path_and_flags_gaps() {
         }
     }
     let back = open_for_estimation(&cut, &SimConfig::default(), None).unwrap();
-    assert_eq!(back.run().unwrap(), gapped);
+    assert_eq!(back.run().unwrap(), bare(&gapped));
 }
 
 /// A recorder that stamps time in whole µs at 48 kS/s writes intervals of 20

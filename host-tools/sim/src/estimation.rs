@@ -3,6 +3,7 @@
 //! estimate`, `report`, `diagnose`, the app's tests and the end-to-end tests
 //! all open traces through here.
 
+use hammer_app::chambers::{Pipeline, ReaderRoom};
 use hammer_estimator::{Config, CycleReport, Estimator, RawSample};
 use hammer_trace::config::ConfigError;
 use std::path::Path;
@@ -404,6 +405,31 @@ pub fn run_with_gaps(samples: &[RawSample], gaps: &[Gap], c: Config) -> Result<V
     Ok(out)
 }
 
+/// [`run_with_gaps`] as a board reports: the estimator, then the
+/// chambers' reader over the same codes (`hammer_app::chambers::Pipeline`),
+/// what `hammer estimate` and the Python package give.
+pub fn board_run_with_gaps(samples: &[RawSample], gaps: &[Gap], c: Config) -> Result<Vec<CycleReport>, ConfigError> {
+    let mut p = board_pipeline(c)?;
+    let mut out = Vec::new();
+    let mut at = 0;
+    for g in gaps {
+        let upto = g.before.min(samples.len());
+        p.push_block(&samples[at..upto], &mut |r| out.push(r));
+        p.push_gap(g.missing.min(u32::MAX as u64) as u32);
+        at = upto;
+    }
+    p.push_block(&samples[at..], &mut |r| out.push(r));
+    p.finish(&mut |r| out.push(r));
+    Ok(out)
+}
+
+fn board_pipeline(c: Config) -> Result<Pipeline<Box<ReaderRoom>>, ConfigError> {
+    Pipeline::new(c, Box::<ReaderRoom>::default()).map_err(|e| ConfigError::Invalid {
+        field: "estimator".into(),
+        message: e.to_string(),
+    })
+}
+
 impl EstimationInput {
     /// The estimator over the whole trace, gaps included.
     pub fn run(&self) -> Result<Vec<CycleReport>, ConfigError> {
@@ -429,7 +455,10 @@ const STREAM_BLOCK: usize = 4096;
 /// The estimator over a trace file of any length in bounded memory: rows are
 /// read, converted to codes and pushed block by block, only the required
 /// columns parsed (text streams; a binary recorder's file is read whole). Same configuration rules as [`open_for_estimation`];
-/// `on_report` sees each cycle as it closes.
+/// `on_report` sees each cycle as a board would send it: after the
+/// chambers' reader has read it (`hammer_app::chambers::Pipeline`, the
+/// same bytes as the board's on the same codes; the last cycle, whose
+/// 8 ms after it the file does not hold, unread).
 pub fn stream_estimation(
     path: &Path,
     file: &SimConfig,
@@ -442,7 +471,7 @@ pub fn stream_estimation(
     let mut u = Uniform::new(opened.source)?;
     let (_, supply_bar, mut config) = config_for(path, embedded.as_deref(), file, supply_bar, 1.0 / u.dt_s())?;
     at_recorder_rails(&mut config, &scans);
-    let mut est = estimator(config)?;
+    let mut est = board_pipeline(config)?;
     let mut block = Vec::with_capacity(STREAM_BLOCK);
     let mut summary = StreamSummary {
         samples: 0,
@@ -473,6 +502,7 @@ pub fn stream_estimation(
         }
     }
     est.push_block(&block, &mut on_report);
+    est.finish(&mut on_report);
     check_gauge(
         path,
         min_rear,
@@ -550,7 +580,7 @@ pub fn estimate_trace(
         supply_bar,
     )?;
     let (config, codes) = checked_codes(trace, config, Path::new(label))?;
-    let reports = run_with_gaps(&codes, &trace.gaps, config)?;
+    let reports = board_run_with_gaps(&codes, &trace.gaps, config)?;
     let summary = StreamSummary {
         samples: trace.len() as u64,
         missing_samples: trace.gaps.iter().map(|g| g.missing).sum(),
