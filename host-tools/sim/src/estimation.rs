@@ -3,7 +3,6 @@
 //! estimate`, `report`, `diagnose`, the app's tests and the end-to-end tests
 //! all open traces through here.
 
-use hammer_app::chambers::{Pipeline, ReaderRoom};
 use hammer_estimator::{Config, CycleReport, Estimator, RawSample};
 use hammer_trace::config::ConfigError;
 use std::path::Path;
@@ -379,10 +378,14 @@ pub fn to_codes(trace: &Trace, c: &Config) -> Vec<RawSample> {
 }
 
 fn estimator(c: Config) -> Result<Estimator, ConfigError> {
-    Estimator::new(c).map_err(|e| ConfigError::Invalid {
+    Estimator::new(c).map_err(refused)
+}
+
+pub(crate) fn refused(e: hammer_estimator::ConfigError) -> ConfigError {
+    ConfigError::Invalid {
         field: "estimator".into(),
         message: e.to_string(),
-    })
+    }
 }
 
 pub fn run(samples: &[RawSample], c: Config) -> Result<Vec<CycleReport>, ConfigError> {
@@ -403,31 +406,6 @@ pub fn run_with_gaps(samples: &[RawSample], gaps: &[Gap], c: Config) -> Result<V
     }
     est.push_block(&samples[at..], |r| out.push(r));
     Ok(out)
-}
-
-/// [`run_with_gaps`] as a board reports: the estimator, then the
-/// chambers' reader over the same codes (`hammer_app::chambers::Pipeline`),
-/// what `hammer estimate` and the Python package give.
-pub fn board_run_with_gaps(samples: &[RawSample], gaps: &[Gap], c: Config) -> Result<Vec<CycleReport>, ConfigError> {
-    let mut p = board_pipeline(c)?;
-    let mut out = Vec::new();
-    let mut at = 0;
-    for g in gaps {
-        let upto = g.before.min(samples.len());
-        p.push_block(&samples[at..upto], &mut |r| out.push(r));
-        p.push_gap(g.missing.min(u32::MAX as u64) as u32);
-        at = upto;
-    }
-    p.push_block(&samples[at..], &mut |r| out.push(r));
-    p.finish(&mut |r| out.push(r));
-    Ok(out)
-}
-
-fn board_pipeline(c: Config) -> Result<Pipeline<Box<ReaderRoom>>, ConfigError> {
-    Pipeline::new(c, Box::<ReaderRoom>::default()).map_err(|e| ConfigError::Invalid {
-        field: "estimator".into(),
-        message: e.to_string(),
-    })
 }
 
 impl EstimationInput {
@@ -471,7 +449,7 @@ pub fn stream_estimation(
     let mut u = Uniform::new(opened.source)?;
     let (_, supply_bar, mut config) = config_for(path, embedded.as_deref(), file, supply_bar, 1.0 / u.dt_s())?;
     at_recorder_rails(&mut config, &scans);
-    let mut est = board_pipeline(config)?;
+    let mut est = crate::board_reading::pipeline(config)?;
     let mut block = Vec::with_capacity(STREAM_BLOCK);
     let mut summary = StreamSummary {
         samples: 0,
@@ -580,7 +558,7 @@ pub fn estimate_trace(
         supply_bar,
     )?;
     let (config, codes) = checked_codes(trace, config, Path::new(label))?;
-    let reports = board_run_with_gaps(&codes, &trace.gaps, config)?;
+    let reports = crate::board_reading::run_with_gaps(&codes, &trace.gaps, config)?;
     let summary = StreamSummary {
         samples: trace.len() as u64,
         missing_samples: trace.gaps.iter().map(|g| g.missing).sum(),

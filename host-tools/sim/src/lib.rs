@@ -13,10 +13,12 @@
 //!   (the channels' settings in [`sensor_model`], below [`params`], which holds them);
 //! - [`simulate`]: a complete simulated measurement as a trace plus sidecar, kept in memory or streamed to disk;
 //! - [`estimation`]: the one path from any trace to the estimator's ADC codes and calibration;
+//! - [`board_reading`]: a file's codes as a board reports them (the estimator, then the chambers' reader);
 //! - [`characteristics`]: per-cycle chamber characteristics of a trace, measured or true.
 
 use hammer_trace::config;
 
+pub mod board_reading;
 pub mod characteristics;
 pub mod effects;
 pub mod estimation;
