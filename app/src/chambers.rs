@@ -286,6 +286,11 @@ impl<R: DerefMut<Target = ReaderRoom>> ChamberReader<R> {
         }
     }
 
+    /// The reports' sample clock, whole Hz.
+    pub fn rate_hz(&self) -> u64 {
+        self.rate_hz
+    }
+
     /// A new configuration: the estimator starts its indices over, so the
     /// reader does too; what waits is released first, unread.
     pub fn configure(&mut self, cfg: &Config, out: &mut impl FnMut(DeviceMsg)) {

@@ -101,6 +101,11 @@ pub struct Shared<M: RawMutex> {
     pub chambers_unread: AtomicU32,
     pub reader_blocks_peak: AtomicU32,
     pub reader_blocks_dropped: AtomicU32,
+    /// The sampling task's position, sample-sets (the estimator's next
+    /// index, low 32 bits), and the longest a report waited from its
+    /// impact to leaving the reader, sample-sets.
+    pub sample_index: AtomicU32,
+    pub report_latency_max_sets: AtomicU32,
 }
 
 impl<M: RawMutex> Shared<M> {
@@ -121,6 +126,8 @@ impl<M: RawMutex> Shared<M> {
             chambers_unread: AtomicU32::new(0),
             reader_blocks_peak: AtomicU32::new(0),
             reader_blocks_dropped: AtomicU32::new(0),
+            sample_index: AtomicU32::new(0),
+            report_latency_max_sets: AtomicU32::new(0),
         }
     }
 
@@ -233,6 +240,9 @@ pub async fn sampling<S: SampleSource, M: RawMutex, C: Clock>(
             }
         }
         drop(slot);
+        shared
+            .sample_index
+            .store(monitor.estimator().next_index() as u32, Ordering::Relaxed);
         if handed {
             blocks.send_done();
         } else if got_samples {
@@ -283,7 +293,18 @@ pub async fn reading<M: RawMutex, R: core::ops::DerefMut<Target = ReaderRoom>>(
     blocks: &mut zerocopy_channel::Receiver<'_, M, Block>,
 ) -> ! {
     loop {
-        let mut out = |m| shared.send(m);
+        let rate_hz = reader.rate_hz();
+        let mut out = |m: DeviceMsg| {
+            if let DeviceMsg::Report(r) = &m {
+                // How long it waited since its impact, as the samples count it.
+                let at = hammer_estimator::clock::index_at_edge_us(r.t_impact_us, rate_hz) as u32;
+                let waited = shared.sample_index.load(Ordering::Relaxed).wrapping_sub(at);
+                if waited < u32::MAX / 2 {
+                    shared.report_latency_max_sets.fetch_max(waited, Ordering::Relaxed);
+                }
+            }
+            shared.send(m)
+        };
         if let Ok(m) = shared.to_reader.try_receive() {
             reader.take(m, &mut out);
             continue;

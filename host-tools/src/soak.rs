@@ -66,6 +66,10 @@ pub struct Soak {
     pub chambers_unread: u32,
     pub reader_blocks_peak: u32,
     pub reader_blocks_dropped: u32,
+    /// The longest a report waited from its impact to leaving the board's
+    /// reader, and the shortest cycle period reported, seconds.
+    pub report_latency_max_s: f64,
+    pub shortest_period_s: f64,
     /// Guest µs the core was awake / since boot (accumulated across wraps).
     pub busy_us: u64,
     pub uptime_us: u64,
@@ -103,6 +107,7 @@ impl Soak {
             && self.reports_lost == 0
             && self.frames_dropped_on_board == 0
             && self.reader_blocks_dropped == 0
+            && self.report_latency_max_s <= 2.0 * self.shortest_period_s
             && self.mismatches == 0
             && self.status.is_some_and(|s| s.dropped_samples == 0)
             && self.reports > 0
@@ -160,6 +165,11 @@ impl Soak {
             self.reader_blocks_peak,
             hammer_app::chambers::READER_BLOCKS,
             self.reader_blocks_dropped
+        );
+        out += &format!(
+            "  report latency: worst {:.1} ms from a cycle's impact to its report leaving the board (two of the shortest periods: {:.1} ms)\n",
+            self.report_latency_max_s * 1e3,
+            2.0 * self.shortest_period_s * 1e3
         );
         out += if self.clean() {
             "  verdict: clean"
@@ -244,6 +254,9 @@ pub fn run(args: &SoakArgs, progress: bool) -> Result<Soak> {
     let check = |m: &DeviceMsg, soak: &mut Soak| -> Result<()> {
         if let DeviceMsg::Report(r) = m {
             soak.reports += 1;
+            if r.is_valid() && (soak.shortest_period_s == 0.0 || f64::from(r.period_s) < soak.shortest_period_s) {
+                soak.shortest_period_s = f64::from(r.period_s);
+            }
             let h = expected
                 .recv_timeout(Duration::from_secs(30))
                 .context("the host estimator fell silent")?;
@@ -313,6 +326,7 @@ pub fn run(args: &SoakArgs, progress: bool) -> Result<Soak> {
     soak.chambers_unread = c.chambers_unread;
     soak.reader_blocks_peak = c.reader_blocks_peak;
     soak.reader_blocks_dropped = c.reader_blocks_dropped;
+    soak.report_latency_max_s = f64::from(c.report_latency_max_sets) / f64::from(hammer_wire::stimulus::RATE_HZ);
     soak.busy_us = unwrap.busy_us;
     soak.uptime_us = unwrap.uptime_us;
     soak.reports_lost = link.lost_reports;

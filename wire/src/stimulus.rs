@@ -165,6 +165,9 @@ pub struct Header {
     pub chambers_unread: AtomicU32,
     pub reader_blocks_peak: AtomicU32,
     pub reader_blocks_dropped: AtomicU32,
+    /// Board: the longest a report waited from its impact to leaving the
+    /// chambers' reader, sample-sets.
+    pub report_latency_max_sets: AtomicU32,
 }
 
 /// The emulated chip's factory calibration of its internal reference, the

@@ -214,6 +214,7 @@ impl StimulusAdc {
             (&h.chambers_unread, &shared.chambers_unread),
             (&h.reader_blocks_peak, &shared.reader_blocks_peak),
             (&h.reader_blocks_dropped, &shared.reader_blocks_dropped),
+            (&h.report_latency_max_sets, &shared.report_latency_max_sets),
         ] {
             to.store(from.load(Ordering::Relaxed), Ordering::Relaxed);
         }

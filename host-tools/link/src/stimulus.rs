@@ -36,6 +36,7 @@ pub struct Counters {
     pub chambers_unread: u32,
     pub reader_blocks_peak: u32,
     pub reader_blocks_dropped: u32,
+    pub report_latency_max_sets: u32,
 }
 
 /// The shared file and its mapping; removed when dropped.
@@ -221,6 +222,7 @@ impl Stimulus {
             chambers_unread: l(&h.chambers_unread),
             reader_blocks_peak: l(&h.reader_blocks_peak),
             reader_blocks_dropped: l(&h.reader_blocks_dropped),
+            report_latency_max_sets: l(&h.report_latency_max_sets),
         }
     }
 }
