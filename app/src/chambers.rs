@@ -201,8 +201,9 @@ impl Decimator {
 /// A report and where its cycle lies in the kept sets, if it is to be read.
 struct Waiting {
     msg: DeviceMsg,
-    /// The kept sets of the cycle's opening and closing impacts.
-    window: Option<(u64, u64)>,
+    /// The kept sets of the cycle's opening and closing impacts, and the
+    /// end of its window (computed once: it is checked at every kept set).
+    window: Option<(u64, u64, u64)>,
 }
 
 /// The last report seen: the next cycle opens at its closing impact.
@@ -366,7 +367,7 @@ impl<R: DerefMut<Target = ReaderRoom>> ChamberReader<R> {
     }
 
     /// Where the cycle `r` closes lies in the kept sets, if it is to be read.
-    fn window_of(&mut self, r: &CycleReport) -> Option<(u64, u64)> {
+    fn window_of(&mut self, r: &CycleReport) -> Option<(u64, u64, u64)> {
         let close = index_at_edge_us(r.t_impact_us, self.rate_hz) / DECIMATION;
         let prev = self.last.replace(Last {
             seq: r.seq,
@@ -375,19 +376,18 @@ impl<R: DerefMut<Target = ReaderRoom>> ChamberReader<R> {
         });
         let p = prev?;
         let follows = p.valid && r.is_valid() && p.seq.wrapping_add(1) == r.seq && p.close < close;
-        let fits = window_samples((close - p.close) as usize, self.cfg.dt_s()) <= TRACK_FLOATS
-            && ((close - p.close) as usize) < ROOM_FLOATS;
-        (follows && fits).then_some((p.close, close))
+        let window = window_samples((close - p.close) as usize, self.cfg.dt_s());
+        let fits = window <= TRACK_FLOATS && ((close - p.close) as usize) < ROOM_FLOATS;
+        (follows && fits).then_some((p.close, close, p.close + window as u64))
     }
 
     /// Reads and sends what is ready at the head of the queue.
     fn release(&mut self, out: &mut impl FnMut(DeviceMsg)) {
         while let Some(window) = self.waiting.front().map(|w| w.window) {
-            let Some((open, close)) = window else {
+            let Some((open, close, end)) = window else {
                 self.leave_unread(out);
                 continue;
             };
-            let end = open + window_samples((close - open) as usize, self.cfg.dt_s()) as u64;
             if self.next < end {
                 return;
             }

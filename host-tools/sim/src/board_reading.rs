@@ -8,7 +8,7 @@ use hammer_app::chambers::{Pipeline, ReaderRoom};
 use hammer_estimator::{Config, CycleReport, RawSample};
 use hammer_trace::trace::Gap;
 
-use crate::estimation::refused;
+use crate::estimation::{between_gaps, refused};
 use hammer_trace::config::ConfigError;
 
 /// The pipeline for `c`.
@@ -22,14 +22,12 @@ pub fn pipeline(c: Config) -> Result<Pipeline<Box<ReaderRoom>>, ConfigError> {
 pub fn run_with_gaps(samples: &[RawSample], gaps: &[Gap], c: Config) -> Result<Vec<CycleReport>, ConfigError> {
     let mut p = pipeline(c)?;
     let mut out = Vec::new();
-    let mut at = 0;
-    for g in gaps {
-        let upto = g.before.min(samples.len());
-        p.push_block(&samples[at..upto], &mut |r| out.push(r));
-        p.push_gap(g.missing.min(u32::MAX as u64) as u32);
-        at = upto;
-    }
-    p.push_block(&samples[at..], &mut |r| out.push(r));
+    between_gaps(samples, gaps, |part, missing| {
+        p.push_block(part, &mut |r| out.push(r));
+        if let Some(n) = missing {
+            p.push_gap(n);
+        }
+    });
     p.finish(&mut |r| out.push(r));
     Ok(out)
 }

@@ -397,15 +397,25 @@ pub fn run(samples: &[RawSample], c: Config) -> Result<Vec<CycleReport>, ConfigE
 pub fn run_with_gaps(samples: &[RawSample], gaps: &[Gap], c: Config) -> Result<Vec<CycleReport>, ConfigError> {
     let mut est = estimator(c)?;
     let mut out = Vec::new();
+    between_gaps(samples, gaps, |part, missing| {
+        est.push_block(part, |r| out.push(r));
+        if let Some(n) = missing {
+            est.push_gap(n);
+        }
+    });
+    Ok(out)
+}
+
+/// `f(stretch, samples missing after it)` for each stretch of `samples`
+/// between `gaps`, in order; the last with none after it.
+pub(crate) fn between_gaps(samples: &[RawSample], gaps: &[Gap], mut f: impl FnMut(&[RawSample], Option<u32>)) {
     let mut at = 0;
     for g in gaps {
         let upto = g.before.min(samples.len());
-        est.push_block(&samples[at..upto], |r| out.push(r));
-        est.push_gap(g.missing.min(u32::MAX as u64) as u32);
+        f(&samples[at..upto], Some(g.missing.min(u32::MAX as u64) as u32));
         at = upto;
     }
-    est.push_block(&samples[at..], |r| out.push(r));
-    Ok(out)
+    f(&samples[at..], None);
 }
 
 impl EstimationInput {
