@@ -2,14 +2,15 @@
 //! (issue 47): as the monitor reads them today, from the board's one-cycle
 //! raw captures (`hammer_host::drift`: the diagnosis' extractor, its own
 //! impacts and friction, the pressures as sampled), and as the board reads
-//! them at a cycle's close (`hammer_estimator::chambers::at_close`: the
-//! estimator's impacts and friction, the pressures read back by their
-//! group delay). A commissioning record read from captures and windows read
+//! them at a cycle's close into its report (`hammer_app::chambers`: half
+//! rate, the estimator's impacts and friction, the pressures read back by
+//! their group delay). A commissioning record read from captures and windows read
 //! from reports differ by this offset, not by any drift.
 //!
 //! The board's own monitor code (`hammer_app::Monitor`) makes the captures
 //! from the simulated hammer's codes, one cycle at a time as the monitor
-//! asks for them; every cycle of the same run is also read at its close.
+//! asks for them; every cycle of the same run is also read as the board
+//! reports it (`hammer_sim::board_reading`, the board's bytes).
 //! Printed per characteristic: each reading's median over the run, the
 //! offset (report − capture) and its standard uncertainty from the two
 //! medians' spreads.
@@ -22,8 +23,6 @@
 //! (defaults: 20 s at 4 and 7 bar).
 
 use hammer_app::Monitor;
-use hammer_estimator::chambers::at_close::{characterise_cycle, window_samples, Work};
-use hammer_estimator::chambers::{ChamberGeometry, Characteristics};
 use hammer_host::diagnose::engine::extractor_for;
 use hammer_host::diagnose::features::{feature_name, ESTIMATOR_CHARACTERISTICS};
 use hammer_host::drift::{median, readings_of, robust_sd, N_CHARACTERISTICS};
@@ -51,21 +50,6 @@ fn main() {
     }
 }
 
-/// The characteristics in the drift's order, from a board's reading.
-fn as_reading(c: &Characteristics) -> [f64; N_CHARACTERISTICS] {
-    let f = |feed: Option<hammer_estimator::chambers::Feed>, k: usize| {
-        feed.map_or(f64::NAN, |f| [f.onset_s, f.closed_exponent, f.feed_area_m2][k] as f64)
-    };
-    [
-        f(c.front, 0),
-        f(c.rear, 0),
-        f(c.front, 1),
-        f(c.rear, 1),
-        f(c.front, 2),
-        f(c.rear, 2),
-    ]
-}
-
 /// Prints both readings' medians and their offset; returns the front
 /// feed's median as (capture, report).
 fn offsets(bar: f64, seconds: f64, effect: Option<&str>) -> [f64; 2] {
@@ -80,19 +64,14 @@ fn offsets(bar: f64, seconds: f64, effect: Option<&str>) -> [f64; 2] {
     let codes = sim.measured.codes.clone();
     let extractor = extractor_for(&cfg);
 
-    // The board's monitor: reports, and one capture at a time.
+    // The board's monitor: one capture at a time.
     let mut monitor = Monitor::new(config, "offset").expect("config");
-    let mut reports = Vec::new();
     let mut captured: Vec<Vec<[u16; 3]>> = Vec::new();
     let mut chunks: Vec<[u16; 3]> = Vec::new();
     let mut ignore = |_: DeviceMsg| {};
     monitor.on_command(HostMsg::StartCapture { cycles: 1 }, 0, &mut ignore);
     for block in codes.chunks(BLOCK_SAMPLES) {
-        monitor.on_samples(block, &mut |m| {
-            if let DeviceMsg::Report(r) = m {
-                reports.push(r);
-            }
-        });
+        monitor.on_samples(block, &mut |_| {});
         let mut done = false;
         while let Some(m) = monitor.next_capture_chunk() {
             if let DeviceMsg::Capture(c) = m {
@@ -114,26 +93,17 @@ fn offsets(bar: f64, seconds: f64, effect: Option<&str>) -> [f64; 2] {
         })
         .collect();
 
-    // Every valid cycle read at its close, as the board would.
-    let geo = ChamberGeometry::of(&config);
-    let dt = config.dt_s() as f64;
-    let n = window_samples((config.max_period_s as f64 / dt) as usize, config.dt_s());
-    let (mut x_room, mut logs_room) = (vec![0.0f32; n], vec![0.0f32; 2 * n]);
-    let mut work = Work {
-        x_m: &mut x_room,
-        room: &mut logs_room,
-    };
+    // Every cycle as the board reports it: the estimator, then its reader
+    // (half rate, at the close), on the same codes.
+    let mut board = hammer_sim::board_reading::pipeline(config).expect("config");
+    let mut read = Vec::new();
+    board.push_block(&codes, &mut |r| read.push(r));
+    board.finish(&mut |r| read.push(r));
     // The run's start-up dropped as a record's is: the second half's cycles.
-    let steady = reports.len() / 4;
-    let by_report: Vec<[f64; N_CHARACTERISTICS]> = reports
-        .windows(2)
-        .skip(steady)
-        .filter(|w| w[0].is_valid() && w[1].is_valid() && w[1].seq == w[0].seq + 1)
-        .filter_map(|w| {
-            let [open, close] = [&w[0], &w[1]].map(|r| (r.t_impact_s() / dt).round() as usize);
-            characterise_cycle(&config, &geo, &codes[open..], close - open, &w[1], true, &mut work)
-        })
-        .map(|c| as_reading(&c))
+    let steady = read.len() / 4;
+    let by_report: Vec<[f64; N_CHARACTERISTICS]> = read[steady..]
+        .iter()
+        .filter_map(hammer_host::drift::report_reading)
         .collect();
 
     println!(

@@ -76,26 +76,29 @@ pub fn record<S: std::io::Read + std::io::Write>(
     cycles: u8,
     timeout: std::time::Duration,
 ) -> anyhow::Result<(Vec<[u16; 3]>, Config)> {
-    record_armed(client, cycles, timeout, || {})
+    record_armed(client, cycles, timeout, || {}, &mut Vec::new())
 }
 
 /// [`record`], calling `on_armed` once the device has acknowledged the
 /// capture: a demo board's hammer is fed from then on, so that the samples
-/// the capture needs never reach the board before the request does.
+/// the capture needs never reach the board before the request does. The
+/// reports that arrive beside the capture are added to `reports`.
 pub fn record_armed<S: std::io::Read + std::io::Write>(
     client: &mut crate::client::Client<S>,
     cycles: u8,
     timeout: std::time::Duration,
     mut on_armed: impl FnMut(),
+    reports: &mut Vec<hammer_estimator::CycleReport>,
 ) -> anyhow::Result<(Vec<[u16; 3]>, Config)> {
     use crate::client::reply_to;
     use hammer_wire::{CommandKind, DeviceMsg, HostMsg};
-    let cfg = client.request(&HostMsg::GetConfig, timeout, |m| {
-        if let DeviceMsg::Config(c) = m {
-            Some(*c)
-        } else {
+    let cfg = client.request(&HostMsg::GetConfig, timeout, |m| match m {
+        DeviceMsg::Config(c) => Some(*c),
+        DeviceMsg::Report(r) => {
+            reports.push(*r);
             None
         }
+        _ => None,
     })?;
     let cfg = cfg.ok_or_else(|| anyhow::anyhow!("the device did not send its configuration"))?;
     let cfg = Config::default().with_device(&cfg);
@@ -124,6 +127,9 @@ pub fn record_armed<S: std::io::Read + std::io::Write>(
             }
             Some(Err(reason)) => anyhow::bail!("the device refused the capture: {reason:?}"),
             None => {}
+        }
+        if let DeviceMsg::Report(r) = &m {
+            reports.push(*r);
         }
         if let DeviceMsg::Capture(c) = m {
             let done = c.offset as usize + c.samples.len() >= c.total as usize;

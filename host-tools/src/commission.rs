@@ -4,9 +4,12 @@
 //!
 //! At each operating point the board's raw captures (one cycle each, with
 //! the milliseconds after its closing impact) are written as traces in
-//! `DIR/<bar>bar/`, and `DIR/commission.json` records what they were made
-//! with: the firmware version, the board, the calibration hash (a later
-//! recalibration makes the record stale) and the supply pressure.
+//! `DIR/<bar>bar/`, with the board's reports of the steady cycles that
+//! arrived meanwhile (`reports.csv`: the chambers as the board reads them,
+//! which the monitor's drift is read against), and `DIR/commission.json`
+//! records what they were made with: the firmware version, the board, the
+//! calibration hash (a later recalibration makes the record stale) and the
+//! supply pressure.
 
 use std::io::IsTerminal;
 use std::path::PathBuf;
@@ -20,7 +23,10 @@ use crate::client::Client;
 use hammer_diagnose::record::{
     is_record, Folder, PointRecord, Record, RECORD_FILE, RECORD_FORMAT, RECORD_VERSION, SUPPLY_AGREE_BAR,
 };
-use hammer_trace::trace::{write_csv, write_sidecar};
+use hammer_estimator::CycleReport;
+use hammer_trace::trace::{write_csv, write_sidecar, Sidecar};
+
+use crate::drift::{write_reports, REPORTS_FILE};
 
 #[derive(Args, Debug)]
 pub struct CommissionArgs {
@@ -99,6 +105,9 @@ struct Session {
     link: Client<Box<dyn crate::monitor::Port>>,
     info: hammer_wire::DeviceInfo,
     demo: Option<Demo>,
+    /// The emulated board sampling its hammer at the full rate, as a board
+    /// on a bench does: it captures the next cycle of a running hammer.
+    _full_rate: Option<(crate::demo::Board, crate::demo::FullRate)>,
 }
 
 /// A demo board and the rest of its simulated hammer, fed a capture's
@@ -153,8 +162,9 @@ pub fn run(args: &CommissionArgs) -> Result<()> {
         std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
         let mut traces = Vec::new();
         let mut hash = None;
+        let mut reports = Vec::new();
         for n in 0..args.cycles {
-            let (codes, cfg) = capture_one(&mut session, timeout)?;
+            let (codes, cfg) = capture_one(&mut session, timeout, &mut reports)?;
             let h = cfg.calibration_hash();
             if hash.is_some_and(|x| x != h) {
                 bail!(
@@ -171,6 +181,18 @@ pub fn run(args: &CommissionArgs) -> Result<()> {
             traces.push(format!("{}/{name}", point_dir(bar)));
         }
         let hash = hash.unwrap_or_default();
+        let reports = steady_reports(&reports);
+        if reports.is_empty() {
+            bail!("no report of a steady cycle arrived at {bar} bar while capturing: is the hammer running steadily?");
+        }
+        let reports_path = dir.join(REPORTS_FILE);
+        write_reports(&reports_path, reports)?;
+        // Its sidecar states the point and the calibration, as a capture's does.
+        let sidecar: Sidecar = Sidecar {
+            calibration_hash: Some(hash),
+            ..Sidecar::new(Some(bar), "device")
+        };
+        write_sidecar(&reports_path, &sidecar)?;
         let info = &session.info;
         let firmware = format!(
             "{}.{}.{}",
@@ -198,6 +220,7 @@ pub fn run(args: &CommissionArgs) -> Result<()> {
         r.points.push(PointRecord {
             supply_bar: bar,
             traces,
+            reports: Some(format!("{}/{REPORTS_FILE}", point_dir(bar))),
         });
         r.points.sort_by(|a, b| a.supply_bar.total_cmp(&b.supply_bar));
         // Written after every point: an interrupted run keeps what it made.
@@ -205,8 +228,9 @@ pub fn run(args: &CommissionArgs) -> Result<()> {
         let path = args.out.join(RECORD_FILE);
         std::fs::write(&path, text + "\n").with_context(|| format!("writing {}", path.display()))?;
         outln!(
-            "commission: {} cycles at {bar} bar into {} (calibration {hash:08x}, firmware {})",
+            "commission: {} cycles captured and {} reported at {bar} bar into {} (calibration {hash:08x}, firmware {})",
             args.cycles,
+            reports.len(),
             dir.display(),
             r.firmware_version
         );
@@ -224,6 +248,22 @@ const DEMO_SETTLE_S: f64 = 0.5;
 /// at `bar`, fed at its own pace for as long as the captures need.
 fn open(args: &CommissionArgs, bar: f64) -> Result<Session> {
     let handshake = Duration::from_secs(20);
+    if args.demo && crate::demo::emulated_board_available(args.native) {
+        let mut demo = crate::demo::DemoArgs::for_capture(bar);
+        demo.effects = args.effects.clone();
+        let full_rate = crate::demo::FullRate::start(&demo, None)?;
+        let (board, read, write) = crate::demo::start_board(false, Some(&full_rate.stimulus), false)?;
+        let port: Box<dyn crate::monitor::Port> =
+            Box::new(crate::demo::SharedPort::new(read, Arc::new(Mutex::new(write))));
+        let mut link = Client::new(port);
+        let (info, _) = link.handshake(handshake)?;
+        return Ok(Session {
+            link,
+            info,
+            demo: None,
+            _full_rate: Some((board, full_rate)),
+        });
+    }
     if args.demo {
         let mut demo = crate::demo::DemoArgs::for_capture(bar);
         demo.effects = args.effects.clone();
@@ -252,6 +292,7 @@ fn open(args: &CommissionArgs, bar: f64) -> Result<Session> {
             link,
             info,
             demo: Some(demo),
+            _full_rate: None,
         });
     }
     let mut connector = crate::monitor::connector_for(&args.port)?;
@@ -260,7 +301,12 @@ fn open(args: &CommissionArgs, bar: f64) -> Result<Session> {
         .with_context(|| format!("opening {}", connector.describe()))?;
     let mut link = Client::new(port);
     let (info, _) = link.handshake(handshake)?;
-    Ok(Session { link, info, demo: None })
+    Ok(Session {
+        link,
+        info,
+        demo: None,
+        _full_rate: None,
+    })
 }
 
 impl Demo {
@@ -286,11 +332,27 @@ impl Demo {
     }
 }
 
-/// One capture of the next whole cycle.
-fn capture_one(s: &mut Session, timeout: Duration) -> Result<(Vec<[u16; 3]>, hammer_estimator::Config)> {
+/// One capture of the next whole cycle; the reports beside it are added to `reports`.
+fn capture_one(
+    s: &mut Session,
+    timeout: Duration,
+    reports: &mut Vec<CycleReport>,
+) -> Result<(Vec<[u16; 3]>, hammer_estimator::Config)> {
     let Some(demo) = s.demo.as_mut() else {
-        return crate::capture::record(&mut s.link, 1, timeout);
+        return crate::capture::record_armed(&mut s.link, 1, timeout, || {}, reports);
     };
     // The hammer's next stretch follows the board's acknowledgement.
-    crate::capture::record_armed(&mut s.link, 1, timeout, || demo.feed(DEMO_PER_CAPTURE_S))
+    crate::capture::record_armed(&mut s.link, 1, timeout, || demo.feed(DEMO_PER_CAPTURE_S), reports)
+}
+
+/// The reports from the first steady cycle on: leading cycles whose
+/// energy or period stands more than 1 % off the later ones' are the
+/// hammer's start-up, which the record must not hold (the rule the
+/// diagnosis applies to a record's captures, `steady_start`).
+fn steady_reports(reports: &[CycleReport]) -> &[CycleReport] {
+    let ep: Vec<(f64, f64)> = reports
+        .iter()
+        .map(|r| (f64::from(r.impact_energy_j), f64::from(r.period_s)))
+        .collect();
+    &reports[hammer_diagnose::features::steady_start(&ep)..]
 }

@@ -42,6 +42,11 @@ pub struct SoakArgs {
     /// slower, and a host that stalls QEMU for a DMA half shows as an overrun.
     #[arg(long)]
     pub real_time: bool,
+    /// Effects of the simulated hammer (`name:key=value,...`, as `hammer
+    /// demo --effect`): a faulty hammer's cycles are longer, and the
+    /// board's work at their close with them.
+    #[arg(long = "effect", value_name = "SPEC")]
+    pub effects: Vec<String>,
 }
 
 /// What a soak measured.
@@ -66,6 +71,8 @@ pub struct Soak {
     pub chambers_unread: u32,
     pub reader_blocks_peak: u32,
     pub reader_blocks_dropped: u32,
+    /// The blocks the board keeps for its reader.
+    pub reader_blocks: u32,
     /// The longest a report waited from its impact to leaving the board's
     /// reader, and the shortest cycle period reported, seconds.
     pub report_latency_max_s: f64,
@@ -163,7 +170,7 @@ impl Soak {
             self.chambers_read,
             self.chambers_unread,
             self.reader_blocks_peak,
-            hammer_app::chambers::READER_BLOCKS,
+            self.reader_blocks,
             self.reader_blocks_dropped
         );
         out += &format!(
@@ -216,6 +223,7 @@ pub fn run(args: &SoakArgs, progress: bool) -> Result<Soak> {
     let demo = DemoArgs {
         wear_rate: args.wear_rate,
         seed: args.seed,
+        effects: args.effects.clone(),
         ..DemoArgs::for_capture(args.supply_bar)
     };
     // The host's estimator and chambers' reader see what the board's ADC
@@ -326,6 +334,7 @@ pub fn run(args: &SoakArgs, progress: bool) -> Result<Soak> {
     soak.chambers_unread = c.chambers_unread;
     soak.reader_blocks_peak = c.reader_blocks_peak;
     soak.reader_blocks_dropped = c.reader_blocks_dropped;
+    soak.reader_blocks = c.reader_blocks;
     soak.report_latency_max_s = f64::from(c.report_latency_max_sets) / f64::from(hammer_wire::stimulus::RATE_HZ);
     soak.busy_us = unwrap.busy_us;
     soak.uptime_us = unwrap.uptime_us;

@@ -45,7 +45,7 @@ fn commission(out: &Path, effect: Option<&str>) {
     let (code, stdout, stderr) = hammer(&args);
     assert_eq!(code, 0, "{stdout}\n{stderr}");
     assert!(
-        stdout.contains("30 cycles at 4 bar") && stdout.contains("30 cycles at 7 bar"),
+        stdout.contains("30 cycles captured and") && stdout.contains("reported at 7 bar"),
         "{stdout}"
     );
 }

@@ -33,6 +33,7 @@ fn half_a_minute_at_full_rate_loses_nothing_and_matches_the_host_bit_for_bit() {
             wear_rate: 0.0,
             seed: 3,
             real_time: false,
+            effects: vec![],
         },
         false,
     )

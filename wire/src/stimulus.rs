@@ -41,7 +41,7 @@ pub const SET_BYTES: usize = 6;
 /// "HSTM", little-endian.
 pub const MAGIC: u32 = u32::from_le_bytes(*b"HSTM");
 /// Bumped on any change of the header's layout or meaning.
-pub const VERSION: u32 = 4;
+pub const VERSION: u32 = 5;
 /// The reference board's DMA half-buffer (firmware/src/sampler.rs), so the
 /// emulated board sees the same block size and has the same slack.
 pub const BLOCK_SETS: u32 = 256;
@@ -168,6 +168,9 @@ pub struct Header {
     /// Board: the longest a report waited from its impact to leaving the
     /// chambers' reader, sample-sets.
     pub report_latency_max_sets: AtomicU32,
+    /// Board: how many sample blocks it keeps for the chambers' reader
+    /// (version 5: the emulated board keeps more than the reference one).
+    pub reader_blocks: AtomicU32,
 }
 
 /// The emulated chip's factory calibration of its internal reference, the

@@ -218,6 +218,7 @@ impl StimulusAdc {
         ] {
             to.store(from.load(Ordering::Relaxed), Ordering::Relaxed);
         }
+        h.reader_blocks.store(crate::READER_BLOCKS as u32, Ordering::Relaxed);
         h.uptime_us.store(uptime as u32, Ordering::Relaxed);
         h.busy_us.store(busy as u32, Ordering::Relaxed);
     }

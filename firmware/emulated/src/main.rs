@@ -43,7 +43,7 @@ use cortex_m_semihosting::debug;
 use embassy_executor::raw;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::zerocopy_channel;
-use hammer_app::chambers::{Block, READER_BLOCKS};
+use hammer_app::chambers::Block;
 use hammer_app::{persisted, ChamberReader, LinkSamples, Monitor, Overrun, ReaderRoom, Record, SampleSource, Shared};
 use hammer_estimator::RawSample;
 use hammer_wire::{HostMsg, WearBlob};
@@ -68,7 +68,15 @@ static MONITOR: StaticCell<Monitor> = StaticCell::new();
 static READER_ROOM: ConstStaticCell<ReaderRoom> = ConstStaticCell::new(ReaderRoom::new());
 static READER: StaticCell<ChamberReader<&'static mut ReaderRoom>> = StaticCell::new();
 /// The blocks the sampling task reads its samples into and the reader
-/// takes them from (`hammer_app::chambers::READER_BLOCKS`).
+/// takes them from: more than the reference board's 13
+/// (`hammer_app::chambers::READER_BLOCKS`), because this core is paced at
+/// 125 M instructions a second (the host's `Icount::m4_at_125_mips`), 1.36
+/// times slower than the G474's 170 MHz, so the samples that arrive while
+/// a cycle is read fill 1.36 times as many. Measured: a 4-bar hammer with a
+/// 1.5 ms valve delay (48.9 ms cycles) filled all 13 and lost 28 blocks in
+/// half a minute; with 20 (`hammer soak --effect valve_delay:tau_s=0.0015
+/// --supply-bar 4`, docs/firmware.md) none.
+pub(crate) const READER_BLOCKS: usize = 20;
 static BLOCKS: ConstStaticCell<[Block; READER_BLOCKS]> = ConstStaticCell::new([Block::EMPTY; READER_BLOCKS]);
 static BLOCK_CHANNEL: StaticCell<zerocopy_channel::Channel<'static, Mutex, Block>> = StaticCell::new();
 type BlockSender = zerocopy_channel::Sender<'static, Mutex, Block>;

@@ -25,7 +25,9 @@ use serde::{Deserialize, Serialize};
 /// The record's file in a commissioning folder.
 pub const RECORD_FILE: &str = "commission.json";
 pub const RECORD_FORMAT: &str = "hammer-commission";
-pub const RECORD_VERSION: u32 = 1;
+/// Version 2 adds each point's `reports` (the board's own reports of the
+/// point's cycles); a version-1 record has captures alone and still reads.
+pub const RECORD_VERSION: u32 = 2;
 
 /// How far a point's supply pressure and its captures' sidecars may differ,
 /// bar: `hammer commission` writes the same number into both, and takes a
@@ -54,6 +56,12 @@ pub struct PointRecord {
     pub supply_bar: f64,
     /// Trace files, relative to the folder.
     pub traces: Vec<String>,
+    /// The board's reports of the point's cycles while it was captured
+    /// (`reports.csv`, the columns of `hammer estimate --format csv`),
+    /// relative to the folder: the characteristics as the board reads
+    /// them, which the drift is read against. Absent in a version-1 record.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reports: Option<String>,
 }
 
 impl Record {
@@ -85,12 +93,12 @@ impl Record {
             if p.traces.is_empty() {
                 bail!("{label}: the point at {bar} bar lists no capture");
             }
-            for t in &p.traces {
+            for t in p.traces.iter().chain(&p.reports) {
                 let rel = relative(t).map_err(|why| {
-                    anyhow!("{label}: the capture {t:?} at {bar} bar {why}: a record's captures are paths inside its folder")
+                    anyhow!("{label}: the file {t:?} at {bar} bar {why}: a record's captures and reports are paths inside its folder")
                 })?;
                 if let Some(other) = listed.insert(rel, bar) {
-                    bail!("{label}: the capture {t:?} is listed twice (at {other} bar and at {bar} bar): each capture belongs to one point");
+                    bail!("{label}: the file {t:?} is listed twice (at {other} bar and at {bar} bar): each capture and report file belongs to one point");
                 }
             }
         }
@@ -112,6 +120,8 @@ pub struct Folder {
 pub struct Point {
     pub supply_bar: f64,
     pub traces: Vec<PathBuf>,
+    /// The board's reports of the point, checked as a capture is.
+    pub reports: Option<PathBuf>,
 }
 
 impl Folder {
@@ -138,29 +148,32 @@ impl Folder {
         let mut files: HashMap<PathBuf, f64> = HashMap::new();
         let mut points = Vec::new();
         for p in &record.points {
-            let mut traces = Vec::new();
-            for t in &p.traces {
-                let what = || format!("{label}: the capture {t:?} at {} bar", p.supply_bar);
+            // Each file the point lists, checked; `kind` names it in errors.
+            let mut checked = |t: &String, kind: &str| -> Result<PathBuf> {
+                let what = || format!("{label}: the {kind} {t:?} at {} bar", p.supply_bar);
                 // (Checked by `parse`.)
                 let rel = relative(t).map_err(|why| anyhow!("{label}: {t:?} {why}"))?;
-                let trace = dir.join(&rel);
-                let real = confined(&root, &trace).with_context(what)?;
+                let file = dir.join(&rel);
+                let real = confined(&root, &file).with_context(what)?;
                 if let Some(other) = files.insert(real.clone(), p.supply_bar) {
                     bail!(
-                        "{label}: the capture {t:?} at {} bar is the same file as one at {other} bar: each capture belongs to one point",
+                        "{label}: the {kind} {t:?} at {} bar is the same file as one at {other} bar: each capture and report file belongs to one point",
                         p.supply_bar
                     );
                 }
-                agrees(&root, &record, p, &trace).with_context(what)?;
+                agrees(&root, &record, p, &file).with_context(what)?;
                 // A link inside the folder: the file it names has its own sidecar.
                 if real != root.join(&rel) {
                     agrees(&root, &record, p, &real).with_context(what)?;
                 }
-                traces.push(trace);
-            }
+                Ok(file)
+            };
+            let traces = p.traces.iter().map(|t| checked(t, "capture")).collect::<Result<_>>()?;
+            let reports = p.reports.as_ref().map(|r| checked(r, "reports")).transpose()?;
             points.push(Point {
                 supply_bar: p.supply_bar,
                 traces,
+                reports,
             });
         }
         Ok(Folder {
@@ -294,6 +307,12 @@ mod tests {
         )
         .unwrap();
         assert_eq!(ok.points[0].traces.len(), 2);
+        // Version 1 has no reports; version 2 names them.
+        assert_eq!(ok.points[0].reports, None);
+        let v2 = text(r#"[{"supply_bar":4,"traces":["a.csv"],"reports":"4.0bar/reports.csv"}]"#)
+            .replace("\"version\":1", "\"version\":2");
+        let v2 = Record::parse(&v2, "r").unwrap();
+        assert_eq!(v2.points[0].reports.as_deref(), Some("4.0bar/reports.csv"));
         for (points, why) in [
             ("[]", "no operating point"),
             (r#"[{"supply_bar":4,"traces":["../../../../etc/shadow"]}]"#, "`..`"),
@@ -303,6 +322,15 @@ mod tests {
             (r#"[{"supply_bar":-4,"traces":["a.csv"]}]"#, "gauge pressure"),
             (
                 r#"[{"supply_bar":4,"traces":["4.0bar/a.csv"]},{"supply_bar":4.04,"traces":["4.0bar//a.csv"]}]"#,
+                "listed twice",
+            ),
+            // A point's reports are a file of the folder like its captures.
+            (
+                r#"[{"supply_bar":4,"traces":["a.csv"],"reports":"../reports.csv"}]"#,
+                "`..`",
+            ),
+            (
+                r#"[{"supply_bar":4,"traces":["a.csv"],"reports":"./a.csv"}]"#,
                 "listed twice",
             ),
         ] {

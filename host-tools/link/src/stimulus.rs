@@ -37,6 +37,7 @@ pub struct Counters {
     pub reader_blocks_peak: u32,
     pub reader_blocks_dropped: u32,
     pub report_latency_max_sets: u32,
+    pub reader_blocks: u32,
 }
 
 /// The shared file and its mapping; removed when dropped.
@@ -223,6 +224,7 @@ impl Stimulus {
             reader_blocks_peak: l(&h.reader_blocks_peak),
             reader_blocks_dropped: l(&h.reader_blocks_dropped),
             report_latency_max_sets: l(&h.report_latency_max_sets),
+            reader_blocks: l(&h.reader_blocks),
         }
     }
 }

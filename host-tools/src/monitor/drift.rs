@@ -1,29 +1,17 @@
 //! The reader's side of the drift since commissioning ([`crate::drift`]):
-//! it asks the board for one raw cycle at a time, puts the chunks together,
-//! reads the cycle's chamber characteristics and emits an
-//! [`Event::Drift`] when a window of them is full. The reader owns the
-//! port, so the requests go out from its loop ([`Watch::due`]); the
-//! chunks, the configuration and the refusals come back as the events it
-//! already emits ([`Watch::see`]).
+//! it reads each report's chamber characteristics (the board read them at
+//! the cycle's close) and emits an [`Event::Drift`] when a window of them
+//! is full. It asks the board for nothing: it sees the events the reader
+//! already emits ([`Watch::see`]), the configuration and the reports.
 
 use std::sync::Arc;
-use std::time::{Duration, Instant};
 
-use hammer_estimator::Config;
-use hammer_wire::{CaptureChunk, CommandKind, DeviceMsg};
+use hammer_app::chambers::LONGEST_CYCLE_S;
+use hammer_estimator::{Config, CycleReport};
+use hammer_wire::DeviceMsg;
 
 use super::event::{Event, Stamped};
-use crate::drift::{Commissioned, DriftArgs, Window};
-
-/// Pause between one capture's end and the next request: the captures
-/// stream beside the reports, and the board needs no more than a cycle
-/// every so often to read the drift.
-pub const CAPTURE_PAUSE: Duration = Duration::from_millis(500);
-/// A capture that has not finished by then is given up (the board lost a
-/// chunk, or the hammer stopped) and asked for again.
-pub const CAPTURE_TIMEOUT: Duration = Duration::from_secs(30);
-/// After the board refused a capture (busy with another), wait this long.
-const REFUSED_PAUSE: Duration = Duration::from_secs(5);
+use crate::drift::{report_reading, Commissioned, DriftArgs, Source, Window};
 
 pub struct Watch {
     reference: Arc<Commissioned>,
@@ -35,9 +23,9 @@ pub struct Watch {
     window: Option<Window>,
     /// The last reason no drift is read, said once.
     refused: Option<String>,
-    chunks: Vec<CaptureChunk>,
-    asked_at: Option<Instant>,
-    next_at: Instant,
+    /// The periods of the reports in a row whose chambers the board left
+    /// unread (NaN for an invalid one): a window's worth is said once.
+    unread_periods: Vec<f64>,
 }
 
 impl Watch {
@@ -54,40 +42,13 @@ impl Watch {
             config: None,
             window: None,
             refused: None,
-            chunks: Vec::new(),
-            asked_at: None,
-            next_at: Instant::now(),
+            unread_periods: Vec::new(),
         }
     }
 
-    /// Whether to ask for a capture now; a capture that never finished is
-    /// given up first (and said so).
-    pub fn due(&mut self, now: Instant) -> (bool, Option<Event>) {
-        if let Some(t) = self.asked_at {
-            if now.duration_since(t) < CAPTURE_TIMEOUT {
-                return (false, None);
-            }
-            self.asked_at = None;
-            self.chunks.clear();
-            let note = Event::Note(format!(
-                "drift: a capture did not finish within {} s; asking again",
-                CAPTURE_TIMEOUT.as_secs()
-            ));
-            return (self.window.is_some(), Some(note));
-        }
-        (self.window.is_some() && now >= self.next_at, None)
-    }
-
-    pub fn asked(&mut self, now: Instant) {
-        self.asked_at = Some(now);
-        self.chunks.clear();
-    }
-
-    /// A new connection: a capture in flight is lost with the old one, and
-    /// the configuration is asked for again.
+    /// A new connection: the configuration is asked for again, and the
+    /// window goes on (a report's reading does not depend on the link).
     pub fn reconnected(&mut self) {
-        self.asked_at = None;
-        self.chunks.clear();
         self.config = None;
     }
 
@@ -96,17 +57,52 @@ impl Watch {
     pub fn see(&mut self, ev: &Stamped) -> Vec<Event> {
         match &ev.event {
             Event::Msg(DeviceMsg::Config(c)) => self.configured(Config::default().with_device(c)),
-            Event::Msg(DeviceMsg::Rejected {
-                command: CommandKind::StartCapture,
-                ..
-            }) => {
-                self.asked_at = None;
-                self.next_at = Instant::now() + REFUSED_PAUSE;
-                vec![]
-            }
-            Event::Msg(DeviceMsg::Capture(c)) if self.asked_at.is_some() => self.chunk(c),
+            Event::Msg(DeviceMsg::Report(r)) if self.config.is_some() => self.report(r),
             _ => vec![],
         }
+    }
+
+    /// A report: its reading into the window, or, unread, counted; a
+    /// window's worth unread in a row is said, with their period.
+    fn report(&mut self, r: &CycleReport) -> Vec<Event> {
+        let Some(window) = self.window.as_mut() else {
+            return vec![];
+        };
+        if let Some(reading) = report_reading(r) {
+            self.unread_periods.clear();
+            return window
+                .push(reading)
+                .map(|d| Event::Drift(Box::new(d)))
+                .into_iter()
+                .collect();
+        }
+        self.unread_periods
+            .push(if r.is_valid() { f64::from(r.period_s) } else { f64::NAN });
+        if self.unread_periods.len() != self.k {
+            return vec![];
+        }
+        let periods: Vec<f64> = self.unread_periods.iter().copied().filter(|p| p.is_finite()).collect();
+        let period_s = crate::drift::median(&periods);
+        let longest_s = f64::from(LONGEST_CYCLE_S);
+        let why = if period_s > longest_s {
+            format!(
+                "their cycles last {:.1} ms, longer than the {:.0} ms the board reads: the hammer's period itself has changed since commissioning (at {} bar)",
+                period_s * 1e3,
+                longest_s * 1e3,
+                window.baseline().supply_bar
+            )
+        } else if periods.is_empty() {
+            "none of them is valid (their flags say why)".into()
+        } else {
+            format!(
+                "their cycles last {:.1} ms; see their flags and the board's status (samples lost?)",
+                period_s * 1e3
+            )
+        };
+        vec![Event::Note(format!(
+            "drift: the last {} reports carry no chamber reading (chambers_unread), so no drift is read: {why}",
+            self.k
+        ))]
     }
 
     fn configured(&mut self, cfg: Config) -> Vec<Event> {
@@ -134,45 +130,120 @@ impl Watch {
                 if self.window.as_ref().is_none_or(|w| w.baseline() != &baseline) {
                     out.extend(warning.map(Event::Note));
                     out.push(Event::Note(format!(
-                        "drift: reading raw captures against {} at {} bar ({} cycles a reading)",
+                        "drift: reading every report against {} at {} bar ({} cycles a reading)",
                         self.reference.dir.display(),
                         baseline.supply_bar,
                         self.k
                     )));
+                    if baseline.source == Source::Captures {
+                        out.push(Event::Note(format!(
+                            "drift: {} at {} bar holds raw captures and no reports (made before the board read its chambers): read by the host, they stand up to 0.06 ms off the board's reading of the front feed, which every drift's uncertainty includes; commission again to read without it",
+                            self.reference.dir.display(),
+                            baseline.supply_bar
+                        )));
+                    }
                     self.window = Some(Window::new(baseline, self.k, self.confirm));
                 }
             }
         }
         out
     }
+}
 
-    fn chunk(&mut self, c: &CaptureChunk) -> Vec<Event> {
-        let done = c.offset as usize + c.samples.len() >= c.total as usize;
-        self.chunks.push(c.clone());
-        if !done {
-            return vec![];
-        }
-        self.asked_at = None;
-        self.next_at = Instant::now() + CAPTURE_PAUSE;
-        let chunks = std::mem::take(&mut self.chunks);
-        let (Some(cfg), Some(window)) = (self.config.as_ref(), self.window.as_mut()) else {
-            return vec![];
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::diagnose::record::Record;
+    use crate::drift::{Baseline, N_CHARACTERISTICS};
+    use hammer_estimator::FeedFields;
+    use hammer_wire::DeviceConfig;
+
+    fn watch(k: u32) -> Watch {
+        let cfg = Config::default();
+        let median = [1e-3, 2e-2, 1.4, 1.4, f64::NAN, f64::NAN];
+        let reference = Commissioned {
+            dir: "ref".into(),
+            record: Record {
+                format: "hammer-commission".into(),
+                version: 2,
+                firmware_version: "0.1.0".into(),
+                board: "b".into(),
+                calibration_hash: cfg.calibration_hash(),
+                points: vec![],
+            },
+            baselines: vec![Baseline {
+                spread: [1e-4, 1e-4, 0.01, 0.01, f64::NAN, f64::NAN],
+                cycles: [100; N_CHARACTERISTICS],
+                ..Baseline::of(4.0, &[median])
+            }],
         };
-        let codes = match crate::capture::assemble(&chunks) {
-            Ok(c) => c,
-            Err(e) => return vec![Event::Note(format!("drift: {e}; the capture is not read"))],
+        let args = DriftArgs {
+            drift_cycles: k,
+            ..DriftArgs::default()
         };
-        let (trace, _) = crate::capture::to_trace(&codes, cfg, None);
-        let readings = self.reference.readings(&trace, window.baseline().supply_bar);
-        if readings.is_empty() {
-            return vec![Event::Note(
-                "drift: a capture held no whole cycle (is the hammer running steadily?)".into(),
-            )];
+        Watch::new(Arc::new(reference), &args, Some(4.0))
+    }
+
+    fn stamped(m: DeviceMsg) -> Stamped {
+        Stamped {
+            t_us: 0,
+            event: Event::Msg(m),
         }
-        readings
-            .into_iter()
-            .filter_map(|r| window.push(r))
-            .map(|d| Event::Drift(Box::new(d)))
-            .collect()
+    }
+
+    fn report(seq: u32, front_feed_s: f32, period_s: f32) -> DeviceMsg {
+        let mut r = CycleReport {
+            seq,
+            period_s,
+            ..CycleReport::default()
+        };
+        let feed = |feed_s| FeedFields {
+            feed_s,
+            closed_exponent: 1.4,
+            ..FeedFields::NAN
+        };
+        r.set_chambers_read(feed(front_feed_s), feed(0.02));
+        DeviceMsg::Report(r)
+    }
+
+    /// Every report counts and nothing is asked of the board: k read
+    /// reports give a reading; k unread in a row are said once, with the
+    /// reason their period gives.
+    #[test]
+    fn every_report_counts_and_a_run_of_unread_ones_is_said() {
+        let mut w = watch(4);
+        // Before the configuration nothing is read.
+        assert!(w.see(&stamped(report(0, 2.5e-3, 0.047))).is_empty());
+        let notes = w.see(&stamped(DeviceMsg::Config(DeviceConfig::from(&Config::default()))));
+        assert!(
+            notes
+                .iter()
+                .any(|n| matches!(n, Event::Note(s) if s.contains("reading every report"))),
+            "{notes:?}"
+        );
+        let mut out = vec![];
+        for seq in 1..=4 {
+            out.extend(w.see(&stamped(report(seq, 2.5e-3, 0.047))));
+        }
+        let [Event::Drift(d)] = out.as_slice() else {
+            panic!("{out:?}")
+        };
+        let f = d.get("front_feed_s").unwrap();
+        assert!((f.drift - 1.5e-3).abs() < 1e-9 && f.beyond, "{f:?}");
+        let mut out = vec![];
+        for seq in 5..=12 {
+            let DeviceMsg::Report(mut r) = report(seq, 2.5e-3, 0.0507) else {
+                unreachable!()
+            };
+            r.mark_chambers_unread();
+            out.extend(w.see(&stamped(DeviceMsg::Report(r))));
+        }
+        let [Event::Note(n)] = out.as_slice() else {
+            panic!("{out:?}")
+        };
+        assert!(
+            n.contains("last 4 reports") && n.contains("50.7 ms, longer than the 50 ms"),
+            "{n}"
+        );
     }
 }

@@ -291,7 +291,7 @@ struct Reader {
     stop: Arc<AtomicBool>,
     ingest: Ingest,
     ui_dropped: u64,
-    /// The drift since commissioning (`--reference`): its captures.
+    /// The drift since commissioning (`--reference`), read from the reports.
     drift: Option<Watch>,
 }
 
@@ -407,26 +407,6 @@ impl Reader {
         }
     }
 
-    /// Asks the board for a raw cycle when the drift is due one; returns
-    /// why the link ended if the request could not be written.
-    fn ask_capture(&mut self, port: &mut Box<dyn Port>) -> Option<String> {
-        let w = self.drift.as_mut()?;
-        let now = Instant::now();
-        let (due, note) = w.due(now);
-        let mut ended = None;
-        if due {
-            match write_frame(port, &HostMsg::StartCapture { cycles: 1 }) {
-                Ok(()) => w.asked(now),
-                Err(e) if matches!(e.kind(), io::ErrorKind::TimedOut | io::ErrorKind::WouldBlock) => {}
-                Err(e) => ended = Some(format!("cannot send StartCapture: {e}")),
-            }
-        }
-        if let Some(n) = note {
-            self.emit(Stamped::now(n));
-        }
-        ended
-    }
-
     /// Reads until the port goes away; returns why it ended.
     fn session(&mut self, mut port: Box<dyn Port>) -> String {
         let mut buf = vec![0u8; 4096];
@@ -466,11 +446,6 @@ impl Reader {
                             config_asked = false;
                         }
                         Err(e) => return format!("cannot send GetConfig: {e}"),
-                    }
-                }
-                Handshake::Done => {
-                    if let Some(reason) = self.ask_capture(&mut port) {
-                        return reason;
                     }
                 }
                 _ => {}

@@ -773,6 +773,8 @@ mod tests {
                 median: [1e-3, 2e-3, 1.3, 1.3, 5e-6, 5e-6],
                 spread: [1e-4, 1e-4, 0.02, 0.02, 2e-7, 2e-7],
                 cycles: [30; 6],
+                source: crate::drift::Source::Reports,
+                systematic: [0.0; 6],
             },
             1,
             2,

@@ -1,65 +1,65 @@
 //! Drift since commissioning: each chamber characteristic of the cycles a
-//! board is capturing now, against the same characteristic of the hammer's
-//! own reference record (`hammer commission`), with the uncertainty of the
+//! board reports now, against the same characteristic of the hammer's own
+//! reference record (`hammer commission`), with the uncertainty of the
 //! difference and an alarm when it stays beyond it.
 //!
-//! The characteristics are the diagnosis' model-free ones (feed onsets,
-//! closed-phase exponents, feed areas: `hammer_estimator::chambers`), read
-//! by the same extractor from the record's traces and from the live
-//! captures, so whatever the extractor reads slightly wrong it reads wrong
-//! on both sides, and the model's form error never enters. The board does not
-//! compute them yet (the checkpoint sums do not keep the samples around an
-//! impact, and its reading, `chambers::at_close`, does not fit its RAM and
-//! time yet: docs/firmware.md), so the host reads them from the board's raw
-//! captures. A reading at a cycle's close stands about 0.03 ms later in the
-//! front feed than this one (docs/estimator.md, "At a cycle's close").
+//! - [`baseline`]: the record's points read as baselines, and a report's
+//!   characteristics ([`report_reading`]).
+//! - here: the options, the windows and their readings.
 //!
-//! A window of `k` captured cycles gives one reading per characteristic:
+//! The characteristics are the diagnosis' model-free ones (feed onsets,
+//! closed-phase exponents, feed areas: `hammer_estimator::chambers`), which
+//! the board reads into every report at a cycle's close (issue 47). The
+//! record holds the board's reports of its cycles too, so both sides are
+//! read by the same code and whatever it reads slightly wrong it reads wrong
+//! on both sides; the model's form error never enters. The monitor asks the
+//! board for nothing: every blow's report counts.
+//!
+//! A window of `k` reported cycles gives one reading per characteristic:
 //! drift = window median − record median, with the expanded uncertainty
 //! (k = 2) of that difference from the record's cycle-to-cycle spread,
-//! U = 2·1.2533·σ·√(1/m + 1/n) (m cycles in the window, n in the record;
-//! 1.2533 = √(π/2), a median's standard error over a mean's): under no
-//! change the window's cycles scatter as the record's did. Medians, and σ
+//! U = 2·√((1.2533·σ)²·(1/m + 1/n) + u_b²) (m cycles in the window, n in
+//! the record; 1.2533 = √(π/2), a median's standard error over a mean's;
+//! u_b the baseline's systematic part, zero for a record of reports): under
+//! no change the window's cycles scatter as the record's did. Medians, and σ
 //! from the median absolute deviation (1.4826·MAD), because a cycle whose
-//! feed was misread (one in a hundred captures reads its front feed a
-//! millisecond late) would otherwise move a record's mean and widen every
+//! feed was misread (one in a hundred reads its front feed a millisecond
+//! late) would otherwise move a record's mean and widen every
 //! window's U: an outlier is left out, not covered. One window beyond
 //! its U happens by chance (about 1 in 20 per characteristic), so the alarm
 //! needs `--drift-confirm` windows in a row beyond it (3 by default: about
 //! 1 in 10 000 per characteristic and window by chance), the way a
 //! condition monitor confirms a change before it calls someone.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
-use anyhow::{bail, Context, Result};
-use hammer_sim::SimConfig;
-use hammer_trace::trace::Trace;
 use serde::Serialize;
 
-use crate::diagnose::engine::extractor_for;
-use crate::diagnose::features::{
-    feature_name, steady_from, CycleFeatures, Extractor, Signals, ESTIMATOR_CHARACTERISTICS,
+use crate::diagnose::features::{feature_name, ESTIMATOR_CHARACTERISTICS};
+
+pub mod baseline;
+pub use baseline::{
+    read_reports, readings_of, report_reading, write_reports, Baseline, Commissioned, Reading, Source, REPORTS_FILE,
 };
-use crate::diagnose::record::{Folder, Record};
 
 /// Characteristics read, in [`ESTIMATOR_CHARACTERISTICS`] order.
 pub const N_CHARACTERISTICS: usize = ESTIMATOR_CHARACTERISTICS.len();
 
 /// A record's operating point within this of the board's configured supply
-/// pressure is the one a capture is read against.
+/// pressure is the one its reports are read against.
 pub const POINT_MATCH_BAR: f64 = 0.05;
 
 /// The monitor's options for the drift since commissioning.
 #[derive(clap::Args, Debug, Clone)]
 pub struct DriftArgs {
     /// The hammer's commissioning folder (`hammer commission --out DIR`):
-    /// the monitor then takes raw captures from the board, reads each
-    /// cycle's chamber characteristics and shows their drift from the
+    /// the monitor then reads each report's chamber characteristics (the
+    /// board reads them at every cycle's close) and shows their drift from the
     /// record at the board's supply pressure, with an alarm when one stays
     /// beyond its uncertainty (docs/fleet.md, "Drift since commissioning").
     #[arg(long, value_name = "DIR")]
     pub reference: Option<PathBuf>,
-    /// Captured cycles per drift reading.
+    /// Reported cycles per drift reading.
     #[arg(long, value_name = "N", default_value_t = 10, requires = "reference",
           value_parser = clap::value_parser!(u32).range(2..=200))]
     pub drift_cycles: u32,
@@ -73,11 +73,13 @@ pub struct DriftArgs {
     #[arg(long, requires = "reference")]
     pub allow_stale_reference: bool,
     /// The hammer's configuration (`hammer simulate --config`'s TOML): its
-    /// chambers' geometry and transducers; default the paper's hammer.
+    /// chambers' geometry and transducers, to read the raw captures of a
+    /// record made before the board read its chambers (version 1);
+    /// default the paper's hammer.
     #[arg(long, value_name = "FILE", requires = "reference")]
     pub hammer_config: Option<PathBuf>,
     /// The record's operating point (gauge supply, bar) to read the
-    /// captures against when the board's configuration holds no supply
+    /// reports against when the board's configuration holds no supply
     /// pressure (a record of one point needs none).
     #[arg(long, value_name = "BAR", requires = "reference", value_parser = crate::cli::supply_bar)]
     pub point_bar: Option<f64>,
@@ -93,146 +95,6 @@ impl Default for DriftArgs {
             hammer_config: None,
             point_bar: None,
         }
-    }
-}
-
-/// One operating point of the record: each characteristic's median, its
-/// cycle-to-cycle spread (1.4826·MAD: a standard deviation where the
-/// cycles scatter normally, untouched by a misread one) and how many
-/// cycles gave it.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Baseline {
-    pub supply_bar: f64,
-    pub median: [f64; N_CHARACTERISTICS],
-    pub spread: [f64; N_CHARACTERISTICS],
-    pub cycles: [usize; N_CHARACTERISTICS],
-}
-
-impl Baseline {
-    /// The baseline of a record's cycles (`readings`) at `supply_bar`.
-    pub fn of(supply_bar: f64, readings: &[Reading]) -> Self {
-        let values: [Vec<f64>; N_CHARACTERISTICS] =
-            std::array::from_fn(|i| readings.iter().map(|r| r[i]).filter(|x| x.is_finite()).collect());
-        Baseline {
-            supply_bar,
-            median: values.each_ref().map(|v| median(v)),
-            spread: values.each_ref().map(|v| robust_sd(v)),
-            cycles: values.each_ref().map(Vec::len),
-        }
-    }
-}
-
-/// A commissioning record read for drift: its baselines and the extractor
-/// that read them (and reads the captures).
-#[derive(Debug, Clone)]
-pub struct Commissioned {
-    pub dir: PathBuf,
-    pub record: Record,
-    pub baselines: Vec<Baseline>,
-    extractor: Extractor,
-}
-
-/// The chamber characteristics of one cycle, NaN where not read.
-pub type Reading = [f64; N_CHARACTERISTICS];
-
-fn reading(c: &CycleFeatures) -> Reading {
-    ESTIMATOR_CHARACTERISTICS.map(|j| c.values[j])
-}
-
-impl Commissioned {
-    /// Reads the record in `dir` and every trace in it, with the hammer
-    /// `config` describes (its chambers, its transducers' ranges).
-    pub fn load(dir: &Path, config: &SimConfig) -> Result<Self> {
-        let Folder { record, points, .. } = Folder::open(dir)?;
-        let extractor = extractor_for(config);
-        let mut baselines = Vec::new();
-        for point in &points {
-            let mut cycles = Vec::new();
-            for path in &point.traces {
-                let (trace, _, _) = hammer_trace::import::read_trace(path, None)
-                    .with_context(|| format!("reading {}", path.display()))?;
-                cycles.extend(cycles_of(&extractor, &trace, point.supply_bar));
-            }
-            let readings: Vec<Reading> = cycles.iter().map(reading).collect();
-            let b = Baseline::of(point.supply_bar, &readings);
-            if b.cycles.iter().all(|&n| n < 2) {
-                bail!(
-                    "{}: the record's cycles at {} bar give no chamber characteristic twice: nothing to read a drift against",
-                    dir.display(),
-                    point.supply_bar
-                );
-            }
-            baselines.push(b);
-        }
-        if baselines.is_empty() {
-            bail!("{}: the record holds no operating point", dir.display());
-        }
-        Ok(Self {
-            dir: dir.to_path_buf(),
-            record,
-            baselines,
-            extractor,
-        })
-    }
-
-    /// The point a board is read at: its configured supply pressure, else
-    /// `point_bar`, else the record's only point.
-    pub fn point_for(&self, configured_bar: f64, point_bar: Option<f64>) -> Result<&Baseline, String> {
-        if configured_bar.is_finite() {
-            return self.point(configured_bar);
-        }
-        match (point_bar, self.baselines.as_slice()) {
-            (Some(bar), _) => self.point(bar),
-            (None, [only]) => Ok(only),
-            (None, _) => Err(format!(
-                "drift: the board's configuration holds no supply pressure and {} has several operating points: give --point-bar BAR",
-                self.dir.display()
-            )),
-        }
-    }
-
-    /// The record's point at `supply_bar`, or why there is none.
-    pub fn point(&self, supply_bar: f64) -> Result<&Baseline, String> {
-        self.baselines
-            .iter()
-            .find(|b| (b.supply_bar - supply_bar).abs() <= POINT_MATCH_BAR)
-            .ok_or_else(|| {
-                let have: Vec<String> = self.baselines.iter().map(|b| format!("{} bar", b.supply_bar)).collect();
-                format!(
-                    "{} has no operating point at {supply_bar:.2} bar (it has {}): commission this point to read its drift",
-                    self.dir.display(),
-                    have.join(", ")
-                )
-            })
-    }
-
-    /// Whether a board with calibration `hash` may be read against the
-    /// record: an error when it was recalibrated since and `allow_stale`
-    /// is not given, else `Some(warning)` for a stale record.
-    pub fn check_calibration(&self, hash: u32, allow_stale: bool) -> Result<Option<String>, String> {
-        if hash == self.record.calibration_hash {
-            return Ok(None);
-        }
-        let what = format!(
-            "{} was commissioned with calibration {:08x}; the board now has {hash:08x}: it was recalibrated since, so the record is stale",
-            self.dir.display(),
-            self.record.calibration_hash
-        );
-        if allow_stale {
-            Ok(Some(format!(
-                "{what}; its drift includes the recalibration's change (--allow-stale-reference)"
-            )))
-        } else {
-            Err(format!(
-                "{what}: no drift is read. Commission again, or pass --allow-stale-reference"
-            ))
-        }
-    }
-
-    /// The characteristics of each whole cycle in `trace` (a capture) at
-    /// `supply_bar`.
-    pub fn readings(&self, trace: &Trace, supply_bar: f64) -> Vec<Reading> {
-        readings_of(&self.extractor, trace, supply_bar)
     }
 }
 
@@ -264,19 +126,6 @@ pub fn robust_sd(xs: &[f64]) -> f64 {
 /// A median's standard error over a mean's, for normal scatter: √(π/2).
 const MEDIAN_EFFICIENCY: f64 = 1.2533;
 
-/// The characteristics of each steady cycle of `trace` at `supply_bar`,
-/// read by `extractor` as a record's are.
-pub fn readings_of(extractor: &Extractor, trace: &Trace, supply_bar: f64) -> Vec<Reading> {
-    cycles_of(extractor, trace, supply_bar).iter().map(reading).collect()
-}
-
-/// The steady cycles of a trace, as the diagnosis reads a record's.
-fn cycles_of(extractor: &Extractor, trace: &Trace, supply_bar: f64) -> Vec<CycleFeatures> {
-    let all = extractor.cycles(&Signals::of_trace(trace, supply_bar));
-    let from = steady_from(&all);
-    all[from..].to_vec()
-}
-
 /// One characteristic's drift in one window.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Characteristic {
@@ -304,7 +153,7 @@ pub struct Characteristic {
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Drift {
     pub supply_bar: f64,
-    /// Cycles captured in the window.
+    /// Cycles reported in the window.
     pub cycles: usize,
     /// Windows read so far (this one included).
     pub window: u64,
@@ -406,7 +255,7 @@ pub fn unit_of(name: &str) -> (f64, &'static str) {
     }
 }
 
-/// The windows of captured cycles at one operating point.
+/// The windows of reported cycles at one operating point.
 #[derive(Debug, Clone)]
 pub struct Window {
     baseline: Baseline,
@@ -449,7 +298,7 @@ impl Window {
         &self.baseline
     }
 
-    /// Takes one captured cycle; a full window gives its drift.
+    /// Takes one reported cycle; a full window gives its drift.
     pub fn push(&mut self, r: Reading) -> Option<Drift> {
         self.readings.push(r);
         if self.readings.len() < self.k {
@@ -465,7 +314,8 @@ impl Window {
         let u_of = |i: usize, m: usize| {
             let n = b.cycles[i];
             if m > 0 && n > 1 {
-                MEDIAN_EFFICIENCY * b.spread[i] * (1.0 / m as f64 + 1.0 / n as f64).sqrt()
+                let scatter = MEDIAN_EFFICIENCY * b.spread[i] * (1.0 / m as f64 + 1.0 / n as f64).sqrt();
+                scatter.hypot(b.systematic[i])
             } else {
                 f64::NAN
             }
@@ -508,6 +358,7 @@ impl Window {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::diagnose::record::Record;
 
     /// One misread cycle in a hundred moves neither the median nor the
     /// spread; normal scatter gives its standard deviation back.
@@ -535,6 +386,8 @@ mod tests {
             median: [1e-3, 2e-3, 1.3, 1.35, 5e-6, 6e-6],
             spread: [1e-4, 1e-4, 0.02, 0.02, 2e-7, 2e-7],
             cycles: [30; N_CHARACTERISTICS],
+            source: Source::Reports,
+            systematic: [0.0; N_CHARACTERISTICS],
         }
     }
 
@@ -589,7 +442,6 @@ mod tests {
                     ..baseline()
                 })
                 .collect(),
-            extractor: extractor_for(&SimConfig::default()),
         }
     }
 
