@@ -9,15 +9,15 @@
 //!
 //! Cycles are read from long simulated runs (the paper's hammer with its
 //! friction, sensor noise on), each run's start-up dropped as a record's
-//! is; the monitor reads one captured cycle at a time, half a second apart,
-//! with the same extractor.
+//! is, as the board reports them (`hammer_sim::board_reading`: the
+//! estimator and the chambers' reader, the board's bytes): the monitor
+//! reads every blow's report, and the record holds the board's reports.
 //!
 //! `cargo run --release -p hammer-host --example drift_false_alarms -- [WINDOWS] [RECORD_CYCLES] [BAR]`
 //! (defaults: 2000 windows of 10 cycles, records of 30 cycles, 4 bar; 40 records).
 
-use hammer_host::diagnose::engine::extractor_for;
 use hammer_host::diagnose::features::feature_name;
-use hammer_host::drift::{readings_of, Baseline, Reading, Window, N_CHARACTERISTICS};
+use hammer_host::drift::{report_reading, steady_reports, Baseline, Reading, Window, N_CHARACTERISTICS};
 use hammer_sim::simulate::simulate;
 use hammer_sim::SimConfig;
 
@@ -34,7 +34,6 @@ fn main() {
     let mut cfg = SimConfig::nominal(bar);
     cfg.effects.apply_spec("coulomb_friction").expect("known effect");
     cfg.solver.duration_s = RUN_S;
-    let extractor = extractor_for(&cfg);
     let needed = RECORDS * record_cycles + windows * WINDOW;
 
     // Runs of RUN_S each, seeds 1.., two at a time, until enough cycles.
@@ -48,10 +47,17 @@ fn main() {
                 .map(|k| {
                     let mut c = cfg.clone();
                     c.seed = seed + k;
-                    let ex = &extractor;
                     s.spawn(move || {
                         let sim = simulate(&c).expect("the sound hammer simulates");
-                        readings_of(ex, &sim.trace(), bar)
+                        let config = c.estimator_config(Some(bar)).expect("nominal config");
+                        let mut board = hammer_sim::board_reading::pipeline(config).expect("config");
+                        let mut reports = Vec::new();
+                        board.push_block(&sim.measured.codes, &mut |r| reports.push(r));
+                        // The start-up dropped as a record's is.
+                        steady_reports(&reports)
+                            .iter()
+                            .filter_map(report_reading)
+                            .collect::<Vec<_>>()
                     })
                 })
                 .collect();

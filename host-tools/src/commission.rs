@@ -26,7 +26,7 @@ use hammer_diagnose::record::{
 use hammer_estimator::CycleReport;
 use hammer_trace::trace::{write_csv, write_sidecar, Sidecar};
 
-use crate::drift::{write_reports, REPORTS_FILE};
+use crate::drift::{steady_reports, write_reports, REPORTS_FILE};
 
 #[derive(Args, Debug)]
 pub struct CommissionArgs {
@@ -343,16 +343,4 @@ fn capture_one(
     };
     // The hammer's next stretch follows the board's acknowledgement.
     crate::capture::record_armed(&mut s.link, 1, timeout, || demo.feed(DEMO_PER_CAPTURE_S), reports)
-}
-
-/// The reports from the first steady cycle on: leading cycles whose
-/// energy or period stands more than 1 % off the later ones' are the
-/// hammer's start-up, which the record must not hold (the rule the
-/// diagnosis applies to a record's captures, `steady_start`).
-fn steady_reports(reports: &[CycleReport]) -> &[CycleReport] {
-    let ep: Vec<(f64, f64)> = reports
-        .iter()
-        .map(|r| (f64::from(r.impact_energy_j), f64::from(r.period_s)))
-        .collect();
-    &reports[hammer_diagnose::features::steady_start(&ep)..]
 }

@@ -52,5 +52,5 @@ pub mod selftest;
 pub mod soak;
 
 pub use hammer_fleet::{influx, mqtt, parquet_files, private_files, records, tls};
-pub use hammer_link::{client, emulator, stimulus};
+pub use hammer_link::{client, emulator, relay, stimulus};
 pub use hammer_trace::numfmt;

@@ -20,7 +20,9 @@ use hammer_trace::trace::Trace;
 
 use super::{median, robust_sd, N_CHARACTERISTICS, POINT_MATCH_BAR};
 use crate::diagnose::engine::extractor_for;
-use crate::diagnose::features::{steady_from, CycleFeatures, Extractor, Signals, ESTIMATOR_CHARACTERISTICS};
+use crate::diagnose::features::{
+    steady_from, steady_start, CycleFeatures, Extractor, Signals, ESTIMATOR_CHARACTERISTICS,
+};
 use crate::diagnose::record::{Folder, Point, Record};
 
 /// The chamber characteristics of one cycle, NaN where not read.
@@ -112,6 +114,18 @@ pub fn report_reading(r: &CycleReport) -> Option<Reading> {
         ]
         .map(f64::from),
     )
+}
+
+/// The reports from the first steady cycle on: leading cycles whose
+/// energy or period stands more than 1 % off the later ones' are the
+/// hammer's start-up, which the record must not hold (the rule the
+/// diagnosis applies to a record's captures, `steady_start`).
+pub fn steady_reports(reports: &[CycleReport]) -> &[CycleReport] {
+    let ep: Vec<(f64, f64)> = reports
+        .iter()
+        .map(|r| (f64::from(r.impact_energy_j), f64::from(r.period_s)))
+        .collect();
+    &reports[steady_start(&ep)..]
 }
 
 /// The columns of a record's `reports.csv` the drift reads, in its order.
