@@ -13,7 +13,7 @@
 //! estimator and the chambers' reader, the board's bytes): the monitor
 //! reads every blow's report, and the record holds the board's reports.
 //!
-//! `cargo run --release -p hammer-host --example drift_false_alarms -- [WINDOWS] [RECORD_CYCLES] [BAR]`
+//! `cargo run --release -p hammer-host --example drift_false_alarms -- [WINDOWS] [RECORD_CYCLES] [BAR] [WINDOW_CYCLES]`
 //! (defaults: 2000 windows of 10 cycles, records of 30 cycles, 4 bar; 40 records).
 
 use hammer_host::diagnose::features::feature_name;
@@ -22,7 +22,6 @@ use hammer_sim::simulate::simulate;
 use hammer_sim::SimConfig;
 
 const RECORDS: usize = 40;
-const WINDOW: usize = 10;
 const CONFIRM: usize = 3;
 const RUN_S: f64 = 20.0;
 
@@ -31,10 +30,11 @@ fn main() {
     let windows = args.first().map_or(2000, |&w| w as usize);
     let record_cycles = args.get(1).map_or(30, |&n| n as usize);
     let bar = args.get(2).copied().unwrap_or(4.0);
+    let window = args.get(3).map_or(10, |&k| k as usize);
     let mut cfg = SimConfig::nominal(bar);
     cfg.effects.apply_spec("coulomb_friction").expect("known effect");
     cfg.solver.duration_s = RUN_S;
-    let needed = RECORDS * record_cycles + windows * WINDOW;
+    let needed = RECORDS * record_cycles + windows * window;
 
     // Runs of RUN_S each, seeds 1.., two at a time, until enough cycles.
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
@@ -75,7 +75,7 @@ fn main() {
         t0.elapsed().as_secs_f64()
     );
     let (records, rest) = readings.split_at(RECORDS * record_cycles);
-    let stream = &rest[..windows * WINDOW];
+    let stream = &rest[..windows * window];
 
     let mut beyond = [0u64; N_CHARACTERISTICS];
     let mut onsets = [0u64; N_CHARACTERISTICS];
@@ -83,7 +83,7 @@ fn main() {
     let mut records_alarming = 0usize;
     let mut worst = (0u64, 0usize);
     for (r, rec) in records.chunks(record_cycles).enumerate() {
-        let mut w = Window::new(Baseline::of(bar, rec), WINDOW, CONFIRM);
+        let mut w = Window::new(Baseline::of(bar, rec), window, CONFIRM);
         let mut was = [false; N_CHARACTERISTICS];
         let mut was_any = false;
         let mut this = 0u64;
@@ -109,7 +109,7 @@ fn main() {
     }
     let n = (RECORDS * windows) as f64;
     println!(
-        "{RECORDS} records of {record_cycles} cycles, each against {windows} windows of {WINDOW} cycles, alarm at {CONFIRM} in a row"
+        "{RECORDS} records of {record_cycles} cycles, each against {windows} windows of {window} cycles, alarm at {CONFIRM} in a row"
     );
     println!("characteristic                  beyond per window   alarm onsets per 10 000 windows");
     for i in 0..N_CHARACTERISTICS {
@@ -123,7 +123,7 @@ fn main() {
     println!(
         "any characteristic: {:.1} alarm onsets per 10 000 windows ({:.2} per 1000 cycles); {records_alarming} of {RECORDS} records alarm at least once; worst record {} onsets",
         1e4 * any_onsets as f64 / n,
-        1e3 * any_onsets as f64 / (n * WINDOW as f64),
+        1e3 * any_onsets as f64 / (n * window as f64),
         worst.0
     );
 }

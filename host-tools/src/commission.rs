@@ -41,9 +41,10 @@ pub struct CommissionArgs {
     /// trying a diagnosis against a record of the sound one.
     #[arg(long = "effect", value_name = "SPEC", requires = "demo")]
     pub effects: Vec<String>,
-    /// Run the demo board's firmware app natively instead of on QEMU
-    /// (faster: under QEMU the emulated UART takes the samples at a few
-    /// percent of the hammer's rate, about 6 s a capture).
+    /// Run the demo board's firmware app natively instead of on QEMU. On
+    /// QEMU the emulated board samples its running hammer at the full rate
+    /// through its ADC model, as a board on a bench does; natively the app
+    /// is fed a stretch of hammer per capture over its link.
     #[arg(long, requires = "demo")]
     pub native: bool,
     /// Gauge supply pressure of an operating point, bar (repeatable). On a
@@ -110,11 +111,10 @@ struct Session {
     _full_rate: Option<(crate::demo::Board, crate::demo::FullRate)>,
 }
 
-/// A demo board and the rest of its simulated hammer, fed a capture's
-/// stretch at a time once that capture is armed: the request is never
-/// queued behind samples (the emulated board's UART takes them slower
-/// than the hammer makes them, and a paced feed ahead of the request held
-/// it back until the capture timed out).
+/// A native demo board and the rest of its simulated hammer, fed a
+/// capture's stretch at a time once that capture is armed: the request is
+/// never queued behind samples (a paced feed ahead of the request held it
+/// back until the capture timed out).
 struct Demo {
     _board: crate::demo::Board,
     writer: Arc<Mutex<Box<dyn std::io::Write + Send>>>,
