@@ -214,10 +214,12 @@ fn seeds() -> Vec<Vec<u8>> {
             hammer_diagnose::record::PointRecord {
                 supply_bar: 4.0,
                 traces: vec!["4.0bar/cycle-000.csv".into(), "4.0bar/cycle-001.csv".into()],
+                reports: None,
             },
             hammer_diagnose::record::PointRecord {
                 supply_bar: 7.0,
                 traces: vec!["7.0bar/cycle-000.csv".into()],
+                reports: None,
             },
         ],
     };
@@ -231,6 +233,10 @@ fn seeds() -> Vec<Vec<u8>> {
         record(r#"[{"supply_bar":4,"traces":["4.0bar/fifo.csv","4.0bar/dir.csv","4.0bar/side-out.csv"]}]"#),
         record(r#"[{"supply_bar":5.5,"traces":["4.0bar/cycle-000.csv"]}]"#),
         record(r#"[{"supply_bar":5.5,"traces":["4.0bar/alias.csv"]}]"#),
+        // A point's reports: a missing file, a capture named twice, a path out.
+        record(r#"[{"supply_bar":4,"traces":["4.0bar/cycle-000.csv"],"reports":"4.0bar/reports.csv"}]"#),
+        record(r#"[{"supply_bar":4,"traces":["4.0bar/cycle-000.csv"],"reports":"4.0bar/cycle-000.csv"}]"#),
+        record(r#"[{"supply_bar":4,"traces":["4.0bar/cycle-000.csv"],"reports":"../other/reports.csv"}]"#),
         record(
             r#"[{"supply_bar":4,"traces":["4.0bar/cycle-000.csv"]},{"supply_bar":4.04,"traces":["4.0bar/alias.csv"]}]"#,
         ),
