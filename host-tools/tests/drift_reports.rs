@@ -102,32 +102,7 @@ fn a_valve_delay_is_found_from_the_reports_alone() {
         let captured_ms = 1e3 * (captured_front_feed_s(&delayed, bar) - captured_front_feed_s(&reference, bar));
 
         // The board with the hidden delay, other noise than the records'.
-        let mut hammer = DemoArgs::for_capture(bar);
-        hammer.effects = vec![DELAY.into()];
-        hammer.seed = 5;
-        let full_rate = FullRate::start(&hammer, None).unwrap();
-        let (board, rx, tx) = start_board(false, Some(&full_rate.stimulus), false).unwrap();
-        let relay = Relay::start(rx, tx).unwrap();
-        let out = Command::new(env!("CARGO_BIN_EXE_hammer"))
-            .args([
-                "monitor",
-                "--headless",
-                "--port",
-                &format!("tcp:127.0.0.1:{}", relay.port),
-            ])
-            .args(["--exit-after-reports", "160", "--drift-cycles", "10"])
-            .args(["--point-bar", &bar.to_string(), "--reference"])
-            .arg(&reference)
-            .output()
-            .unwrap();
-        drop(board);
-        let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
-        assert!(
-            out.status.success(),
-            "{stdout}\n{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-
+        let (stdout, relay) = monitored(bar, Some(DELAY), 5, 160, &reference);
         // Nothing asked of the board but who it is and its configuration.
         assert!(relay.commands() >= 2, "the relay saw no command");
         assert_eq!(relay.start_captures(), 0, "StartCaptures sent");
@@ -153,7 +128,69 @@ fn a_valve_delay_is_found_from_the_reports_alone() {
             "{bar} bar: {reported_ms} ms from the reports, {captured_ms} ms from the captures"
         );
     }
+    // The sound hammer with other noise, every blow counted: 3 000 cycles,
+    // no alarm.
+    let (stdout, relay) = monitored(4.0, None, 6, 3000, &reference);
+    assert_eq!(relay.start_captures(), 0);
+    let readings: Vec<&str> = stdout
+        .lines()
+        .filter(|l| l.contains("drift since commissioning"))
+        .collect();
+    assert!(readings.len() >= 295, "{} readings", readings.len());
+    let alarms = readings.iter().filter(|l| l.contains("ALARM")).count();
+    let beyond = |name: &str| {
+        let n = readings
+            .iter()
+            .filter(|l| {
+                l.split(&format!("{name} "))
+                    .nth(1)
+                    .is_some_and(|v| v.split(',').next().unwrap().contains("beyond"))
+            })
+            .count();
+        100.0 * n as f64 / readings.len() as f64
+    };
+    println!(
+        "4 bar, sound, 3 000 reported cycles: {} windows, {alarms} alarms; beyond U: front feed {:.1} %, rear feed {:.1} %, exponents {:.1} and {:.1} %",
+        readings.len(),
+        beyond("front_feed_s"),
+        beyond("rear_feed_s"),
+        beyond("front_closed_exponent"),
+        beyond("rear_closed_exponent")
+    );
+    assert_eq!(alarms, 0, "alarms on the sound hammer");
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `hammer monitor --headless --reference` on the emulated board running
+/// the hammer at `bar` (with `effect`, noise `seed`) through a counting
+/// relay, until `reports` reports: its output and the relay.
+fn monitored(bar: f64, effect: Option<&str>, seed: u64, reports: u32, reference: &Path) -> (String, Relay) {
+    let mut hammer = DemoArgs::for_capture(bar);
+    hammer.effects = effect.map(String::from).into_iter().collect();
+    hammer.seed = seed;
+    let full_rate = FullRate::start(&hammer, None).unwrap();
+    let (board, rx, tx) = start_board(false, Some(&full_rate.stimulus), false).unwrap();
+    let relay = Relay::start(rx, tx).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_hammer"))
+        .args([
+            "monitor",
+            "--headless",
+            "--port",
+            &format!("tcp:127.0.0.1:{}", relay.port),
+        ])
+        .args(["--exit-after-reports", &reports.to_string(), "--drift-cycles", "10"])
+        .args(["--point-bar", &bar.to_string(), "--reference"])
+        .arg(reference)
+        .output()
+        .unwrap();
+    drop(board);
+    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(
+        out.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    (stdout, relay)
 }
 
 /// The sound hammer's cycles as the board reports them (the host's copy of

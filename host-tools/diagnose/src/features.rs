@@ -678,29 +678,11 @@ pub fn summarize(cycles: &[CycleFeatures]) -> Summary {
     }
 }
 
-/// Index of the first steady cycle: leading cycles whose energy or period
-/// differs from the later cycles' median by more than 1 % are the start-up.
+/// Index of the first steady cycle ([`crate::steady::steady_start`] on
+/// the cycles' energies and periods).
 pub fn steady_from(cycles: &[CycleFeatures]) -> usize {
     let ep: Vec<(f64, f64)> = cycles.iter().map(|c| (c.values[ENERGY], c.values[PERIOD])).collect();
-    steady_start(&ep)
-}
-
-/// [`steady_from`] on each cycle's (impact energy, period): for any
-/// reading of cycles (the extractor's, a board's reports).
-pub fn steady_start(energy_period: &[(f64, f64)]) -> usize {
-    if energy_period.len() < 3 {
-        return 0;
-    }
-    let median = |pick: fn(&(f64, f64)) -> f64| {
-        let mut xs: Vec<f64> = energy_period[energy_period.len() / 2..].iter().map(pick).collect();
-        xs.sort_by(f64::total_cmp);
-        xs[xs.len() / 2]
-    };
-    let (e, p) = (median(|c| c.0), median(|c| c.1));
-    energy_period
-        .iter()
-        .position(|&(ce, cp)| ((ce - e) / e).abs() < 0.01 && ((cp - p) / p).abs() < 0.01)
-        .unwrap_or(energy_period.len())
+    crate::steady::steady_start(&ep)
 }
 
 #[cfg(test)]

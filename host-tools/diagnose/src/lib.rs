@@ -23,10 +23,11 @@
 //! (the rows of one layer may import each other, as noted), so the stages
 //! never import the engine that runs them:
 //!
-//! 1. [`stages`], [`fit`], `parallel`, [`options`], [`record`], [`input`]:
-//!    the cycle's stages (a)–(f), the optimiser, the thread pool, the
-//!    tunables, the commissioning record's format, and what the diagnosis is
-//!    given (traces or commissioning folders, progress, refusals);
+//! 1. [`stages`], [`fit`], `parallel`, [`options`], [`record`], [`input`],
+//!    [`steady`]: the cycle's stages (a)–(f), the optimiser, the thread
+//!    pool, the tunables, the commissioning record's format, what the
+//!    diagnosis is given (traces or commissioning folders, progress,
+//!    refusals), and the start-up rule;
 //! 2. [`report`]: the schema of `report.json` (the candidate models
 //!    included), apart so a schema change is one diff;
 //! 3. [`gap`], [`features`], [`valve_timing`]: what is compared — cycles
@@ -65,4 +66,5 @@ mod pipeline;
 pub mod record;
 pub mod report;
 pub mod stages;
+pub mod steady;
 pub mod valve_timing;

@@ -20,9 +20,7 @@ use hammer_trace::trace::Trace;
 
 use super::{median, robust_sd, N_CHARACTERISTICS, POINT_MATCH_BAR};
 use crate::diagnose::engine::extractor_for;
-use crate::diagnose::features::{
-    steady_from, steady_start, CycleFeatures, Extractor, Signals, ESTIMATOR_CHARACTERISTICS,
-};
+use crate::diagnose::features::{steady_from, CycleFeatures, Extractor, Signals, ESTIMATOR_CHARACTERISTICS};
 use crate::diagnose::record::{Folder, Point, Record};
 
 /// The chamber characteristics of one cycle, NaN where not read.
@@ -125,7 +123,7 @@ pub fn steady_reports(reports: &[CycleReport]) -> &[CycleReport] {
         .iter()
         .map(|r| (f64::from(r.impact_energy_j), f64::from(r.period_s)))
         .collect();
-    &reports[steady_start(&ep)..]
+    &reports[crate::diagnose::steady::steady_start(&ep)..]
 }
 
 /// The columns of a record's `reports.csv` the drift reads, in its order.
