@@ -20,7 +20,9 @@ use hammer_trace::trace::Trace;
 
 use super::{median, robust_sd, N_CHARACTERISTICS, POINT_MATCH_BAR};
 use crate::diagnose::engine::extractor_for;
-use crate::diagnose::features::{steady_from, CycleFeatures, Extractor, Signals, ESTIMATOR_CHARACTERISTICS};
+use crate::diagnose::features::{
+    feature_name, steady_from, CycleFeatures, Extractor, Signals, ESTIMATOR_CHARACTERISTICS,
+};
 use crate::diagnose::record::{Folder, Point, Record};
 
 /// The chamber characteristics of one cycle, NaN where not read.
@@ -126,16 +128,6 @@ pub fn steady_reports(reports: &[CycleReport]) -> &[CycleReport] {
     &reports[crate::diagnose::steady::steady_start(&ep)..]
 }
 
-/// The columns of a record's `reports.csv` the drift reads, in its order.
-pub const REPORT_COLUMNS: [&str; N_CHARACTERISTICS] = [
-    "front_feed_s",
-    "rear_feed_s",
-    "front_closed_exponent",
-    "rear_closed_exponent",
-    "front_feed_area_m2",
-    "rear_feed_area_m2",
-];
-
 /// The file a point's reports are written to, in its folder.
 pub const REPORTS_FILE: &str = "reports.csv";
 
@@ -166,9 +158,11 @@ pub fn read_reports(path: &Path) -> Result<Vec<Reading>> {
             path.display()
         );
     };
-    let columns = REPORT_COLUMNS
+    // A report's field for each characteristic has the feature's name.
+    let names = ESTIMATOR_CHARACTERISTICS.map(feature_name);
+    let columns = names
         .iter()
-        .map(|c| at(c).ok_or(*c))
+        .map(|c| at(c).ok_or(c.as_str()))
         .collect::<Result<Vec<usize>, &str>>()
         .map_err(|c| {
             anyhow!(
@@ -360,6 +354,11 @@ mod tests {
     fn a_report_gives_its_chambers_unless_unread_or_invalid() {
         let r = report(1, 1.5e-3);
         let x = report_reading(&r).expect("read");
+        // Each characteristic is the report's field of the feature's name.
+        for (i, j) in ESTIMATOR_CHARACTERISTICS.into_iter().enumerate() {
+            let f = hammer_estimator::fields::field(&feature_name(j)).expect("a report field");
+            assert_eq!(f.f64(&r).to_bits(), x[i].to_bits(), "{}", f.name);
+        }
         assert_eq!(x[0], f64::from(1.5e-3f32));
         assert_eq!(x[1], f64::from(0.021f32));
         assert_eq!(x[2], f64::from(1.4f32));
