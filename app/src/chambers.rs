@@ -59,6 +59,20 @@ pub const ROOM_FLOATS: usize = 2_501;
 /// Messages waiting behind a report that waits for its reading.
 pub const WAITING: usize = 4;
 
+/// The longest cycle the reader reads at `cfg`'s sample rate, s: the
+/// longest whose window fits the track and whose span fits the room
+/// ([`LONGEST_CYCLE_S`] at 100 kS/s). For a host to say why reports come
+/// unread.
+pub fn longest_cycle_s(cfg: &Config) -> f32 {
+    let kept = at_kept_rate(cfg);
+    let dt = kept.dt_s();
+    let sets = (1..ROOM_FLOATS)
+        .rev()
+        .find(|&n| window_samples(n, dt) <= TRACK_FLOATS)
+        .unwrap_or(0);
+    sets as f32 * dt
+}
+
 /// Full-rate sample-sets the sampling task reads at a time (its block).
 pub const READER_BLOCK: usize = 4 * BLOCK_SAMPLES;
 /// Blocks the reference board keeps for its reader: the samples that

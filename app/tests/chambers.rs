@@ -2,7 +2,9 @@
 //! on the host: against the reading of the same kept codes done by hand,
 //! whatever the blocks, and what it does with cycles it cannot read.
 
-use hammer_app::chambers::{ChamberReader, Pipeline, ReaderCounters, ReaderRoom, DECIMATION, LONGEST_CYCLE_S};
+use hammer_app::chambers::{
+    longest_cycle_s, ChamberReader, Pipeline, ReaderCounters, ReaderRoom, DECIMATION, LONGEST_CYCLE_S,
+};
 use hammer_estimator::chambers::at_close::{characterise_cycle, fields, window_samples, Work};
 use hammer_estimator::chambers::ChamberGeometry;
 use hammer_estimator::{Config, CycleReport, Estimator, Flags, RawSample};
@@ -206,4 +208,15 @@ fn a_cycle_longer_than_the_window_is_unread() {
     // It leaves at once (nothing to wait for), unread.
     assert_eq!(out.len(), 2, "{out:?}");
     assert!(matches!(out[1], DeviceMsg::Report(r) if r.flags.contains(Flags::CHAMBERS_UNREAD)));
+    // The longest cycle read at this rate is the one the constant states,
+    // to a kept set; at twice the rate the 8 ms after the impact take twice
+    // the kept sets, so the longest cycle is shorter.
+    let longest = longest_cycle_s(&cfg);
+    let kept_dt = DECIMATION as f32 / cfg.sample_rate_hz;
+    assert!((longest - LONGEST_CYCLE_S).abs() <= 1.5 * kept_dt, "{longest}");
+    let fast = Config {
+        sample_rate_hz: 2.0 * cfg.sample_rate_hz,
+        ..cfg
+    };
+    assert!(longest_cycle_s(&fast) < 0.5 * longest, "{}", longest_cycle_s(&fast));
 }

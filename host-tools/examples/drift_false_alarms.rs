@@ -17,7 +17,7 @@
 //! (defaults: 2000 windows of 10 cycles, records of 30 cycles, 4 bar; 40 records).
 
 use hammer_host::diagnose::features::feature_name;
-use hammer_host::drift::{report_reading, steady_reports, Baseline, Reading, Window, N_CHARACTERISTICS};
+use hammer_host::drift::{steady_readings, Baseline, Reading, Window, N_CHARACTERISTICS};
 use hammer_sim::simulate::simulate;
 use hammer_sim::SimConfig;
 
@@ -54,10 +54,7 @@ fn main() {
                         let mut reports = Vec::new();
                         board.push_block(&sim.measured.codes, &mut |r| reports.push(r));
                         // The start-up dropped as a record's is.
-                        steady_reports(&reports)
-                            .iter()
-                            .filter_map(report_reading)
-                            .collect::<Vec<_>>()
+                        steady_readings(&reports)
                     })
                 })
                 .collect();

@@ -99,12 +99,8 @@ fn offsets(bar: f64, seconds: f64, effect: Option<&str>) -> [f64; 2] {
     let mut read = Vec::new();
     board.push_block(&codes, &mut |r| read.push(r));
     board.finish(&mut |r| read.push(r));
-    // The run's start-up dropped as a record's is: the second half's cycles.
-    let steady = read.len() / 4;
-    let by_report: Vec<[f64; N_CHARACTERISTICS]> = read[steady..]
-        .iter()
-        .filter_map(hammer_host::drift::report_reading)
-        .collect();
+    // The run's start-up dropped as a record's is.
+    let by_report = hammer_host::drift::steady_readings(&read);
 
     println!(
         "{bar} bar{}, {seconds} s: {} cycles read from {} captures, {} at their close",

@@ -431,8 +431,9 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         read,
         write: writer.clone(),
     };
-    // The drift's captures need the native app fed at the hammer's pace:
-    // fed faster, it drops samples and a capture never completes.
+    // The drift needs the native app fed at the hammer's pace: fed faster,
+    // it drops samples, and the reports around a gap carry no chamber
+    // reading.
     let drift = args.drift.reference.is_some();
     let feeder = feeder.map(|codes| {
         let (writer, paced) = (writer.clone(), !headless || drift);

@@ -18,11 +18,11 @@
 //! - [`chambers`]: the chamber characteristics against their truth on both model families;
 //! - [`diagnose`]: `hammer diagnose` and `diagnose-bench` over `hammer-diagnose`
 //!   (re-exported in it), and the report for people;
-//! - [`drift`]: the chamber characteristics of live captures read against
-//!   the hammer's commissioning record (`hammer_diagnose::record`);
+//! - [`drift`]: the chamber characteristics of every live report read
+//!   against the hammer's commissioning record (`hammer_diagnose::record`);
 //! - [`flash`], [`capture`], [`calibrate`], [`selftest`], [`demo`], [`soak`], [`monitor`]: live: raw captures, calibration, the
 //!   no-hardware demo, the full-rate soak, the dashboard, logs and replay;
-//! - [`commission`]: the hammer's reference record, from the board's raw captures;
+//! - [`commission`]: the hammer's reference record, from the board's raw captures and reports;
 //! - [`fmu_cmd`]: `hammer fmu`: the export, the pre-flight and speed of a
 //!   foreign FMU (`hammer-fmu`'s import), its hidden worker process;
 //! - [`cli`]: the subcommands, thin over the above.

@@ -16,7 +16,8 @@ use std::process::Command;
 use hammer_host::demo::{emulated_board_available, start_board, DemoArgs, FullRate};
 use hammer_host::diagnose::engine::extractor_for;
 use hammer_host::diagnose::record::Folder;
-use hammer_host::drift::{median, readings_of};
+use hammer_host::drift::baseline::captured;
+use hammer_host::drift::median;
 use hammer_host::relay::Relay;
 use hammer_sim::SimConfig;
 
@@ -54,13 +55,9 @@ fn captured_front_feed_s(dir: &Path, bar: f64) -> f64 {
         .iter()
         .find(|p| (p.supply_bar - bar).abs() < 0.01)
         .unwrap();
-    let feeds: Vec<f64> = point
-        .traces
+    let feeds: Vec<f64> = captured(&extractor, point)
+        .unwrap()
         .iter()
-        .flat_map(|t| {
-            let (trace, _, _) = hammer_trace::import::read_trace(t, None).unwrap();
-            readings_of(&extractor, &trace, bar)
-        })
         .map(|r| r[0])
         .filter(|x| x.is_finite())
         .collect();
@@ -204,10 +201,7 @@ fn reported(bar: f64, seconds: f64, seed: u64) -> Vec<hammer_host::drift::Readin
     let mut board = hammer_sim::board_reading::pipeline(cfg.estimator_config(Some(bar)).unwrap()).unwrap();
     let mut reports = Vec::new();
     board.push_block(&sim.measured.codes, &mut |r| reports.push(r));
-    hammer_host::drift::steady_reports(&reports)
-        .iter()
-        .filter_map(hammer_host::drift::report_reading)
-        .collect()
+    hammer_host::drift::steady_readings(&reports)
 }
 
 /// Every blow counted, the sound hammer raises no alarm: 3 000 cycles with
@@ -292,7 +286,7 @@ fn a_record_from_before_the_reports_still_reads() {
         stdout
     };
     let delayed = run(Some(DELAY));
-    assert!(delayed.contains("holds raw captures and no reports"), "{delayed}");
+    assert!(delayed.contains("is read from its raw captures"), "{delayed}");
     let lines: Vec<(u32, f64, bool)> = delayed
         .lines()
         .filter(|l| l.contains("drift since commissioning"))

@@ -52,6 +52,9 @@ pub const TARGET: Target = Target {
         b"dir.csv",
         b"side-out.csv",
         b"../other/4.0bar/cycle-000.csv",
+        b"\"reports\":",
+        b"reports.csv",
+        b"4.0bar/reports.csv",
     ],
     seeds,
 };
@@ -99,6 +102,14 @@ fn fixture() -> Fixture {
         write(&rec.join(format!("{stem}.json")), &side);
     }
     write(&rec.join("4.0bar/cycle-001.csv"), trace);
+    // A point's reports, with its sidecar as `hammer commission` writes it.
+    write(&rec.join("4.0bar/reports.csv"), "seq,valid,flags\n");
+    write(
+        &rec.join("4.0bar/reports.json"),
+        &format!(
+            r#"{{"format":"hammer-trace","version":2,"supply_pressure_bar":4,"source":"device","calibration_hash":{HASH}}}"#
+        ),
+    );
     write(&base.join("outside/secret.csv"), trace);
     write(&base.join("outside/side.json"), r#"{"supply_pressure_bar": 4}"#);
     write(&base.join("other/4.0bar/cycle-000.csv"), trace);
@@ -168,12 +179,17 @@ fn run(data: &[u8]) -> u64 {
     })
 }
 
-/// An accepted record's captures: regular files inside the folder once
-/// resolved, each once, never the file outside, their sidecars agreeing.
+/// An accepted record's captures and reports: regular files inside the
+/// folder once resolved, each once, never the file outside, their sidecars
+/// agreeing.
 fn check(f: &Fixture, folder: &Folder) {
     assert!(!folder.points.is_empty(), "a record without a point accepted");
     let mut seen = HashSet::new();
-    for (trace, bar) in folder.traces() {
+    let reports = folder
+        .points
+        .iter()
+        .flat_map(|p| p.reports.iter().map(|r| (r.as_path(), p.supply_bar)));
+    for (trace, bar) in folder.traces().chain(reports) {
         let real = trace.canonicalize().expect("an accepted capture resolves");
         assert!(real.starts_with(&f.root), "{} leads out of the folder", trace.display());
         assert!(

@@ -41,12 +41,12 @@ pub enum Source {
 /// reading of the same cycles at most, per characteristic in the drift's
 /// order: 1.5 times the largest offset (report − capture) measured on the
 /// paper's hammer at 4 and 7 bar, sound and with a 1.5 ms valve delay
-/// (`cargo run --release -p hammer-host --example report_vs_capture`:
-/// front feed +0.040 ms, rear feed −0.023 ms, exponents 0.0004, feed
-/// areas 1.7 % and 0.7 %). The feed areas' bound is relative to the
-/// record's median. A version-1 record's baseline carries it as a
+/// (`cargo run --release -p hammer-host --example report_vs_capture -- 20 4 7`:
+/// front feed +0.039 ms, rear feed −0.025 ms, exponents 0.00042, feed
+/// areas +1.66 % and +0.66 %). The feed areas' bound is relative to the
+/// record's median. A baseline read from captures carries it as a
 /// rectangular standard uncertainty, bound/√3.
-pub const CAPTURE_OFFSET_BOUND: Reading = [6e-5, 3.5e-5, 6e-4, 6e-4, 0.025, 0.01];
+pub const CAPTURE_OFFSET_BOUND: Reading = [6e-5, 4e-5, 7e-4, 7e-4, 0.025, 0.01];
 
 /// Characteristics whose [`CAPTURE_OFFSET_BOUND`] is relative (the feed areas).
 const RELATIVE_BOUND: [bool; N_CHARACTERISTICS] = [false, false, false, false, true, true];
@@ -80,6 +80,11 @@ impl Baseline {
             source: Source::Reports,
             systematic: [0.0; N_CHARACTERISTICS],
         }
+    }
+
+    /// Whether some characteristic was read in two cycles or more.
+    pub fn is_read(&self) -> bool {
+        self.cycles.iter().any(|&n| n >= 2)
     }
 
     /// [`Baseline::of`] for cycles read from raw captures: the offset to
@@ -116,17 +121,31 @@ pub fn report_reading(r: &CycleReport) -> Option<Reading> {
     )
 }
 
-/// The reports from the first steady cycle on: leading cycles whose
+/// The valid reports from the first steady cycle on: leading cycles whose
 /// energy or period stands more than 1 % off the later ones' are the
 /// hammer's start-up, which the record must not hold (the rule the
-/// diagnosis applies to a record's captures, `steady_start`).
-pub fn steady_reports(reports: &[CycleReport]) -> &[CycleReport] {
-    let ep: Vec<(f64, f64)> = reports
+/// diagnosis applies to a record's captures, `steady_start`). Invalid
+/// reports are left out first, so their NaNs move no median.
+pub fn steady_reports(reports: &[CycleReport]) -> Vec<CycleReport> {
+    let valid: Vec<CycleReport> = reports.iter().filter(|r| r.is_valid()).copied().collect();
+    let ep: Vec<(f64, f64)> = valid
         .iter()
         .map(|r| (f64::from(r.impact_energy_j), f64::from(r.period_s)))
         .collect();
-    &reports[crate::diagnose::steady::steady_start(&ep)..]
+    let from = crate::diagnose::steady::steady_start(&ep);
+    valid[from..].to_vec()
 }
+
+/// The characteristics of a run's reports as a record keeps them: the
+/// steady ones ([`steady_reports`]) that carry a reading.
+pub fn steady_readings(reports: &[CycleReport]) -> Vec<Reading> {
+    steady_reports(reports).iter().filter_map(report_reading).collect()
+}
+
+/// The largest reports file read, bytes: a record's holds about 1.2 KB a
+/// report, so this is some 50 000 reports; a larger file is refused, not
+/// read into memory.
+const REPORTS_FILE_MAX_BYTES: u64 = 64 << 20;
 
 /// The file a point's reports are written to, in its folder.
 pub const REPORTS_FILE: &str = "reports.csv";
@@ -148,6 +167,16 @@ pub fn write_reports(path: &Path, reports: &[CycleReport]) -> Result<()> {
 /// row that does not hold as many values as the header or a value that is
 /// not a number, is refused with the file and line named (never quoted).
 pub fn read_reports(path: &Path) -> Result<Vec<Reading>> {
+    let size = std::fs::metadata(path)
+        .with_context(|| format!("reading {}", path.display()))?
+        .len();
+    if size > REPORTS_FILE_MAX_BYTES {
+        bail!(
+            "{}: {size} bytes, more than the {} MB a record's reports take: refused, not read",
+            path.display(),
+            REPORTS_FILE_MAX_BYTES >> 20
+        );
+    }
     let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
     let mut lines = text.lines();
     let header: Vec<&str> = lines.next().unwrap_or("").split(',').map(str::trim).collect();
@@ -225,14 +254,21 @@ impl Commissioned {
         let mut extractor = None;
         let mut baselines = Vec::new();
         for point in &points {
-            let b = match &point.reports {
-                Some(path) => Baseline::of(point.supply_bar, &read_reports(path)?),
+            // A point's reports, unless they hold no characteristic twice
+            // (every cycle longer than the board reads, say): then its
+            // captures, as a version-1 record's.
+            let from_reports = match &point.reports {
+                Some(path) => Some(Baseline::of(point.supply_bar, &read_reports(path)?)).filter(Baseline::is_read),
+                None => None,
+            };
+            let b = match from_reports {
+                Some(b) => b,
                 None => {
                     let ex = extractor.get_or_insert_with(|| extractor_for(config));
                     Baseline::of_captures(point.supply_bar, &captured(ex, point)?)
                 }
             };
-            if b.cycles.iter().all(|&n| n < 2) {
+            if !b.is_read() {
                 bail!(
                     "{}: the record's cycles at {} bar give no chamber characteristic twice: nothing to read a drift against",
                     dir.display(),
@@ -307,7 +343,7 @@ impl Commissioned {
 }
 
 /// The readings of a point's captures, each trace's steady cycles.
-fn captured(extractor: &Extractor, point: &Point) -> Result<Vec<Reading>> {
+pub fn captured(extractor: &Extractor, point: &Point) -> Result<Vec<Reading>> {
     let mut out = Vec::new();
     for path in &point.traces {
         let (trace, _, _) =

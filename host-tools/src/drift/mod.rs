@@ -39,8 +39,8 @@ use crate::diagnose::features::{feature_name, ESTIMATOR_CHARACTERISTICS};
 
 pub mod baseline;
 pub use baseline::{
-    read_reports, readings_of, report_reading, steady_reports, write_reports, Baseline, Commissioned, Reading, Source,
-    REPORTS_FILE,
+    read_reports, readings_of, report_reading, steady_readings, steady_reports, write_reports, Baseline, Commissioned,
+    Reading, Source, REPORTS_FILE,
 };
 
 /// Characteristics read, in [`ESTIMATOR_CHARACTERISTICS`] order.

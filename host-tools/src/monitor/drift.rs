@@ -6,11 +6,12 @@
 
 use std::sync::Arc;
 
-use hammer_app::chambers::LONGEST_CYCLE_S;
+use hammer_app::chambers::longest_cycle_s;
 use hammer_estimator::{Config, CycleReport};
 use hammer_wire::DeviceMsg;
 
 use super::event::{Event, Stamped};
+use crate::drift::baseline::CAPTURE_OFFSET_BOUND;
 use crate::drift::{report_reading, Commissioned, DriftArgs, Source, Window};
 
 pub struct Watch {
@@ -76,17 +77,21 @@ impl Watch {
                 .into_iter()
                 .collect();
         }
+        // A window's worth is kept and said once; the run may go on.
+        if self.unread_periods.len() == self.k {
+            return vec![];
+        }
         self.unread_periods
             .push(if r.is_valid() { f64::from(r.period_s) } else { f64::NAN });
-        if self.unread_periods.len() != self.k {
+        if self.unread_periods.len() < self.k {
             return vec![];
         }
         let periods: Vec<f64> = self.unread_periods.iter().copied().filter(|p| p.is_finite()).collect();
         let period_s = crate::drift::median(&periods);
-        let longest_s = f64::from(LONGEST_CYCLE_S);
+        let longest_s = self.config.as_ref().map_or(f64::NAN, |c| f64::from(longest_cycle_s(c)));
         let why = if period_s > longest_s {
             format!(
-                "their cycles last {:.1} ms, longer than the {:.0} ms the board reads: the hammer's period itself has changed since commissioning (at {} bar)",
+                "their cycles last {:.1} ms, longer than the {:.1} ms the board reads: the hammer's period itself has changed since commissioning (at {} bar)",
                 period_s * 1e3,
                 longest_s * 1e3,
                 window.baseline().supply_bar
@@ -127,7 +132,13 @@ impl Watch {
             }
             Ok((warning, baseline)) => {
                 self.refused = None;
-                if self.window.as_ref().is_none_or(|w| w.baseline() != &baseline) {
+                // The same point keeps its window (compared by pressure: a median
+                // may be NaN, which equals nothing).
+                if self
+                    .window
+                    .as_ref()
+                    .is_none_or(|w| w.baseline().supply_bar != baseline.supply_bar)
+                {
                     out.extend(warning.map(Event::Note));
                     out.push(Event::Note(format!(
                         "drift: reading every report against {} at {} bar ({} cycles a reading)",
@@ -137,9 +148,10 @@ impl Watch {
                     )));
                     if baseline.source == Source::Captures {
                         out.push(Event::Note(format!(
-                            "drift: {} at {} bar holds raw captures and no reports (made before the board read its chambers): read by the host, they stand up to 0.06 ms off the board's reading of the front feed, which every drift's uncertainty includes; commission again to read without it",
+                            "drift: {} at {} bar is read from its raw captures (the record predates the board's reading of its chambers, or its reports carry none): read by the host, they stand up to {:.3} ms off the board's reading of the front feed, which every drift's uncertainty includes; commission again to read without it",
                             self.reference.dir.display(),
-                            baseline.supply_bar
+                            baseline.supply_bar,
+                            CAPTURE_OFFSET_BOUND[0] * 1e3
                         )));
                     }
                     self.window = Some(Window::new(baseline, self.k, self.confirm));
@@ -242,8 +254,21 @@ mod tests {
             panic!("{out:?}")
         };
         assert!(
-            n.contains("last 4 reports") && n.contains("50.7 ms, longer than the 50 ms"),
+            n.contains("last 4 reports") && n.contains("50.7 ms, longer than the 50.0 ms"),
             "{n}"
         );
+        // The run goes on, said once, and a reconfiguration keeps the window.
+        for seq in 13..=30 {
+            let DeviceMsg::Report(mut r) = report(seq, 2.5e-3, 0.0507) else {
+                unreachable!()
+            };
+            r.mark_chambers_unread();
+            assert!(w.see(&stamped(DeviceMsg::Report(r))).is_empty());
+        }
+        assert_eq!(w.unread_periods.len(), 4);
+        // A reconfiguration (a reconnect, a tare) keeps the same point's
+        // window, though its areas' medians are NaN.
+        let again = w.see(&stamped(DeviceMsg::Config(DeviceConfig::from(&Config::default()))));
+        assert!(again.is_empty(), "{again:?}");
     }
 }
