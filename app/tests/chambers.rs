@@ -220,3 +220,31 @@ fn a_cycle_longer_than_the_window_is_unread() {
     };
     assert!(longest_cycle_s(&fast) < 0.5 * longest, "{}", longest_cycle_s(&fast));
 }
+
+/// An estimator renewed in place (`Estimator::renew`, what a board's
+/// `SetConfig` and tare do) is a new one: after a run under another
+/// configuration it reports the same bytes, and counts the same, as one
+/// built for the new configuration.
+#[test]
+fn an_estimator_renewed_in_place_is_a_new_one() {
+    let (codes, cfg) = hammer(5.0, 0.4);
+    let other = Config {
+        blank_after_s: 1.5 * cfg.blank_after_s,
+        supply_pressure_pa: 0.8 * cfg.supply_pressure_pa,
+        ..cfg
+    };
+    let mut renewed = Estimator::new(other).unwrap();
+    let mut before = 0;
+    renewed.push_block(&codes, |_| before += 1);
+    assert!(before > 3, "the run before the renewal closed {before} cycles");
+    renewed.renew(cfg).unwrap();
+    let mut fresh = Estimator::new(cfg).unwrap();
+    let (mut a, mut b) = (vec![], vec![]);
+    fresh.push_block(&codes, |r| a.push(r));
+    renewed.push_block(&codes, |r| b.push(r));
+    assert!(a.len() > 3);
+    assert_eq!(a, b);
+    assert_eq!(fresh.counters(), renewed.counters());
+    assert_eq!(fresh.next_index(), renewed.next_index());
+    assert_eq!(fresh.wear_state(), renewed.wear_state());
+}
