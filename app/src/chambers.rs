@@ -81,7 +81,7 @@ pub const READER_BLOCK: usize = 4 * BLOCK_SAMPLES;
 /// task reads the ADC's samples straight into a free one (no copy: the
 /// sampling loop pays nothing a set for the reader); with none free, into
 /// its own, and the reader sees a gap. A slower core keeps more: the
-/// emulated board, paced at 125 M instructions a second, keeps 16 (a
+/// emulated board, paced at 125 M instructions a second, keeps 20 (a
 /// faulty hammer's 48.9 ms cycles filled 13 there).
 pub const READER_BLOCKS: usize = 13;
 /// Messages waiting for the reader: reports, alarms, a configuration.

