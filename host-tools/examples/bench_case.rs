@@ -39,6 +39,16 @@ fn main() {
                 1e3 * t
             );
         }
+        for p in &c.physical_sizes {
+            println!(
+                "  {} as {}: the verdict's model {:.4e} against the hammer's {:.4e} ({:.1} % off)",
+                p.effect,
+                p.quantity,
+                p.model,
+                p.truth,
+                100.0 * p.error
+            );
+        }
         if let Some(e) = c.port_shift_error {
             println!(
                 "  the named delay shifts the model's front port within {:.1} % of that",

@@ -9,21 +9,23 @@ use serde::{Deserialize, Serialize};
 
 use super::effects::diagnosis;
 use super::engine::{diagnose_with, MeasuredInput, Options};
-use super::model::{Builtin, Plant, SETTLE_S};
-use super::valve_timing::{front_port_opening_of_model, front_port_opening_of_variant};
+use super::model::{Builtin, Plant};
 use hammer_sim::effects::{EffectSlot, Effects, ValveDelay, EFFECT_NAMES};
 use hammer_sim::sensor::Rng;
 use hammer_sim::simulate::simulate;
 use hammer_sim::SimConfig;
 use hammer_trace::trace::Trace;
 use hammer_variants::{generate, Structure, VariantParams};
+use physical::PointTruth;
 use std::sync::Arc;
 
 mod ceiling;
 mod outcome;
+mod physical;
 mod summary;
 pub use ceiling::{model_alone_ceiling, FormSpan, ModelAloneCeiling};
 pub use outcome::{Named, Outcome};
+pub use physical::{PhysicalSize, TrueSizes};
 pub use summary::{above_floor, render, summarize, BenchSummary};
 
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -254,6 +256,11 @@ pub struct CaseResult {
     /// delay's model-free evidence, can give of τ on this hammer's law.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub true_port_delay_s: Option<f64>,
+    /// A hidden heat exchange's and leakage's sizes in physical terms (the
+    /// heat across the walls and the air leaked a cycle, the mean over the
+    /// points).
+    #[serde(default)]
+    pub true_sizes: TrueSizes,
     pub score: f64,
     pub energy_error_before: f64,
     pub energy_error_after: f64,
@@ -295,6 +302,11 @@ pub struct CaseResult {
     /// the points) relative to the hammer's true shift, |error|.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub port_shift_error: Option<f64>,
+    /// A named (or grouped) heat exchange's and leakage's sizes in
+    /// physical terms, the verdict's model against the truth
+    /// ([`physical`]).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub physical_sizes: Vec<PhysicalSize>,
     /// With a hidden friction named: whether the verdict's friction law
     /// lies within U of the force balance's reading at every operating
     /// point, the held-out one included.
@@ -357,25 +369,6 @@ fn judge(r: &super::engine::Report, hidden: &Hidden, truth: &Effects, points: &[
     }
 }
 
-/// How much later the diagnosis model's front port opens after the impact
-/// with a valve delay of `tau_s` than without, the mean over `points`: a
-/// named delay's size in the physical terms the truth has.
-fn model_port_shift_s(base: &SimConfig, tau_s: f64, points: &[f64]) -> Option<f64> {
-    let opening = |bar: f64, tau: Option<f64>| {
-        let mut c = base.clone();
-        c.supply.pressure_bar = bar;
-        c.solver.duration_s = 1.0;
-        c.effects.valve_delay = tau.map(|tau_s| ValveDelay { tau_s });
-        let run = hammer_sim::simulate_truth(&c).ok()?;
-        front_port_opening_of_model(&run, &c, SETTLE_S)
-    };
-    let shifts: Vec<f64> = points
-        .iter()
-        .map(|&bar| Some(opening(bar, Some(tau_s))? - opening(bar, None)?))
-        .collect::<Option<_>>()?;
-    (!shifts.is_empty()).then(|| shifts.iter().sum::<f64>() / shifts.len() as f64)
-}
-
 /// Whether the verdict's friction law lies within U of the force balance's
 /// friction at every point; `None` without a friction named.
 fn friction_within_u(r: &super::engine::Report, params: Option<&serde_json::Value>) -> Option<bool> {
@@ -406,6 +399,8 @@ pub struct DrawnCase {
     /// the impact than in the same hammer without it, the mean over the
     /// points (the truth of the delay's size in physical terms).
     pub true_port_delay_s: Option<f64>,
+    /// The hidden heat exchange's and leakage's sizes in physical terms.
+    pub true_sizes: TrueSizes,
 }
 
 /// Draws case `index` of the plan and records its traces.
@@ -421,13 +416,14 @@ pub fn draw_case(opts: &BenchOptions, index: usize) -> anyhow::Result<DrawnCase>
     let mut inputs = Vec::new();
     let mut references = Vec::new();
     let last = opts.points.len().saturating_sub(1);
-    // A trace, and its front port's true opening after the impact.
-    let record = |effects: &Effects, bar: f64, seed: u64| -> anyhow::Result<(Trace, Option<f64>)> {
+    // A trace, and its truth in physical terms (the front port's opening
+    // after the impact, the heat and the leak a cycle).
+    let record = |effects: &Effects, bar: f64, seed: u64| -> anyhow::Result<(Trace, PointTruth)> {
         Ok(match &structural {
             Some((structure, params)) => {
                 let g = generate(params, *structure, effects, bar, opts.duration_s, seed);
-                let opening = front_port_opening_of_variant(&g, SETTLE_S);
-                (g.trace, opening)
+                let truth = PointTruth::of_variant(&g);
+                (g.trace, truth)
             }
             None => {
                 let mut c = gen.clone();
@@ -435,16 +431,19 @@ pub fn draw_case(opts: &BenchOptions, index: usize) -> anyhow::Result<DrawnCase>
                 c.supply.pressure_bar = bar;
                 c.seed = seed;
                 let sim = simulate(&c)?;
-                let opening = front_port_opening_of_model(&sim.run, &c, SETTLE_S);
-                (sim.trace(), opening)
+                let truth = PointTruth::of_model(&sim.run, &c);
+                (sim.trace(), truth)
             }
         })
     };
+    let mut point_truths = Vec::new();
     let delayed = hidden.names().iter().any(|n| n == ValveDelay::NAME);
     let mut port_delays = Vec::new();
     for (k, &bar) in opts.points.iter().enumerate() {
         let seed = rng.next_u64();
-        let (trace, opening) = record(&gen.effects, bar, seed)?;
+        let (trace, truth) = record(&gen.effects, bar, seed)?;
+        let opening = truth.port_opening_s;
+        point_truths.push(truth);
         inputs.push(MeasuredInput {
             label: format!("case {index} at {bar} bar"),
             supply_bar: bar,
@@ -455,8 +454,8 @@ pub fn draw_case(opts: &BenchOptions, index: usize) -> anyhow::Result<DrawnCase>
         if opts.reference {
             // Its own noise, without drawing from the case's generator:
             // the cases stay those of the benchmark without references.
-            let (trace, opening) = record(&Effects::default(), bar, seed ^ 0x5EED_5EED_5EED_5EED)?;
-            sound_opening = opening;
+            let (trace, truth) = record(&Effects::default(), bar, seed ^ 0x5EED_5EED_5EED_5EED)?;
+            sound_opening = truth.port_opening_s;
             references.push(MeasuredInput {
                 label: format!("case {index} reference at {bar} bar"),
                 supply_bar: bar,
@@ -470,7 +469,7 @@ pub fn draw_case(opts: &BenchOptions, index: usize) -> anyhow::Result<DrawnCase>
             let mut without = gen.effects.clone();
             without.valve_delay = None;
             if !(opts.reference && without.active().is_empty()) {
-                sound_opening = record(&without, bar, seed)?.1;
+                sound_opening = record(&without, bar, seed)?.1.port_opening_s;
             }
             port_delays.push(opening.zip(sound_opening).map(|(d, s)| d - s));
         }
@@ -481,6 +480,7 @@ pub fn draw_case(opts: &BenchOptions, index: usize) -> anyhow::Result<DrawnCase>
         .collect::<Option<Vec<f64>>>()
         .filter(|v| !v.is_empty())
         .map(|v| v.iter().sum::<f64>() / v.len() as f64);
+    let true_sizes = TrueSizes::of(&point_truths, &hidden.names());
     Ok(DrawnCase {
         hidden,
         gen,
@@ -488,6 +488,7 @@ pub fn draw_case(opts: &BenchOptions, index: usize) -> anyhow::Result<DrawnCase>
         inputs,
         references,
         true_port_delay_s,
+        true_sizes,
     })
 }
 
@@ -515,6 +516,7 @@ pub fn run_case_with(
         inputs,
         references,
         true_port_delay_s,
+        true_sizes,
     } = draw_case(opts, index)?;
     let base = SimConfig::default();
     let builtin = plant.is_none();
@@ -530,12 +532,18 @@ pub fn run_case_with(
     let friction = hammer_sim::effects::CoulombFriction::NAME;
     let friction_within_u =
         friction_within_u(r, j.named.params.get(friction)).filter(|_| hidden.names().iter().any(|n| n == friction));
-    // The port's shift is read off the built-in model at the named delay.
+    // Physical sizes are read off the verdict's built-in model.
+    let verdict_model = physical::verdict_config(&base, r);
     let port_shift_error = true_port_delay_s.filter(|_| builtin).and_then(|truth| {
-        let named = j.named.params.get(ValveDelay::NAME)?;
+        let named = physical::named_params(r, ValveDelay::NAME)?;
         let tau = named.get("tau_s")?.as_f64()?;
-        Some((model_port_shift_s(&base, tau, &opts.points)? - truth).abs() / truth)
+        Some((physical::model_port_shift_s(&verdict_model, tau, &opts.points)? - truth).abs() / truth)
     });
+    let physical_sizes = if builtin {
+        physical::heat_and_leak(&verdict_model, r, &true_sizes, &opts.points)
+    } else {
+        Vec::new()
+    };
     let alone = if references.is_empty() || !opts.alone_beside {
         None
     } else {
@@ -571,6 +579,7 @@ pub fn run_case_with(
         correct: j.correct,
         param_errors: j.param_errors,
         true_port_delay_s,
+        true_sizes,
         score: r.verdict.score,
         energy_error_before: s.impact_energy_error_before,
         energy_error_after: s.impact_energy_error_after,
@@ -589,6 +598,7 @@ pub fn run_case_with(
         friction_within_u,
         confirmation: r.verdict.confirmation.clone(),
         port_shift_error,
+        physical_sizes,
         alone,
         report: Some(out.report),
     })

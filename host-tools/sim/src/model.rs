@@ -30,7 +30,9 @@ pub const W_GRAVITY: usize = 13; // ∫ m·g·sinθ·v dt, J
 pub const M_IN: usize = 14; // air drawn from the source, kg
 pub const M_OUT: usize = 15; // air vented to atmosphere, kg
 pub const Q_WALL: usize = 16; // ∫ heat from the walls into both chambers' air dt, J
-pub const N: usize = 17;
+pub const Q_EXCHANGED: usize = 17; // ∫ (|q_wall,rear| + |q_wall,front|) dt: heat across the walls either way, J
+pub const M_LEAKED: usize = 18; // ∫ (|q_piston gap| + |q_rod guide|) dt: air through the leak paths, kg
+pub const N: usize = 19;
 pub const N_DYN: usize = 10;
 
 /// Forces on the piston at one instant.
@@ -323,11 +325,13 @@ impl OdeSystem<N> for HammerModel {
         transfer(qo1, t1, ta, &mut rear, &mut atm);
         transfer(qo2, t2, ta, &mut front, &mut atm);
 
+        let mut leaked = 0.0;
         if let Some((gap, ecc, guide)) = self.leak {
             let q12 = annular_leak_mass_flow(self.bore_m, gap, self.piston_length_m, ecc, p1, t1, p2, t2);
             let q2a = annular_leak_mass_flow(self.rod_m, gap, guide, ecc, p2, t2, P_ATM_PA, ta);
             transfer(q12, t1, t2, &mut rear, &mut front);
             transfer(q2a, t2, ta, &mut front, &mut atm);
+            leaked = q12.abs() + q2a.abs();
         }
 
         let mut q1 = 0.0;
@@ -394,5 +398,7 @@ impl OdeSystem<N> for HammerModel {
         dy[M_IN] = q_src;
         dy[M_OUT] = atm.dm;
         dy[Q_WALL] = q1 + q2;
+        dy[Q_EXCHANGED] = q1.abs() + q2.abs();
+        dy[M_LEAKED] = leaked;
     }
 }

@@ -199,6 +199,18 @@ pub struct CycleTruth {
     /// grow steadily with h (examples/heat_equivalent.rs).
     #[serde(default)]
     pub wall_heat_j: f64,
+    /// Heat that crossed the chambers' walls over the cycle, either way:
+    /// heat exchange's size as a heat quantity. Unlike the net
+    /// `wall_heat_j` it grows with the walls' film coefficient, and it is
+    /// defined for any law of the walls, so a named heat exchange is
+    /// scored against the hammer's own (absent in older sidecars).
+    #[serde(default)]
+    pub heat_exchanged_j: f64,
+    /// Air that went through the leak paths over the cycle (past the
+    /// piston either way, and out past the rod): leakage's size as a mass,
+    /// whatever the gap's law (absent in older sidecars).
+    #[serde(default)]
+    pub leaked_kg: f64,
 }
 
 /// Air mass bookkeeping over the run.
@@ -401,6 +413,8 @@ impl CycleTracker {
                 peak_front_pa: self.peak_front_pa,
                 air_drawn_kg: d(model::M_IN),
                 wall_heat_j: d(model::Q_WALL),
+                heat_exchanged_j: d(model::Q_EXCHANGED),
+                leaked_kg: d(model::M_LEAKED),
             });
         }
         self.prev_impact = Some(*imp);

@@ -5,7 +5,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::plant::{Plant, N, QW, V, WC, WF, WP, X, XT};
+use crate::plant::{Plant, ML, N, QW, QX, V, WC, WF, WP, X, XT};
 use crate::sensors::{FrontEndState, Noise};
 use crate::structure::AnvilLaw;
 
@@ -27,6 +27,14 @@ pub struct VariantCycle {
     /// the air lost it); absent in truth files written before it was kept.
     #[serde(default)]
     pub wall_heat_j: f64,
+    /// Heat that crossed the walls over the cycle, either way: heat
+    /// exchange's size, as the built-in model's truth has it.
+    #[serde(default)]
+    pub heat_exchanged_j: f64,
+    /// Air through the leak paths over the cycle: leakage's size, as the
+    /// built-in model's truth has it.
+    #[serde(default)]
+    pub leaked_kg: f64,
 }
 
 /// Samples on the output grid plus the truth.
@@ -107,8 +115,9 @@ pub struct Stepper {
     signs: Noise,
     offset: f64,
     in_contact: bool,
-    /// (t, friction work and wall heat then) at the last impact.
-    last_impact: Option<(f64, f64, f64)>,
+    /// (t, then friction work, wall heat, heat exchanged and air leaked) at
+    /// the last impact.
+    last_impact: Option<(f64, [f64; 4])>,
     stroke_start_x: Option<f64>,
     stroke: Phase,
     backhaul: Phase,
@@ -264,7 +273,7 @@ impl Stepper {
                 self.last_period_s = t_imp - t0;
             }
             self.last_impact_tv = Some((t_imp, v_imp));
-            if let (Some((t_last, w_last, q_last)), Some(x_turn)) = (self.last_impact, self.stroke_start_x) {
+            if let (Some((t_last, last)), Some(x_turn)) = (self.last_impact, self.stroke_start_x) {
                 let period = t_imp - t_last;
                 self.cycles.push(VariantCycle {
                     t_impact_s: t_imp,
@@ -275,11 +284,13 @@ impl Stepper {
                     stroke_m: anvil(y0) - x_turn,
                     friction_stroke_n: self.stroke.mean(),
                     friction_backhaul_n: self.backhaul.mean(),
-                    friction_work_j: y[WF] - w_last,
-                    wall_heat_j: y[QW] - q_last,
+                    friction_work_j: y[WF] - last[0],
+                    wall_heat_j: y[QW] - last[1],
+                    heat_exchanged_j: y[QX] - last[2],
+                    leaked_kg: y[ML] - last[3],
                 });
             }
-            self.last_impact = Some((t_imp, y[WF], y[QW]));
+            self.last_impact = Some((t_imp, [y[WF], y[QW], y[QX], y[ML]]));
             self.stroke_start_x = None;
             self.in_stroke = false;
             self.stroke = Phase::default();

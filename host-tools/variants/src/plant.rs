@@ -35,7 +35,12 @@ pub const WP: usize = 14;
 pub const WC: usize = 15;
 /// Heat the walls gave both chambers' air, J.
 pub const QW: usize = 16;
-pub const N: usize = 17;
+/// Heat that crossed the walls either way (|rear| + |front|), J.
+pub const QX: usize = 17;
+/// Air through the leak paths, past the piston either way and out past
+/// the rod, kg.
+pub const ML: usize = 18;
+pub const N: usize = 19;
 
 /// Collar stiffness that holds the tool against the feed force.
 const COLLAR_N_PER_M: f64 = 1e8;
@@ -288,6 +293,8 @@ impl Plant {
             qw2 = h.h_w_per_m2_k * wall(v2, self.a2, PI * (p.bore_m + p.rod_m)) * (ta - t2);
         }
         dy[QW] = qw1 + qw2;
+        dy[QX] = qw1.abs() + qw2.abs();
+        dy[ML] = q12.abs() + q2a.abs();
         let (dv1, dv2) = (self.a1 * v, -self.a2 * v);
         dy[M1] = dm1;
         dy[M2] = dm2;

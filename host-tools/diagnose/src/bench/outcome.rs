@@ -164,6 +164,11 @@ pub struct Tally {
     /// 15 % of the hammer's true shift: (within, all).
     #[serde(default)]
     pub port_shift_within_15pct: (usize, usize),
+    /// Named or grouped heat exchanges and leaks whose physical size in the
+    /// verdict's model lies within 15 % of the hammer's, by effect:
+    /// (within, all).
+    #[serde(default)]
+    pub physical_within_15pct: BTreeMap<String, (usize, usize)>,
     /// The same counts against the model alone (with references only).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub alone: Option<Box<Tally>>,
@@ -181,13 +186,21 @@ pub struct Tally {
 /// the record, in points of %: the bound.
 pub const WORSE_BY_POINTS: f64 = 0.5;
 
+/// How close a physical size must come to the truth's: the bound.
+pub const PHYSICAL_WITHIN: f64 = 0.15;
+
 impl Tally {
     pub fn of(cases: &[super::CaseResult]) -> Self {
         let mut t = Self::count(cases.iter().map(|c| (&c.hidden, c.outcome)));
         for c in cases {
             if let Some(e) = c.port_shift_error {
-                t.port_shift_within_15pct.0 += usize::from(e <= 0.15);
+                t.port_shift_within_15pct.0 += usize::from(e <= PHYSICAL_WITHIN);
                 t.port_shift_within_15pct.1 += 1;
+            }
+            for p in &c.physical_sizes {
+                let e = t.physical_within_15pct.entry(p.effect.clone()).or_default();
+                e.0 += usize::from(p.error <= PHYSICAL_WITHIN);
+                e.1 += 1;
             }
             if let Some(w) = c.friction_within_u {
                 t.friction_within_u.0 += usize::from(w);
@@ -272,7 +285,28 @@ impl Tally {
         if n > 0 {
             let _ = writeln!(
                 out,
-                "  valve delays named, sized in physical terms (the model's front port shift at the named τ against the hammer's true shift): within 15 % in {w}/{n}"
+                "  valve delays named or grouped, sized in physical terms (the verdict's model's front port shift at the named τ against the hammer's true shift): within 15 % in {w}/{n}"
+            );
+        }
+        for (effect, (w, n)) in &self.physical_within_15pct {
+            let what = match effect.as_str() {
+                "heat_transfer" => "heat exchanges named or grouped, sized as the heat across the walls a cycle",
+                _ => "leaks named or grouped, sized as the air leaked a cycle",
+            };
+            let _ = writeln!(
+                out,
+                "  {what} (the verdict's model at the named size against the hammer's): within 15 % in {w}/{n}"
+            );
+        }
+        let (mut w, mut n) = self.port_shift_within_15pct;
+        for (a, b) in self.physical_within_15pct.values() {
+            (w, n) = (w + a, n + b);
+        }
+        if n > 0 {
+            let _ = writeln!(
+                out,
+                "  physical sizes within 15 % over the three: {w}/{n} ({:.1} %)",
+                100.0 * w as f64 / n as f64
             );
         }
         if let Some(a) = &self.alone {
