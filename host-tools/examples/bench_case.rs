@@ -2,7 +2,7 @@
 //! effect's score and explained share, the model-form factors, the
 //! recalibration and the remainder. For finding why a case is misnamed.
 //!
-//! `cargo run --release -p hammer-host --example bench_case -- [--structural] [--reference] SEED INDEX...`
+//! `cargo run --release -p hammer-host --example bench_case -- [--structural] [--reference] [--oracle] [--jitter J] SEED INDEX...`
 
 use hammer_host::diagnose::bench::{run_case, BenchOptions};
 use hammer_host::diagnose::engine::Options;
@@ -11,9 +11,22 @@ fn main() {
     let mut args: Vec<String> = std::env::args().skip(1).collect();
     let structural = args.iter().any(|a| a == "--structural");
     let reference = args.iter().any(|a| a == "--reference");
-    args.retain(|a| a != "--structural" && a != "--reference");
+    let oracle = args.iter().any(|a| a == "--oracle");
+    args.retain(|a| a != "--structural" && a != "--reference" && a != "--oracle");
+    let jitter = match args.iter().position(|a| a == "--jitter") {
+        Some(i) => {
+            let j = args.get(i + 1).and_then(|s| s.parse::<f64>().ok());
+            args.drain(i..(i + 2).min(args.len()));
+            j
+        }
+        None => None,
+    };
     let seed: u64 = args.first().and_then(|s| s.parse().ok()).unwrap_or(7);
-    let bench = BenchOptions::of(seed, structural, reference);
+    let mut bench = BenchOptions::of(seed, structural, reference);
+    bench.oracle = oracle;
+    if let Some(j) = jitter {
+        bench.jitter = j;
+    }
     let diag = Options {
         figures: false,
         ..Options::default()
@@ -37,6 +50,37 @@ fn main() {
             println!(
                 "  the front port truly opens {:+.3} ms later than without the delay",
                 1e3 * t
+            );
+        }
+        for row in &r.force_balance {
+            for q in row.quantities.iter().filter(|q| q.key.ends_with(".friction_n")) {
+                println!(
+                    "  force balance at {} bar ({}): friction {:.3} N ± {:.3} N (expanded)",
+                    row.supply_bar,
+                    if row.fit_point { "fitted" } else { "held out" },
+                    q.value,
+                    q.expanded_u
+                );
+            }
+        }
+        if let Some(o) = &c.oracle {
+            println!(
+                "  oracle: the truth ({}) adds {:.1} and explains {:.1} % of χ² {:.1} without any effect: {}",
+                o.effect,
+                o.score,
+                100.0 * o.explained_fraction,
+                o.chi2_without,
+                if o.passes { "passes" } else { "fails" }
+            );
+        }
+        if let Some(c) = &c.confirmation {
+            println!(
+                "  confirm: {} adds {:.1}, explains {:.1} % of χ² {:.1}: {}",
+                c.effect,
+                c.score,
+                100.0 * c.explained_fraction,
+                c.chi2_without,
+                if c.kept { "kept" } else { "dropped" }
             );
         }
         for p in &c.physical_sizes {

@@ -56,6 +56,11 @@ pub struct BenchOptions {
     /// identity (`report.json`'s `model`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub model: Option<serde_json::Value>,
+    /// Each single's hammer of the diagnosis' own form also checked by the
+    /// oracle ([`super::pipeline::oracle`]): would its truth pass the rule?
+    /// Two recalibrations more a case.
+    #[serde(default)]
+    pub oracle: bool,
 }
 
 impl Default for BenchOptions {
@@ -70,6 +75,7 @@ impl Default for BenchOptions {
             reference: false,
             alone_beside: false,
             model: None,
+            oracle: false,
         }
     }
 }
@@ -316,6 +322,9 @@ pub struct CaseResult {
     /// (against the model alone), kept or dropped.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub confirmation: Option<super::report::Confirmation>,
+    /// With `oracle`: whether the hammer's truth passes the rule.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub oracle: Option<super::report::OracleCheck>,
     /// With references: the same case diagnosed against the model alone,
     /// side by side (a record must add evidence, never subtract it).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -524,6 +533,22 @@ pub fn run_case_with(
         Some(f) => f(structural.as_ref().map(|(s, _)| s)),
         None => Arc::new(Builtin::new(base.clone())),
     };
+    // The oracle knows the truth only where it is the model's own form.
+    let oracle_for = (opts.oracle && structural.is_none() && builtin).then(|| super::options::Oracle {
+        effects: gen.effects.clone(),
+        nuisance: super::model::NUISANCE.iter().map(|(_, f)| *f(&mut gen.clone())).collect(),
+    });
+    let with_oracle;
+    let diag = match oracle_for {
+        Some(o) => {
+            with_oracle = Options {
+                oracle: Some(o),
+                ..diag.clone()
+            };
+            &with_oracle
+        }
+        None => diag,
+    };
     let t = std::time::Instant::now();
     let out = diagnose_with(&inputs, &references, &base, plant.clone(), diag, &|_, _, _| {})?;
     let diagnose_s = t.elapsed().as_secs_f64();
@@ -597,6 +622,7 @@ pub fn run_case_with(
         front_dead_volume_error,
         friction_within_u,
         confirmation: r.verdict.confirmation.clone(),
+        oracle: r.oracle.clone(),
         port_shift_error,
         physical_sizes,
         alone,

@@ -18,7 +18,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use super::features::{pressure_floor, Extractor};
 pub use super::gap::PointWaves;
 use super::model::{Builtin, ModelRunner, Plant};
-use super::pipeline::{confirm, floor, force_balance, group, held_out, nominal, rank, reference, where_};
+use super::pipeline::{confirm, floor, force_balance, group, held_out, nominal, oracle, rank, reference, where_};
 use hammer_sim::effects::EFFECT_NAMES;
 use hammer_sim::SimConfig;
 use std::sync::Arc;
@@ -28,7 +28,8 @@ pub use super::input::{DiagnoseError, MeasuredInput, Progress};
 pub use super::options::{Floors, Options};
 pub use super::report::{
     Alternative, Confirmation, DeadVolume, EffectResult, FittedParam, ForceBalancePoint, ForceBalanceQuantity,
-    InputInfo, ModelForm, ModelFreeStat, NominalMove, PointShrink, Recalibration, Remainder, Report, Shrink, Verdict,
+    InputInfo, ModelForm, ModelFreeStat, NominalMove, OracleCheck, PointShrink, Recalibration, Remainder, Report, Shrink,
+    Verdict,
     WhereCell,
 };
 
@@ -141,6 +142,7 @@ pub fn diagnose_with(
     let form: Vec<f64> = model_form.iter().map(|m| m.factor).collect();
     let (confirmation, reuse) = confirm::confirm(&fs, &mut ranking, &form, &fit_opts).unzip();
     step("confirm");
+    let oracle = fit_opts.oracle.as_ref().and_then(|o| oracle::check(&fs, &form, o, &fit_opts));
     let detection_floors = floor::floors(&fs, &ranking, &fit_opts);
     step("detection floors");
 
@@ -178,6 +180,7 @@ pub fn diagnose_with(
             effects: ranking.effects,
             pairs: ranking.pairs,
             recalibration,
+            oracle,
             remainder: located.remainder,
             model_form,
             model_free: fs.model_free_stats(),

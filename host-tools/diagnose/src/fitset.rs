@@ -288,13 +288,7 @@ impl<'a> FitSet<'a> {
     ) -> Option<Recalibrated> {
         let k = self.runner.nuisance.len();
         let h = self.runner.prior_sds(h);
-        let runner_at = |d: &[f64]| {
-            let mut r = self.runner.clone();
-            for (i, x) in d.iter().enumerate() {
-                r.nuisance[i] *= 1.0 + h[i] * x;
-            }
-            r
-        };
+        let runner_at = |d: &[f64]| self.runner_at(&h, d);
         // One point's whitened residuals at `d`.
         let block = |d: &[f64], k: usize| -> Option<Vec<f64>> {
             self.sims.fetch_add(1, Ordering::Relaxed);
@@ -390,6 +384,16 @@ impl<'a> FitSet<'a> {
             delta,
             sd,
         })
+    }
+
+    /// The model with each nominal value moved by `d` of its prior
+    /// standard deviations (`sds`, relative).
+    pub(crate) fn runner_at(&self, sds: &[f64], d: &[f64]) -> ModelRunner {
+        let mut r = self.runner.clone();
+        for (i, x) in d.iter().enumerate() {
+            r.nuisance[i] *= 1.0 + sds[i] * x;
+        }
+        r
     }
 
     /// The recalibration's Jacobian at `delta` by forward differences of

@@ -150,6 +150,21 @@ pub struct Options {
     /// recalibrated nominal model's residual (see [`crate::report::ModelForm`]); off, the
     /// floors alone weigh them (a model whose form is the hammer's).
     pub model_form: bool,
+    /// The benchmark's hammer as it truly is (its nominal values and its
+    /// effect), for the oracle's check ([`crate::pipeline::oracle`]): never
+    /// a diagnosis' input, and never written to a report's options.
+    #[serde(skip)]
+    pub oracle: Option<Oracle>,
+}
+
+/// What only a benchmark knows of its hammer: its effects, and its nominal
+/// values in the plant's order. The oracle's check asks whether the truth
+/// itself, in the diagnosis' own model, would pass the rule that names an
+/// effect: where it does not, no reading of these features names it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Oracle {
+    pub effects: hammer_sim::effects::Effects,
+    pub nuisance: Vec<f64>,
 }
 
 impl Default for Options {
@@ -171,6 +186,7 @@ impl Default for Options {
             threads: std::thread::available_parallelism().map_or(2, |n| n.get()),
             figures: true,
             model_form: true,
+            oracle: None,
         }
     }
 }

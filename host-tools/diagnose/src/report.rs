@@ -285,6 +285,24 @@ pub struct ModelForm {
     pub factor: f64,
 }
 
+/// The oracle's check (benchmarks only, `pipeline::oracle`): the hammer's
+/// truth in the diagnosis' own model, its nominal values settled from the
+/// true ones, against the nominal values refitted without any effect,
+/// weighed and judged as the confirm stage weighs and judges.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct OracleCheck {
+    pub effect: String,
+    pub chi2_without: f64,
+    pub chi2_truth: f64,
+    /// What the true effect adds in BIC units, its parameters' price paid,
+    /// and its share of `chi2_without`.
+    pub score: f64,
+    pub explained_fraction: f64,
+    /// The truth passes the rule that names an effect: a diagnosis that
+    /// leaves it `none` missed what the features hold.
+    pub passes: bool,
+}
+
 /// One quantity of the measurement's force balance over the fit points
 /// against the nominal model's: it needs no valve, port or chamber model,
 /// so a structural difference of the model cannot fake it, and an effect
@@ -410,6 +428,10 @@ pub struct Report {
     pub verdict: Verdict,
     /// The nominal parameters as the verdict's fit left them.
     pub recalibration: Vec<Recalibration>,
+    /// A benchmark's check of its hammer's truth (never in a diagnosis of
+    /// a measurement).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub oracle: Option<OracleCheck>,
     /// The unexplained remainder, largest first.
     pub remainder: Vec<Remainder>,
     pub model_form: Vec<ModelForm>,

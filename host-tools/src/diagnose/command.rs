@@ -111,6 +111,11 @@ pub struct BenchArgs {
     /// The longest one run of the FMU may take, s.
     #[arg(long, value_name = "S", default_value_t = 60.0, requires = "model")]
     pub model_time_limit: f64,
+    /// Check each single of the model's own form against its truth: would
+    /// the hammer's true nominal values and effect, in the model, pass the
+    /// rule that names it? Where not, a `none` is the features' ceiling.
+    #[arg(long, conflicts_with_all = ["structural", "model"])]
+    pub oracle: bool,
 }
 
 /// Pairs every `--supply-bar` of the raw command line with the `--measured`
@@ -252,6 +257,7 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         // shows every case beside its diagnosis against the model alone.
         alone_beside: args.reference,
         model: None,
+        oracle: args.oracle,
     };
     let diag = Options {
         figures: false,

@@ -139,3 +139,58 @@ pub fn render(out: &mut String, c: &ModelAloneCeiling) {
         );
     }
 }
+
+/// The oracle's lines (`diagnose-bench --oracle`): of the singles whose
+/// truth was checked, how many truths pass the rule that names an effect,
+/// and of those the diagnosis left `none` or named wrong, which the
+/// features held (the truth passes: a miss) and which they did not (the
+/// truth fails too: the ceiling of these features under this rule).
+pub fn render_oracle(out: &mut String, cases: &[CaseResult]) {
+    use std::fmt::Write as _;
+    let checked: Vec<(&CaseResult, &crate::report::OracleCheck)> =
+        cases.iter().filter_map(|c| Some((c, c.oracle.as_ref()?))).collect();
+    if checked.is_empty() {
+        return;
+    }
+    let passes = checked.iter().filter(|(_, o)| o.passes).count();
+    let _ = writeln!(
+        out,
+        "\nthe oracle (each single's truth in the model, its nominal values settled from the true ones, against them refitted without any effect, by the confirm stage's rule): the truth passes in {passes} of {}",
+        checked.len()
+    );
+    let missed: Vec<_> = checked
+        .iter()
+        .filter(|(c, _)| matches!(c.outcome, super::Outcome::None | super::Outcome::Wrong))
+        .collect();
+    let line = |pass: bool| -> Vec<String> {
+        missed
+            .iter()
+            .filter(|(_, o)| o.passes == pass)
+            .map(|(c, o)| {
+                format!(
+                    "case {} {} ({}): adds {:.1}, explains {:.0} %",
+                    c.index,
+                    o.effect,
+                    c.outcome.label(),
+                    o.score,
+                    100.0 * o.explained_fraction
+                )
+            })
+            .collect()
+    };
+    let (held, ceiling) = (line(true), line(false));
+    let list = |v: &[String]| if v.is_empty() { "none".to_string() } else { v.join("; ") };
+    let _ = writeln!(
+        out,
+        "  singles left none or named wrong: {}; the truth passes (the features held it, the diagnosis missed it) in {}: {}",
+        missed.len(),
+        held.len(),
+        list(&held)
+    );
+    let _ = writeln!(
+        out,
+        "  the truth fails too (the ceiling of these features under this rule) in {}: {}",
+        ceiling.len(),
+        list(&ceiling)
+    );
+}

@@ -294,6 +294,7 @@ pub fn render(s: &BenchSummary) -> String {
     );
     s.outcomes.render(&mut out);
     floors(&mut out, s);
+    super::ceiling::render_oracle(&mut out, &s.cases);
     let _ = writeln!(
         out,
         "refitted model worse than nominal on the held-out data (a caution in the report): {} of {} cases",

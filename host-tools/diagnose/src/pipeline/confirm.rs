@@ -23,6 +23,7 @@
 use std::sync::atomic::Ordering;
 
 use super::effect_fit::{at_measured_sizes, fit_over};
+use super::joint;
 use super::rank::Ranking;
 use crate::effects::free_params;
 use crate::features::N_FEATURES;
@@ -49,6 +50,10 @@ pub(crate) fn confirm(
     if fs.against_reference || opts.nominal_uncertainty <= 0.0 {
         return None;
     }
+    // A single, or nothing: every waveform-only single re-ranked jointly.
+    if !ranking.verdict.as_ref().is_some_and(|v| v.name.contains('+')) {
+        return super::rerank::rerank(fs, ranking, form, opts);
+    }
     let verdict = ranking.verdict.clone()?;
     let names: Vec<&str> = verdict.name.split('+').collect();
     let last = *names.last()?;
@@ -74,10 +79,17 @@ pub(crate) fn confirm(
     )?;
     let refitted = refit(fs, &base, &without, &verdict, last, opts)
         .and_then(|c| fs.recalibrate(&c, h, RECALIBRATION_STEPS, opts.threads, Some(&base.delta)));
-    let with = match &refitted {
-        Some(r) if r.cost < full.cost => r,
-        _ => &full,
-    };
+    // And a third: the size and the nominal values moved together from
+    // where the nominal values went without it (`joint`): the other two
+    // move one with the other held, and at ±20 % each stops where the
+    // other was left.
+    let joint = joint::theta_of(fs, &verdict.fitted, last)
+        .and_then(|t0| joint::fit(fs, &without, last, &t0, &base.delta, opts));
+    let with = [Some(&full), refitted.as_ref(), joint.as_ref().map(|j| &j.recalibrated)]
+        .into_iter()
+        .flatten()
+        .min_by(|a, b| a.cost.total_cmp(&b.cost))
+        .unwrap_or(&full);
     let factors = form_factors(with, form);
     let (cost_without, cost_with) = (reweighed(&base, form, &factors), reweighed(with, form, &factors));
     let k = free_params(last, fs.distinct).len() as f64;
@@ -126,7 +138,7 @@ pub(crate) struct Reuse {
 /// could not take up as well as the hammer's form (a sound hammer's
 /// nominal values 20 % off gave factors of 3–9); what the best model
 /// leaves is the form alone. Without factors (`form` empty) none.
-fn form_factors(with: &Recalibrated, form: &[f64]) -> Vec<f64> {
+pub(crate) fn form_factors(with: &Recalibrated, form: &[f64]) -> Vec<f64> {
     if form.is_empty() {
         return Vec::new();
     }
@@ -136,7 +148,7 @@ fn form_factors(with: &Recalibrated, form: &[f64]) -> Vec<f64> {
 /// `rc`'s χ² (its prior's terms included) with each waveform's weight
 /// carrying `factors` instead of the fit set's `form`. Not refitted under
 /// them: both sides of the check are weighed alike.
-fn reweighed(rc: &Recalibrated, form: &[f64], factors: &[f64]) -> f64 {
+pub(crate) fn reweighed(rc: &Recalibrated, form: &[f64], factors: &[f64]) -> f64 {
     let prior: f64 = rc.delta.iter().map(|d| d * d).sum();
     let data: f64 = rc
         .residuals
@@ -151,7 +163,7 @@ fn reweighed(rc: &Recalibrated, form: &[f64], factors: &[f64]) -> f64 {
 }
 
 /// The two nominal values `rc` moved most, if beyond half a prior width.
-fn largest_moves(fs: &FitSet, rc: &Recalibrated, h: f64) -> Vec<NominalMove> {
+pub(crate) fn largest_moves(fs: &FitSet, rc: &Recalibrated, h: f64) -> Vec<NominalMove> {
     let sds = fs.runner.prior_sds(h);
     let names = fs.runner.plant.nuisance();
     let mut moves: Vec<(f64, NominalMove)> = rc

@@ -10,6 +10,8 @@
 //!    [`confirm`] (against the model alone): an effect the waveforms alone
 //!    named, checked with the nominal values refitted on the model itself;
 //!    [`floor`]: how large each unseen effect must be to be named here;
+//!    [`oracle`] (benchmarks only): whether the hammer's truth itself would
+//!    pass the confirm stage's rule;
 //! 4. [`held_out`]: the verdict's model against the held-out data → the shrink;
 //! 5. [`where_`]: the gap and its remainder by signal × stage → where to look.
 //!
@@ -22,9 +24,12 @@ pub(crate) mod floor;
 pub(crate) mod force_balance;
 pub(crate) mod group;
 pub(crate) mod held_out;
+pub(crate) mod joint;
 pub(crate) mod nominal;
+pub(crate) mod oracle;
 pub(crate) mod rank;
 pub(crate) mod reference;
+pub(crate) mod rerank;
 pub(crate) mod where_;
 
 #[cfg(test)]

@@ -390,7 +390,7 @@ fn close_call<'e>(
 }
 
 /// Whether `other` scores within [`Options::close_call_margin`] of `named`.
-fn within_close_call(named: f64, other: f64, opts: &Options) -> bool {
+pub(crate) fn within_close_call(named: f64, other: f64, opts: &Options) -> bool {
     named > 0.0 && named - other <= opts.close_call_margin * named
 }
 
@@ -399,7 +399,7 @@ fn within_close_call(named: f64, other: f64, opts: &Options) -> bool {
 /// score), a measured change rules one out, or a signature that parts
 /// (`signature_parts`: not heat exchange's exponent) stands for one and not
 /// the other.
-fn parted(a: &EffectResult, b: &EffectResult, opts: &Options) -> bool {
+pub(crate) fn parted(a: &EffectResult, b: &EffectResult, opts: &Options) -> bool {
     let in_force_balance =
         |e: &EffectResult| e.model_free_z.is_some() && diagnosis(&e.name).is_some_and(|d| !d.seen_in_chambers());
     let stands = |e: &EffectResult| {

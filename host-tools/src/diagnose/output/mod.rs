@@ -136,6 +136,7 @@ mod tests {
                 confirmation: None,
             },
             recalibration: vec![],
+            oracle: None,
             remainder: vec![],
             model_form: vec![],
             model_free: vec![],
