@@ -292,7 +292,8 @@ mod tests {
     /// A sound hammer whose valve opens 15 % less and whose front dead
     /// volume is 15 % larger than nominal (within the ±20 % the diagnosis
     /// allows): a leak fitted to it does not hold once the nominal values
-    /// are refitted on the simulator, and the verdict falls back to none.
+    /// are refitted on the simulator, nor does any other waveform-only
+    /// effect, and the verdict falls back to none.
     /// A hammer with heat exchange at the catalogue's default keeps it:
     /// the check drops what the nominal values explain, not every effect.
     #[test]
@@ -318,11 +319,12 @@ mod tests {
             c.hammer.front_dead_volume_m3 *= 1.15;
         });
         let (checked, ranking) = diagnosed(&sound, Some("leakage"));
+        // The leak forced as the ranking's single is re-ranked with every
+        // waveform-only effect (`rerank`): none holds.
         let c = checked.expect("a leak is named on the waveforms alone: checked");
-        assert_eq!(c.effect, "leakage");
         assert!(!c.kept, "{c:?}");
         assert!(ranking.verdict.is_none());
-        assert!(ranking.reason.contains("leakage did not hold"), "{}", ranking.reason);
+        assert!(ranking.reason.contains("none holds"), "{}", ranking.reason);
 
         let heat = hammer(&|c| {
             let e = hammer_sim::effects::entry("heat_transfer").unwrap();
