@@ -2,17 +2,27 @@
 //! effect's score and explained share, the model-form factors, the
 //! recalibration and the remainder. For finding why a case is misnamed.
 //!
-//! `cargo run --release -p hammer-host --example bench_case -- [--structural] [--reference] [--oracle] [--jitter J] SEED INDEX...`
+//! `cargo run --release -p hammer-host --example bench_case -- [--structural] [--reference] [--held-out] [--oracle] [--jitter J] SEED INDEX...`
+//!
+//! With `--held-out` (and `--reference`), only the held-out check of each
+//! case, with the record and without it side by side: the verdict, its
+//! sizes, the recalibration and every point's energies, for finding why
+//! the two modes' checks differ. With `--oracle`, each single's truth
+//! checked as `diagnose-bench --oracle` does.
 
-use hammer_host::diagnose::bench::{run_case, BenchOptions};
-use hammer_host::diagnose::engine::Options;
+use hammer_host::diagnose::bench::{draw_case, run_case, BenchOptions};
+use hammer_host::diagnose::engine::{diagnose_with, Options, Report};
+use hammer_host::diagnose::model::Builtin;
+use hammer_sim::SimConfig;
+use std::sync::Arc;
 
 fn main() {
     let mut args: Vec<String> = std::env::args().skip(1).collect();
     let structural = args.iter().any(|a| a == "--structural");
     let reference = args.iter().any(|a| a == "--reference");
     let oracle = args.iter().any(|a| a == "--oracle");
-    args.retain(|a| a != "--structural" && a != "--reference" && a != "--oracle");
+    let held_out = args.iter().any(|a| a == "--held-out");
+    args.retain(|a| a != "--structural" && a != "--reference" && a != "--oracle" && a != "--held-out");
     let jitter = match args.iter().position(|a| a == "--jitter") {
         Some(i) => {
             let j = args.get(i + 1).and_then(|s| s.parse::<f64>().ok());
@@ -32,6 +42,10 @@ fn main() {
         ..Options::default()
     };
     for index in args.iter().skip(1).filter_map(|s| s.parse::<usize>().ok()) {
+        if held_out {
+            held_out_side_by_side(&bench, index, &diag);
+            continue;
+        }
         let c = match run_case(&bench, index, &diag) {
             Ok(c) => c,
             Err(e) => {
@@ -173,5 +187,59 @@ fn main() {
                 p.impact_energy_fitted_j
             );
         }
+    }
+}
+
+/// Case `index` diagnosed with its records and without them, and each
+/// mode's held-out check printed.
+fn held_out_side_by_side(bench: &BenchOptions, index: usize, diag: &Options) {
+    let case = match draw_case(bench, index) {
+        Ok(c) => c,
+        Err(e) => {
+            println!("case {index}: {e}");
+            return;
+        }
+    };
+    let base = SimConfig::default();
+    println!("case {index} hidden {:?}", case.hidden);
+    for (mode, refs) in [("record", case.references.as_slice()), ("alone", &[])] {
+        let plant = Arc::new(Builtin::new(base.clone()));
+        match diagnose_with(&case.inputs, refs, &base, plant, diag, &|_, _, _| {}) {
+            Ok(out) => print_check(mode, &out.report),
+            Err(e) => println!("  {mode}: {e}"),
+        }
+    }
+}
+
+/// One mode's verdict, its sizes, its recalibration and its check.
+fn print_check(mode: &str, r: &Report) {
+    let s = &r.shrink;
+    println!(
+        "  {mode}: named {:?}, energy error after {:.2} % (recalibrated only {:.2} %)",
+        r.verdict.effects, s.impact_energy_error_after, s.impact_energy_error_recalibrated_only
+    );
+    for e in r.effects.iter().chain(&r.pairs) {
+        if r.verdict.effects.iter().any(|v| *v == e.name) || r.verdict.effects.join("+") == e.name {
+            let fitted: Vec<String> = e.fitted.iter().map(|p| format!("{}={:.4}", p.key, p.value)).collect();
+            println!("    sizes {}: {}", e.name, fitted.join(" "));
+        }
+    }
+    let moves: Vec<String> = r
+        .recalibration
+        .iter()
+        .map(|rc| format!("{} {:+.2}", rc.parameter, rc.prior_sds))
+        .collect();
+    println!("    recal (prior sds): {}", moves.join(", "));
+    for p in &s.points {
+        println!(
+            "    {} bar{}: measured {:.4} J, nominal {:.4}, recalibrated {:.4}, verdict {:.4} ({:+.2} %)",
+            p.supply_bar,
+            if p.held_out_point { " (held out)" } else { "" },
+            p.impact_energy_measured_j,
+            p.impact_energy_nominal_j,
+            p.impact_energy_recalibrated_j,
+            p.impact_energy_fitted_j,
+            100.0 * (p.impact_energy_fitted_j / p.impact_energy_measured_j - 1.0)
+        );
     }
 }

@@ -140,7 +140,7 @@ pub fn diagnose_with(
     let mut ranking = rank::rank(&fs, &fit_opts, &step);
     plant_ok(&runner)?;
     let form: Vec<f64> = model_form.iter().map(|m| m.factor).collect();
-    let (confirmation, reuse) = confirm::confirm(&fs, &mut ranking, &form, &fit_opts).unzip();
+    let confirmation = confirm::confirm(&fs, &mut ranking, &form, &fit_opts);
     step("confirm");
     let oracle = fit_opts.oracle.as_ref().and_then(|o| oracle::check(&fs, &form, o, &fit_opts));
     let detection_floors = floor::floors(&fs, &ranking, &fit_opts);
@@ -151,9 +151,7 @@ pub fn diagnose_with(
         (Some(f), Some(p)) => (f, p.as_slice()),
         _ => (&fs, points.as_slice()),
     };
-    // The confirm stage's recalibrations were made on `fs` (only without a
-    // record, where `check_fs` is `fs`).
-    let models = held_out::models(check_fs, &nominal.bars, ranking.verdict.as_ref(), reuse.flatten(), opts);
+    let models = held_out::models(check_fs, &nominal.bars, ranking.verdict.as_ref(), opts);
     step("held-out check");
     let shrink = held_out::shrink(check_points, &nominal.features, &models);
     let located = where_::locate(inputs, &grouped, &nominal, &models, &runner.hammer, opts);
@@ -303,7 +301,7 @@ fn close_call_group(
     let (Some(named), Some(other)) = (&ranking.verdict, &ranking.close_call) else {
         return (Vec::new(), 0);
     };
-    let models = held_out::models(fs, &nominal.bars, Some(other), None, opts);
+    let models = held_out::models(fs, &nominal.bars, Some(other), opts);
     let other_shrink = held_out::shrink(points, &nominal.features, &models);
     let member = |e: &EffectResult, s: &Shrink| {
         let name = e.name.rsplit('+').next().unwrap_or_default().to_string();

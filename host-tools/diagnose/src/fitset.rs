@@ -286,6 +286,19 @@ impl<'a> FitSet<'a> {
         threads: usize,
         from: Option<&[f64]>,
     ) -> Option<Recalibrated> {
+        let search = Search { steps, damped: false };
+        self.recalibrate_with(cand, h, search, threads, from)
+    }
+
+    /// [`FitSet::recalibrate`] searching as `search` says.
+    pub(crate) fn recalibrate_with(
+        &self,
+        cand: &Candidate,
+        h: f64,
+        search: Search,
+        threads: usize,
+        from: Option<&[f64]>,
+    ) -> Option<Recalibrated> {
         let k = self.runner.nuisance.len();
         let h = self.runner.prior_sds(h);
         let runner_at = |d: &[f64]| self.runner_at(&h, d);
@@ -320,7 +333,7 @@ impl<'a> FitSet<'a> {
             }
         }
         let mut sd = vec![1.0; k];
-        for _ in 0..steps {
+        for _ in 0..search.steps {
             let cols = self.jacobian(&block, &delta, &r, STEP, threads);
             let (a, b) = prior_normal_equations(&cols, &r, &delta);
             sd = (0..k)
@@ -330,50 +343,21 @@ impl<'a> FitSet<'a> {
                     super::fit::solve(a.clone(), e).map_or(1.0, |x| x[i].max(0.0).sqrt())
                 })
                 .collect();
-            let Some(mut step) = super::fit::solve(a.clone(), b.clone()) else {
+            let (before, at) = (cost(&r, &delta), delta.clone());
+            // A step is taken if the cost falls there.
+            let mut take = |d: Vec<f64>| -> Option<f64> {
+                let rn = whitened(&d)?;
+                let after = cost(&rn, &d);
+                (after < before).then(|| {
+                    delta = d;
+                    r = rn;
+                    before - after
+                })
+            };
+            let Some(gain) = line_search(&a, &b, &at, search.damped, &mut take) else {
                 break;
             };
-            // A parameter at its bound that the step pushes further is held
-            // there, and the step solved for the others: clamped afterwards,
-            // it would be a step the linearisation never proposed.
-            let held: Vec<usize> = (0..k)
-                .filter(|&i| delta[i].abs() >= MAX_PRIOR_SDS && step[i] * delta[i] > 0.0)
-                .collect();
-            if !held.is_empty() {
-                let (mut a, mut b) = (a, b);
-                for &i in &held {
-                    for j in 0..k {
-                        a[i][j] = 0.0;
-                        a[j][i] = 0.0;
-                    }
-                    a[i][i] = 1.0;
-                    b[i] = 0.0;
-                }
-                let Some(s) = super::fit::solve(a, b) else { break };
-                step = s;
-            }
-            // Halve the step until the cost falls (at most five times).
-            let before = cost(&r, &delta);
-            let mut scale = 1.0;
-            let mut gain = None;
-            for _ in 0..5 {
-                let d: Vec<f64> = delta
-                    .iter()
-                    .zip(&step)
-                    .map(|(x, s)| (x + scale * s).clamp(-MAX_PRIOR_SDS, MAX_PRIOR_SDS))
-                    .collect();
-                if let Some(rn) = whitened(&d) {
-                    let after = cost(&rn, &d);
-                    if after < before {
-                        delta = d;
-                        r = rn;
-                        gain = Some(before - after);
-                        break;
-                    }
-                }
-                scale *= 0.5;
-            }
-            if gain.is_none_or(|g| g < CONVERGED * before) {
+            if gain < CONVERGED * before {
                 break;
             }
         }
@@ -470,6 +454,87 @@ pub(crate) fn prior_normal_equations(cols: &[Vec<f64>], r: &[f64], at: &[f64]) -
     }
     (a, b)
 }
+
+/// How a recalibration searches.
+#[derive(Clone, Copy)]
+pub(crate) struct Search {
+    /// Gauss–Newton steps, at most.
+    pub(crate) steps: usize,
+    /// Where the Gauss–Newton step, halved five times, still does not
+    /// lower the cost, retry it damped towards the gradient
+    /// (Levenberg–Marquardt) before stopping. Without, the search stops
+    /// there, short of the minimum: a step the linearisation misjudged is
+    /// not convergence.
+    pub(crate) damped: bool,
+}
+
+/// The step of one Gauss–Newton iteration on the normal equations `a`,
+/// `b` at `delta`, found by `take` (which takes a point if the cost falls
+/// there and returns the gain): the full step, halved until the cost falls
+/// (at most five times), and if `damped`, then steps damped ever more
+/// towards the gradient. The gain, None where no step lowered the cost.
+fn line_search(
+    a: &[Vec<f64>],
+    b: &[f64],
+    delta: &[f64],
+    damped: bool,
+    take: &mut dyn FnMut(Vec<f64>) -> Option<f64>,
+) -> Option<f64> {
+    let moved = |step: &[f64], scale: f64| -> Vec<f64> {
+        delta
+            .iter()
+            .zip(step)
+            .map(|(x, s)| (x + scale * s).clamp(-MAX_PRIOR_SDS, MAX_PRIOR_SDS))
+            .collect()
+    };
+    let step = bounded_step(a, b, delta, 0.0)?;
+    let mut scale = 1.0;
+    for _ in 0..5 {
+        if let Some(gain) = take(moved(&step, scale)) {
+            return Some(gain);
+        }
+        scale *= 0.5;
+    }
+    if !damped {
+        return None;
+    }
+    DAMPING
+        .iter()
+        .find_map(|&lambda| take(moved(&bounded_step(a, b, delta, lambda)?, 1.0)))
+}
+
+/// The Gauss–Newton step of the normal equations `a`·step = `b` at `delta`,
+/// each diagonal term raised by `lambda` times itself (Marquardt's damping;
+/// 0: none). A parameter at its bound that the step pushes further is held
+/// there, and the step solved for the others: clamped afterwards, it would
+/// be a step the linearisation never proposed.
+fn bounded_step(a: &[Vec<f64>], b: &[f64], delta: &[f64], lambda: f64) -> Option<Vec<f64>> {
+    let k = b.len();
+    let mut a = a.to_vec();
+    for (i, row) in a.iter_mut().enumerate() {
+        row[i] *= 1.0 + lambda;
+    }
+    let step = super::fit::solve(a.clone(), b.to_vec())?;
+    let held: Vec<usize> = (0..k)
+        .filter(|&i| delta[i].abs() >= MAX_PRIOR_SDS && step[i] * delta[i] > 0.0)
+        .collect();
+    if held.is_empty() {
+        return Some(step);
+    }
+    let mut b = b.to_vec();
+    for &i in &held {
+        a[i].iter_mut().for_each(|x| *x = 0.0);
+        for row in a.iter_mut() {
+            row[i] = 0.0;
+        }
+        a[i][i] = 1.0;
+        b[i] = 0.0;
+    }
+    super::fit::solve(a, b)
+}
+
+/// The damped search's factors (Marquardt's λ), tried in turn.
+const DAMPING: [f64; 4] = [1.0, 10.0, 100.0, 1000.0];
 
 /// The nominal model recalibrated for a candidate.
 pub(crate) struct Recalibrated {
@@ -583,4 +648,36 @@ pub(crate) fn sigmas(s: &Summary, nominal: &[f64], f: &Floors) -> Vec<f64> {
             (sd * sd / n + floor * floor).sqrt()
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A linearisation that misjudges the cost (its two parameters nearly
+    /// interchangeable, where the cost tells them apart): the Gauss–Newton
+    /// step raises the cost even halved five times, so the undamped search
+    /// stops there, short of the minimum; damped, it still finds a step
+    /// that lowers the cost.
+    #[test]
+    fn a_misjudged_step_is_retried_damped() {
+        let a = vec![vec![1.0, 0.99], vec![0.99, 1.0]];
+        let b = vec![1.0, 0.0];
+        let cost = |d: &[f64]| (d[0] - 1.0).powi(2) + 10.0 * d[1] * d[1];
+        let start = [0.0, 0.0];
+        let before = cost(&start);
+        let mut taken = None;
+        let mut take = |d: Vec<f64>| -> Option<f64> {
+            let gain = before - cost(&d);
+            (gain > 0.0).then(|| {
+                taken = Some(d);
+                gain
+            })
+        };
+        assert_eq!(line_search(&a, &b, &start, false, &mut take), None);
+        let gain = line_search(&a, &b, &start, true, &mut take).expect("a damped step lowers the cost");
+        assert!(gain > 0.1, "{gain}");
+        let d = taken.expect("the step taken");
+        assert!(d[0] > 0.0 && d[1].abs() < 0.05, "{d:?}");
+    }
 }

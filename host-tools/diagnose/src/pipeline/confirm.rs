@@ -35,18 +35,11 @@ use crate::report::{Confirmation, EffectResult, FittedParam, NominalMove};
 
 /// Checks the verdict's last effect if the waveforms alone named it, and
 /// drops it if it does not hold: a single leaves `none`, a pair its first.
-/// With the check, the recalibrations the held-out stage would make again
-/// where it made them (a single checked).
 ///
 /// `form` holds the model-form factors the fit set's weights carry (empty:
 /// none): the check re-measures them on the verdict's refitted model (see
 /// [`reweighed`]).
-pub(crate) fn confirm(
-    fs: &FitSet,
-    ranking: &mut Ranking,
-    form: &[f64],
-    opts: &Options,
-) -> Option<(Confirmation, Option<Reuse>)> {
+pub(crate) fn confirm(fs: &FitSet, ranking: &mut Ranking, form: &[f64], opts: &Options) -> Option<Confirmation> {
     if fs.against_reference || opts.nominal_uncertainty <= 0.0 {
         return None;
     }
@@ -115,19 +108,7 @@ pub(crate) fn confirm(
     if !kept {
         drop_last(fs, ranking, &names, &c, min_share, opts);
     }
-    let reuse = (names.len() == 1).then(|| Reuse {
-        nominal: base,
-        verdict: kept.then_some(full),
-    });
-    Some((c, reuse))
-}
-
-/// The recalibrations of a single's check, as the held-out stage makes
-/// them on the same fit set: the nominal model's from nominal, and the
-/// verdict's (if it held) from there.
-pub(crate) struct Reuse {
-    pub(crate) nominal: Recalibrated,
-    pub(crate) verdict: Option<Recalibrated>,
+    Some(c)
 }
 
 /// The model-form factors re-measured on `with`, the verdict's model with
@@ -310,7 +291,7 @@ mod tests {
                 ranking.verdict = Some(fitted);
             }
             let form: Vec<f64> = form.iter().map(|m| m.factor).collect();
-            let checked = confirm(&fs, &mut ranking, &form, &opts).map(|c| c.0);
+            let checked = confirm(&fs, &mut ranking, &form, &opts);
             (checked, ranking)
         };
 

@@ -16,7 +16,8 @@
 
 use super::confirm::{form_factors, reweighed};
 use crate::effects::free_params;
-use crate::fitset::{FitSet, RECALIBRATION_STEPS};
+use super::held_out::CHECK_SEARCH;
+use crate::fitset::FitSet;
 use crate::model::Candidate;
 use crate::options::{Options, Oracle};
 use crate::report::OracleCheck;
@@ -45,12 +46,11 @@ pub(crate) fn check(fs: &FitSet, form: &[f64], oracle: &Oracle, opts: &Options) 
         .zip(&sds)
         .map(|((t, n), sd)| (t / n - 1.0) / sd)
         .collect();
-    let steps = RECALIBRATION_STEPS;
-    let without = fs.recalibrate(&Candidate::default(), h, steps, opts.threads, Some(&truth))?;
+    let without = fs.recalibrate_with(&Candidate::default(), h, CHECK_SEARCH, opts.threads, Some(&truth))?;
     let cand = Candidate {
         effects: oracle.effects.clone(),
     };
-    let with = fs.recalibrate(&cand, h, steps, opts.threads, Some(&truth))?;
+    let with = fs.recalibrate_with(&cand, h, CHECK_SEARCH, opts.threads, Some(&truth))?;
     let factors = form_factors(&with, form);
     let (chi2_without, chi2_truth) = (reweighed(&without, form, &factors), reweighed(&with, form, &factors));
     let gain = chi2_without - chi2_truth;
