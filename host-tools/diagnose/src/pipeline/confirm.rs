@@ -23,6 +23,7 @@
 use std::sync::atomic::Ordering;
 
 use super::effect_fit::{at_measured_sizes, fit_over};
+use super::held_out::CHECK_SEARCH;
 use super::joint;
 use super::rank::Ranking;
 use crate::effects::free_params;
@@ -33,8 +34,9 @@ use crate::options::Options;
 use crate::parallel::parallel;
 use crate::report::{Confirmation, EffectResult, FittedParam, NominalMove};
 
-/// Checks the verdict's last effect if the waveforms alone named it, and
-/// drops it if it does not hold: a single leaves `none`, a pair its first.
+/// A single or nothing: re-ranked ([`super::rerank`]). A pair: checks its
+/// member the waveforms alone named, and drops it if it does not hold,
+/// leaving the other.
 ///
 /// `form` holds the model-form factors the fit set's weights carry (empty:
 /// none): the check re-measures them on the verdict's refitted model (see
@@ -49,15 +51,21 @@ pub(crate) fn confirm(fs: &FitSet, ranking: &mut Ranking, form: &[f64], opts: &O
     }
     let verdict = ranking.verdict.clone()?;
     let names: Vec<&str> = verdict.name.split('+').collect();
-    let last = *names.last()?;
-    let single = ranking.effects.iter().find(|e| e.name == last)?;
-    if single.model_free_z.is_some() {
-        return None;
-    }
+    // The pair's member the waveforms alone named is checked (the second
+    // if both are), the other kept: a supply restriction named first
+    // beside a zero shift the force balance measures is checked too.
+    let unseen = |n: &str| ranking.effects.iter().any(|e| e.name == n && e.model_free_z.is_none());
+    let (other, last) = match names.as_slice() {
+        [a, b] if unseen(b) => (*a, *b),
+        [a, b] if unseen(a) => (*b, *a),
+        _ => return None,
+    };
     let mut without = verdict.candidate.clone();
     hammer_sim::effects::entry(last)?.turn_off(&mut without.effects);
     let h = opts.nominal_uncertainty;
-    let base = fs.recalibrate(&without, h, RECALIBRATION_STEPS, opts.threads, None)?;
+    // Without it, to the minimum (the held-out check's search): stopped
+    // short, the nominal values leave what the effect is credited with.
+    let base = fs.recalibrate_with(&without, h, CHECK_SEARCH, opts.threads, None)?;
     // Two starts for the model with the effect, the better kept: the
     // ranking's size with the nominal parameters refitted from where they
     // went without it, and the size refitted there first (from the
@@ -89,11 +97,7 @@ pub(crate) fn confirm(fs: &FitSet, ranking: &mut Ranking, form: &[f64], opts: &O
     let gain = cost_without - cost_with;
     let score = gain - k * fs.ln_cycles();
     let explained = if cost_without > 0.0 { gain / cost_without } else { 0.0 };
-    let min_share = if names.len() > 1 {
-        opts.min_explained_pair
-    } else {
-        opts.min_explained
-    };
+    let min_share = opts.min_explained_pair;
     let kept = score > opts.min_score && explained >= min_share;
     let c = Confirmation {
         effect: last.to_string(),
@@ -106,7 +110,7 @@ pub(crate) fn confirm(fs: &FitSet, ranking: &mut Ranking, form: &[f64], opts: &O
         nominal_moves: largest_moves(fs, &base, h),
     };
     if !kept {
-        drop_last(fs, ranking, &names, &c, min_share, opts);
+        drop_last(fs, ranking, &[other, last], &c, min_share, opts);
     }
     Some(c)
 }
@@ -165,8 +169,8 @@ pub(crate) fn largest_moves(fs: &FitSet, rc: &Recalibrated, h: f64) -> Vec<Nomin
     moves.into_iter().take(2).map(|m| m.1).collect()
 }
 
-/// The verdict without its last effect: `none` for a single, the pair's
-/// first (as fitted beside it) for a pair.
+/// The pair `names` without its second: the first (as fitted beside it)
+/// named alone.
 fn drop_last(fs: &FitSet, ranking: &mut Ranking, names: &[&str], c: &Confirmation, min_share: f64, opts: &Options) {
     let moves: Vec<String> = c
         .nominal_moves

@@ -69,7 +69,16 @@ pub(crate) fn rerank(
         .iter()
         .filter_map(|e| {
             let t0 = joint::theta_of(fs, &e.fitted, &e.name)?;
-            Some((*e, joint::fit(fs, &Candidate::default(), &e.name, &t0, &base.delta, opts)?))
+            // Two starts, the better kept: from where the nominal values
+            // went without any effect, and from nominal (the ranking
+            // sized the effect there): along a valley the effect and the
+            // nominal values share, either may stop in a side basin.
+            let nominal = vec![0.0; base.delta.len()];
+            [&base.delta, &nominal]
+                .into_iter()
+                .filter_map(|from| joint::fit(fs, &Candidate::default(), &e.name, &t0, from, opts))
+                .min_by(|a, b| a.recalibrated.cost.total_cmp(&b.recalibrated.cost))
+                .map(|j| (*e, j))
         })
         .collect();
     let best_cost = fits.iter().min_by(|a, b| a.1.recalibrated.cost.total_cmp(&b.1.recalibrated.cost))?;
