@@ -536,7 +536,10 @@ pub fn run_case_with(
     // The oracle knows the truth only where it is the model's own form.
     let oracle_for = (opts.oracle && structural.is_none() && builtin).then(|| super::options::Oracle {
         effects: gen.effects.clone(),
-        nuisance: super::model::NUISANCE.iter().map(|(_, f)| *f(&mut gen.clone())).collect(),
+        nuisance: super::model::NUISANCE
+            .iter()
+            .map(|(_, f)| *f(&mut gen.clone()))
+            .collect(),
     });
     let with_oracle;
     let diag = match oracle_for {

@@ -28,9 +28,8 @@ pub use super::input::{DiagnoseError, MeasuredInput, Progress};
 pub use super::options::{Floors, Options};
 pub use super::report::{
     Alternative, Confirmation, DeadVolume, EffectResult, FittedParam, ForceBalancePoint, ForceBalanceQuantity,
-    InputInfo, ModelForm, ModelFreeStat, NominalMove, OracleCheck, PointShrink, Recalibration, Remainder, Report, Shrink,
-    Verdict,
-    WhereCell,
+    InputInfo, ModelForm, ModelFreeStat, NominalMove, OracleCheck, PointShrink, Recalibration, Remainder, Report,
+    Shrink, Verdict, WhereCell,
 };
 
 #[derive(Debug, Clone)]
@@ -142,7 +141,10 @@ pub fn diagnose_with(
     let form: Vec<f64> = model_form.iter().map(|m| m.factor).collect();
     let confirmation = confirm::confirm(&fs, &mut ranking, &form, &fit_opts);
     step("confirm");
-    let oracle = fit_opts.oracle.as_ref().and_then(|o| oracle::check(&fs, &form, o, &fit_opts));
+    let oracle = fit_opts
+        .oracle
+        .as_ref()
+        .and_then(|o| oracle::check(&fs, &form, o, &fit_opts));
     let detection_floors = floor::floors(&fs, &ranking, &fit_opts);
     step("detection floors");
 

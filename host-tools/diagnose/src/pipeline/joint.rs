@@ -15,9 +15,9 @@
 use std::sync::atomic::Ordering;
 
 use crate::effects::{apply, free_params};
+use crate::features::N_FEATURES;
 use crate::fit::{levenberg_marquardt, ParamSpec};
 use crate::fitset::{residual, FitSet, Recalibrated, MAX_PRIOR_SDS};
-use crate::features::N_FEATURES;
 use crate::model::Candidate;
 use crate::options::Options;
 use crate::parallel::parallel;

@@ -15,8 +15,8 @@
 //! names the effect: a measured ceiling, not a miss.
 
 use super::confirm::{form_factors, reweighed};
-use crate::effects::free_params;
 use super::held_out::CHECK_SEARCH;
+use crate::effects::free_params;
 use crate::fitset::FitSet;
 use crate::model::Candidate;
 use crate::options::{Options, Oracle};
