@@ -141,10 +141,7 @@ pub fn diagnose_with(
     let form: Vec<f64> = model_form.iter().map(|m| m.factor).collect();
     let confirmation = confirm::confirm(&fs, &mut ranking, &form, &fit_opts);
     step("confirm");
-    let oracle = fit_opts
-        .oracle
-        .as_ref()
-        .and_then(|o| oracle::check(&fs, &form, o, &fit_opts));
+    let oracle = oracle::check(&fs, &form, &fit_opts);
     let detection_floors = floor::floors(&fs, &ranking, &fit_opts);
     step("detection floors");
 

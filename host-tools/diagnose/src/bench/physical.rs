@@ -23,7 +23,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::super::engine::Report;
+use crate::report::Report;
 use super::super::model::SETTLE_S;
 use super::super::valve_timing::front_port_opening_of_model;
 use hammer_sim::effects::{EffectSlot, Effects, HeatTransfer, Leakage, ValveDelay};

@@ -23,9 +23,11 @@ use crate::options::{Options, Oracle};
 use crate::report::OracleCheck;
 
 /// The truth's check against the model alone, for a hammer with one
-/// effect; `None` against a record (the nominal values cancel there), for
-/// a hammer with none or two, or where a recalibration fails.
-pub(crate) fn check(fs: &FitSet, form: &[f64], oracle: &Oracle, opts: &Options) -> Option<OracleCheck> {
+/// effect (`opts.oracle`); `None` without an oracle, against a record (the
+/// nominal values cancel there), for a hammer with none or two, or where a
+/// recalibration fails.
+pub(crate) fn check(fs: &FitSet, form: &[f64], opts: &Options) -> Option<OracleCheck> {
+    let oracle: &Oracle = opts.oracle.as_ref()?;
     if fs.against_reference || opts.nominal_uncertainty <= 0.0 {
         return None;
     }
