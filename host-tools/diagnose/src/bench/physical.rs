@@ -23,9 +23,9 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::report::Report;
 use super::super::model::SETTLE_S;
 use super::super::valve_timing::front_port_opening_of_model;
+use crate::report::Report;
 use hammer_sim::effects::{EffectSlot, Effects, HeatTransfer, Leakage, ValveDelay};
 use hammer_sim::params::NUISANCE;
 use hammer_sim::run::{CycleTruth, SimRun};

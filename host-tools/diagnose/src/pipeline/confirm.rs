@@ -251,28 +251,8 @@ mod tests {
     use crate::pipeline::group::group;
     use crate::pipeline::nominal::{fit_set, nominal};
     use crate::pipeline::rank::rank;
+    use crate::pipeline::tests::hammer_at_4_and_7 as hammer;
     use crate::pipeline::tests::{nominal_runner, options, quiet};
-    use hammer_sim::simulate::simulate;
-    use hammer_sim::SimConfig;
-
-    /// The default hammer at 4 and 7 bar (both fitted), changed by `change`.
-    fn hammer(change: &dyn Fn(&mut SimConfig)) -> Vec<MeasuredInput> {
-        [4.0, 7.0]
-            .iter()
-            .map(|&bar| {
-                let mut c = SimConfig::nominal(bar);
-                c.solver.duration_s = 0.4;
-                c.seed = 3;
-                change(&mut c);
-                MeasuredInput {
-                    label: format!("{bar} bar"),
-                    supply_bar: bar,
-                    trace: simulate(&c).unwrap().trace(),
-                    fit: true,
-                }
-            })
-            .collect()
-    }
 
     /// A sound hammer whose valve opens 15 % less and whose front dead
     /// volume is 15 % larger than nominal (within the ±20 % the diagnosis

@@ -55,6 +55,26 @@ pub(crate) mod tests {
         }
     }
 
+    /// The default hammer at 4 and 7 bar (both fitted), 0.4 s each,
+    /// changed by `change`.
+    pub(crate) fn hammer_at_4_and_7(change: &dyn Fn(&mut SimConfig)) -> Vec<MeasuredInput> {
+        [4.0, 7.0]
+            .iter()
+            .map(|&bar| {
+                let mut c = SimConfig::nominal(bar);
+                c.solver.duration_s = 0.4;
+                c.seed = 3;
+                change(&mut c);
+                MeasuredInput {
+                    label: format!("{bar} bar"),
+                    supply_bar: bar,
+                    trace: simulate(&c).unwrap().trace(),
+                    fit: true,
+                }
+            })
+            .collect()
+    }
+
     /// The diagnosis' model of the default hammer, as the engine builds it.
     pub(crate) fn nominal_runner() -> ModelRunner {
         let base = SimConfig::default();

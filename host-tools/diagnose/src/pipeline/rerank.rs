@@ -198,33 +198,19 @@ mod tests {
     use crate::pipeline::group::group;
     use crate::pipeline::nominal::{fit_set, nominal};
     use crate::pipeline::rank::rank;
-    use crate::pipeline::tests::{nominal_runner, options, quiet};
-    use hammer_sim::simulate::simulate;
-    use hammer_sim::SimConfig;
+    use crate::pipeline::tests::{hammer_at_4_and_7, nominal_runner, options, quiet};
 
     /// The default hammer at 4 and 7 bar (both fitted), its valve opening
     /// 15 % less and its front dead volume 15 % larger than nominal (within
     /// the ±20 % the diagnosis allows), with `effects`.
     fn hammer(effects: &str) -> Vec<MeasuredInput> {
-        [4.0, 7.0]
-            .iter()
-            .map(|&bar| {
-                let mut c = SimConfig::nominal(bar);
-                c.solver.duration_s = 0.4;
-                c.seed = 3;
-                c.valve.full_open_area_m2 *= 0.85;
-                c.hammer.front_dead_volume_m3 *= 1.15;
-                if !effects.is_empty() {
-                    c.effects.apply_spec(effects).unwrap();
-                }
-                MeasuredInput {
-                    label: format!("{bar} bar"),
-                    supply_bar: bar,
-                    trace: simulate(&c).unwrap().trace(),
-                    fit: true,
-                }
-            })
-            .collect()
+        hammer_at_4_and_7(&|c| {
+            c.valve.full_open_area_m2 *= 0.85;
+            c.hammer.front_dead_volume_m3 *= 1.15;
+            if !effects.is_empty() {
+                c.effects.apply_spec(effects).unwrap();
+            }
+        })
     }
 
     fn reranked(inputs: &[MeasuredInput]) -> (Option<Confirmation>, Ranking) {
