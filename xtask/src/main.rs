@@ -71,6 +71,74 @@ pub(crate) fn cargo_test(dir: &Path, args: &[&str], totals: &mut (u64, u64)) -> 
     }
 }
 
+/// The workspace's tests. With cargo-nextest on the machine, every test
+/// binary runs side by side, the slowest first (`.config/nextest.toml`),
+/// and the doc-tests (which nextest does not run) after; without it, `cargo
+/// test` runs the binaries one after another.
+fn workspace_tests(root: &Path, totals: &mut (u64, u64)) -> Result<(), String> {
+    let started = std::time::Instant::now();
+    let has_nextest = Command::new("cargo")
+        .args(["nextest", "--version"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success());
+    let result = if has_nextest {
+        nextest(
+            root,
+            &["nextest", "run", "--workspace", "--release", "--no-fail-fast"],
+            totals,
+        )
+        .and(cargo_test(root, &["test", "--workspace", "--release", "--doc"], totals))
+    } else {
+        eprintln!("xtask: cargo-nextest not found: the test binaries run one after another");
+        cargo_test(root, &["test", "--workspace", "--release"], totals)
+    };
+    eprintln!(
+        "xtask: the workspace's tests took {:.0} s",
+        started.elapsed().as_secs_f64()
+    );
+    result
+}
+
+/// Runs `cargo nextest` passing its output through and adds up its
+/// closing `Summary` line (`N tests run: A passed, B failed, C timed out`).
+fn nextest(dir: &Path, args: &[&str], totals: &mut (u64, u64)) -> Result<(), String> {
+    eprintln!("xtask: ({}) cargo {}", dir.display(), args.join(" "));
+    let mut child = Command::new("cargo")
+        .args(args)
+        .current_dir(dir)
+        .stderr(Stdio::piped())
+        .spawn()
+        .map_err(|e| format!("cannot start cargo: {e}"))?;
+    let stderr = child.stderr.take().expect("piped");
+    for line in BufReader::new(stderr).lines() {
+        let line = line.map_err(|e| e.to_string())?;
+        eprintln!("{line}");
+        let trimmed = line.trim_start();
+        if !trimmed.starts_with("Summary [") {
+            continue;
+        }
+        if let Some((_, rest)) = trimmed.split_once("tests run:") {
+            for part in rest.split(',') {
+                let mut words = part.split_whitespace();
+                let n = words.next().and_then(|n| n.parse::<u64>().ok()).unwrap_or(0);
+                match words.next() {
+                    Some("passed") => totals.0 += n,
+                    Some("failed") | Some("timed") => totals.1 += n,
+                    _ => {}
+                }
+            }
+        }
+    }
+    let status = child.wait().map_err(|e| e.to_string())?;
+    if status.success() {
+        Ok(())
+    } else {
+        Err(format!("`cargo {}` failed ({status})", args.join(" ")))
+    }
+}
+
 /// Builds the firmware from its own folder: cargo reads `.cargo/config.toml`
 /// (target, linker scripts) from the directory it runs in.
 /// Its own target folder whatever `CARGO_TARGET_DIR` says: the benches and
@@ -259,6 +327,8 @@ fn size_and_stack() -> Result<(), String> {
 
 fn ci() -> Result<(), String> {
     let root = root();
+    let started = std::time::Instant::now();
+    let at = |stage: &str| eprintln!("xtask: {stage} done at {:.0} s", started.elapsed().as_secs_f64());
     run(&root, "cargo", &["fmt", "--all", "--", "--check"])?;
     run(&root.join("firmware"), "cargo", &["fmt", "--all", "--", "--check"])?;
     run(&root.join("fuzz"), "cargo", &["fmt", "--all", "--", "--check"])?;
@@ -270,8 +340,9 @@ fn ci() -> Result<(), String> {
         &["build", "--release", "-p", "hammer-estimator", "--target", TARGET],
     )?;
     build_firmware()?;
+    at("formatting and the firmware's build");
     let mut totals = (0, 0);
-    let mut result = cargo_test(&root, &["test", "--workspace", "--release"], &mut totals);
+    let mut result = workspace_tests(&root, &mut totals);
     // Once more with overflow checks on (the test profile): arithmetic that
     // would wrap on bad input must not hide behind release mode.
     if result.is_ok() {
@@ -280,10 +351,12 @@ fn ci() -> Result<(), String> {
     // The Python package: its wheel built once into a fresh virtualenv,
     // imported, and pytest against it (python/tests, docs/python.md).
     if result.is_ok() {
+        at("the workspace's tests");
         result = python::run(&root, &mut totals);
     }
     // A ninth effect through the registry alone (a copy of the workspace).
     if result.is_ok() {
+        at("the Python package");
         result = ninth_effect::run(&root, &mut totals);
     }
     // Fuzzing smoke run: the seeded in-process runner over every target.
@@ -295,6 +368,7 @@ fn ci() -> Result<(), String> {
             &mut totals,
         )
         .and_then(|_| fuzz(&["--execs", "1000000"]));
+        at("the ninth effect and the fuzzing smoke run");
     }
     // The closing line CI reads.
     println!("xtask: {} passed, {} failed", totals.0, totals.1);
