@@ -232,6 +232,10 @@ pub struct Shrink {
     /// What the figures above were computed on.
     pub judged_on: String,
     pub points: Vec<PointShrink>,
+    /// The verdict's waveform-only sizes as the check refitted them with
+    /// the nominal values on the fit points (empty where they were held).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub refitted: Vec<FittedParam>,
 }
 
 /// How much worse (percentage points) the verdict's model may predict the

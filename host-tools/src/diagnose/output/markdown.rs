@@ -392,6 +392,18 @@ fn shrink_md(s: &mut String, report: &Report) {
         "- the named effects in the nominal model, nothing recalibrated: impact energy error {} %",
         pct(sh.impact_energy_error_effects_only)
     );
+    if !sh.refitted.is_empty() {
+        let sizes: Vec<String> = sh
+            .refitted
+            .iter()
+            .map(|p| format!("{} = {:.4e}", p.key, p.value))
+            .collect();
+        line!(
+            s,
+            "- the check's model has the waveform-only sizes refitted with the nominal parameters on the fit points: {}",
+            sizes.join(", ")
+        );
+    }
     if let Some(c) = sh.caution() {
         line!(s);
         line!(s, "**Caution:** {c}.");

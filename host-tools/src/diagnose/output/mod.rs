@@ -173,6 +173,7 @@ mod tests {
                 impact_energy_error_effects_only: 3.4,
                 held_out_points: vec![],
                 judged_on: "the later half of the cycles".into(),
+                refitted: vec![],
                 points: vec![PointShrink {
                     supply_bar: 4.0,
                     held_out_point: false,
