@@ -34,33 +34,62 @@ pub(crate) fn run(dir: &Path, program: &str, args: &[&str]) -> Result<(), String
 
 /// Runs `cargo test` passing its output through and adds up its `test result` lines.
 pub(crate) fn cargo_test(dir: &Path, args: &[&str], totals: &mut (u64, u64)) -> Result<(), String> {
-    eprintln!("xtask: ({}) cargo {}", dir.display(), args.join(" "));
-    let mut child = Command::new("cargo")
-        .args(args)
-        .current_dir(dir)
-        .stdout(Stdio::piped())
-        .spawn()
-        .map_err(|e| format!("cannot start cargo: {e}"))?;
-    let stdout = child.stdout.take().expect("piped");
-    for line in BufReader::new(stdout).lines() {
-        let line = line.map_err(|e| e.to_string())?;
-        println!("{line}");
-        if let Some(rest) = line.strip_prefix("test result: ") {
-            let count = |word: &str| {
-                rest.split(';')
-                    .find_map(|part| {
-                        part.trim().strip_suffix(word).map(|n| {
-                            n.trim()
-                                .trim_start_matches("ok. ")
-                                .trim_start_matches("FAILED. ")
-                                .parse::<u64>()
-                                .unwrap_or(0)
-                        })
+    counted(dir, args, Stream::Stdout, totals, &|line| {
+        let rest = line.strip_prefix("test result: ")?;
+        let count = |word: &str| {
+            rest.split(';')
+                .find_map(|part| {
+                    part.trim().strip_suffix(word).map(|n| {
+                        n.trim()
+                            .trim_start_matches("ok. ")
+                            .trim_start_matches("FAILED. ")
+                            .parse::<u64>()
+                            .unwrap_or(0)
                     })
-                    .unwrap_or(0)
-            };
-            totals.0 += count("passed");
-            totals.1 += count("failed");
+                })
+                .unwrap_or(0)
+        };
+        Some((count("passed"), count("failed")))
+    })
+}
+
+/// The stream a test runner writes its results to.
+enum Stream {
+    Stdout,
+    Stderr,
+}
+
+/// Runs `cargo args` in `dir` passing `stream` through, and adds to
+/// `totals` what `count` reads off its lines (passed, failed), whether or
+/// not the run fails.
+fn counted(
+    dir: &Path,
+    args: &[&str],
+    stream: Stream,
+    totals: &mut (u64, u64),
+    count: &dyn Fn(&str) -> Option<(u64, u64)>,
+) -> Result<(), String> {
+    eprintln!("xtask: ({}) cargo {}", dir.display(), args.join(" "));
+    let mut cmd = Command::new("cargo");
+    cmd.args(args).current_dir(dir);
+    match stream {
+        Stream::Stdout => cmd.stdout(Stdio::piped()),
+        Stream::Stderr => cmd.stderr(Stdio::piped()),
+    };
+    let mut child = cmd.spawn().map_err(|e| format!("cannot start cargo: {e}"))?;
+    let out: Box<dyn std::io::Read> = match stream {
+        Stream::Stdout => Box::new(child.stdout.take().expect("piped")),
+        Stream::Stderr => Box::new(child.stderr.take().expect("piped")),
+    };
+    for line in BufReader::new(out).lines() {
+        let line = line.map_err(|e| e.to_string())?;
+        match stream {
+            Stream::Stdout => println!("{line}"),
+            Stream::Stderr => eprintln!("{line}"),
+        }
+        if let Some((passed, failed)) = count(&line) {
+            totals.0 += passed;
+            totals.1 += failed;
         }
     }
     let status = child.wait().map_err(|e| e.to_string())?;
@@ -104,39 +133,25 @@ fn workspace_tests(root: &Path, totals: &mut (u64, u64)) -> Result<(), String> {
 /// Runs `cargo nextest` passing its output through and adds up its
 /// closing `Summary` line (`N tests run: A passed, B failed, C timed out`).
 fn nextest(dir: &Path, args: &[&str], totals: &mut (u64, u64)) -> Result<(), String> {
-    eprintln!("xtask: ({}) cargo {}", dir.display(), args.join(" "));
-    let mut child = Command::new("cargo")
-        .args(args)
-        .current_dir(dir)
-        .stderr(Stdio::piped())
-        .spawn()
-        .map_err(|e| format!("cannot start cargo: {e}"))?;
-    let stderr = child.stderr.take().expect("piped");
-    for line in BufReader::new(stderr).lines() {
-        let line = line.map_err(|e| e.to_string())?;
-        eprintln!("{line}");
-        let trimmed = line.trim_start();
-        if !trimmed.starts_with("Summary [") {
-            continue;
-        }
-        if let Some((_, rest)) = trimmed.split_once("tests run:") {
-            for part in rest.split(',') {
-                let mut words = part.split_whitespace();
-                let n = words.next().and_then(|n| n.parse::<u64>().ok()).unwrap_or(0);
-                match words.next() {
-                    Some("passed") => totals.0 += n,
-                    Some("failed") | Some("timed") => totals.1 += n,
-                    _ => {}
-                }
-            }
+    counted(dir, args, Stream::Stderr, totals, &nextest_summary)
+}
+
+/// Passed and failed (timed out counted as failed) off nextest's closing
+/// line, `Summary [ 631.051s] 419 tests run: 417 passed (3 slow), 1
+/// failed, 1 timed out, 2 skipped`.
+fn nextest_summary(line: &str) -> Option<(u64, u64)> {
+    let (_, rest) = line.trim_start().strip_prefix("Summary [")?.split_once(" run:")?;
+    let mut sum = (0, 0);
+    for part in rest.split(',') {
+        let mut words = part.split_whitespace();
+        let n = words.next().and_then(|n| n.parse::<u64>().ok()).unwrap_or(0);
+        match words.next() {
+            Some("passed") => sum.0 += n,
+            Some("failed") | Some("timed") => sum.1 += n,
+            _ => {}
         }
     }
-    let status = child.wait().map_err(|e| e.to_string())?;
-    if status.success() {
-        Ok(())
-    } else {
-        Err(format!("`cargo {}` failed ({status})", args.join(" ")))
-    }
+    Some(sum)
 }
 
 /// Builds the firmware from its own folder: cargo reads `.cargo/config.toml`
@@ -539,5 +554,22 @@ fn main() -> ExitCode {
             eprintln!("xtask: {e}");
             ExitCode::FAILURE
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    /// nextest's closing line is counted, slow tests, time-outs and skips
+    /// included; its other lines are not.
+    #[test]
+    fn nextests_closing_line_is_counted() {
+        let line = "     Summary [ 631.051s] 419 tests run: 416 passed (3 slow), 2 failed, 1 timed out, 2 skipped";
+        assert_eq!(super::nextest_summary(line), Some((416, 3)));
+        let all = "     Summary [  15.531s] 1 test run: 1 passed, 2 skipped";
+        assert_eq!(super::nextest_summary(all), Some((1, 0)));
+        assert_eq!(
+            super::nextest_summary("        PASS [   1.2s] (1/419) a::b summary"),
+            None
+        );
     }
 }
