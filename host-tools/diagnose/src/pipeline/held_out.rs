@@ -162,10 +162,10 @@ pub(crate) fn models(fs: &FitSet, bars: &[f64], verdict: Option<&EffectResult>, 
 /// size fits this hammer's own form, not how well the effect predicts:
 /// the structural benchmark's case 107 (seed 7), the same supply
 /// restriction named in both modes at 1.82 mm with the record and 1.52 mm
-/// without, missed the held-out energy by 3.5 % against 0.15 %; refitted, 0.10 %
-/// against 0.12 %. Refitted here in both modes, the check is the same question in both: the model
-/// with the named effects, fitted to the fit points, at the points it did
-/// not see. Sizes the force balance measured (friction, viscous friction,
+/// without, missed the held-out energy by 3.5 % against 0.15 %; refitted,
+/// 0.33 % against 0.15 %. Refitted in both modes, the check asks the same
+/// in both: the model with the named effects, fitted to the fit points,
+/// at the points it did not see. Sizes the force balance measured (friction, viscous friction,
 /// the pressure gain and zero) are that measurement in both modes and are
 /// held.
 fn refit(
