@@ -736,6 +736,62 @@ fn diagnose_bench_small_run() {
     assert_eq!(json["cases"].as_array().unwrap().len(), 12);
 }
 
+/// A benchmark stopped and resumed is the benchmark run straight: the log
+/// of finished cases (`cases.jsonl`) gives back the cases it holds to the
+/// bit, and only the missing ones run. A log of other options is refused.
+#[test]
+fn a_resumed_benchmark_is_the_straight_run() {
+    let (straight, resumed) = (tmp_dir("resume-straight"), tmp_dir("resume-resumed"));
+    let run = |dir: &std::path::Path, cases: &str, more: &[&str]| {
+        let mut args = vec![
+            "diagnose-bench",
+            "--cases",
+            cases,
+            "--seed",
+            "3",
+            "--points",
+            "4,7",
+            "--out",
+        ];
+        args.push(dir.to_str().unwrap());
+        args.extend_from_slice(more);
+        let (code, _, err) = hammer(&args);
+        assert_eq!(code, 0, "{err}");
+        err
+    };
+    run(&straight, "2", &[]);
+    run(&resumed, "1", &[]);
+    let err = run(&resumed, "2", &["--resume"]);
+    assert!(err.contains("1 of 2 cases done, 1 to run"), "{err}");
+    let cases = |dir: &std::path::Path| {
+        let json: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(dir.join("bench.json")).unwrap()).unwrap();
+        let mut cases = json["cases"].as_array().unwrap().clone();
+        for c in &mut cases {
+            c.as_object_mut().unwrap().remove("diagnose_s");
+        }
+        cases
+    };
+    let (a, b) = (cases(&straight), cases(&resumed));
+    assert_eq!(a.len(), 2);
+    assert_eq!(a, b, "the resumed run's cases differ from the straight run's");
+    // Another seed is another run: refused, the log named, nothing run.
+    let (code, _, err) = hammer(&[
+        "diagnose-bench",
+        "--cases",
+        "3",
+        "--seed",
+        "4",
+        "--points",
+        "4,7",
+        "--resume",
+        "--out",
+        resumed.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("cases.jsonl") && err.contains("seed"), "{err}");
+}
+
 /// The structural benchmark's first 24 cases, two rounds of its plan (hammers of the second
 /// model family, one or two structural variants each, parameters ±10 %,
 /// transducers that clip below atmosphere): every effect the model-free

@@ -9,6 +9,7 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use super::bench::{render, run_case_with, summarize, BenchOptions, CaseResult, PlantFor};
+use super::case_log::{CaseLog, Done};
 use super::engine::{diagnose_with, Options};
 use super::input::{read_request, DiagnoseError, Request};
 use super::model::{Builtin, FmuPlant, Plant};
@@ -116,6 +117,11 @@ pub struct BenchArgs {
     /// rule that names it? Where not, a `none` is the features' ceiling.
     #[arg(long, conflicts_with_all = ["structural", "model"])]
     pub oracle: bool,
+    /// Go on with the run whose cases `--out DIR` logged (`DIR/cases.jsonl`):
+    /// only the cases it lacks are run. The options must be the run's own;
+    /// `--cases` may grow. Without it, a new log replaces an old one.
+    #[arg(long, requires = "out", conflicts_with = "isolability")]
+    pub resume: bool,
 }
 
 /// Pairs every `--supply-bar` of the raw command line with the `--measured`
@@ -287,22 +293,41 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         }
     };
     let plant_for: Option<PlantFor> = fmu.as_ref().map(|_| &plant_for as PlantFor);
+    // Each finished case is logged as it finishes, so a long run can go on
+    // where it was stopped (`--resume`).
+    let (log, mut done) = match &args.out {
+        Some(dir) => {
+            let (log, done) = CaseLog::open(dir, &opts, args.resume)?;
+            (Some(log), done)
+        }
+        None => (None, Done::default()),
+    };
+    let todo: Vec<usize> = (0..args.cases).filter(|i| !done.contains(*i)).collect();
+    if let Some(log) = &log {
+        if args.resume {
+            eprintln!(
+                "{}: {} of {} cases done, {} to run",
+                log.path().display(),
+                args.cases - todo.len(),
+                args.cases,
+                todo.len()
+            );
+        }
+    }
     let pb = progress_bar(
         args.cases as u64,
         "diagnose-bench [{bar:30}] {pos}/{len} {msg} ({elapsed}, eta {eta})",
     );
-    let results = run_cases(args.cases, &opts, &diag, workers, plant_for, &pb);
-    let mut cases = Vec::new();
+    pb.set_position((args.cases - todo.len()) as u64);
+    let results = run_cases(&todo, &opts, &diag, workers, plant_for, log.as_ref(), &pb);
+    let mut cases: Vec<CaseResult> = Vec::new();
     let mut not_run = Vec::new();
     for (i, r) in results {
         match r {
             Ok(c) => cases.push(c),
             // A generated hammer that does not run: the case is not a test
             // of the diagnosis. Said, and left out of the counts.
-            Err(e)
-                if e.downcast_ref::<DiagnoseError>()
-                    .is_some_and(DiagnoseError::is_no_cycles) =>
-            {
+            Err(e) if is_no_cycles(&e) => {
                 pb.println(format!("case {i} not run: {e:#}"));
                 not_run.push((i, format!("{e:#}")));
             }
@@ -310,6 +335,12 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         }
     }
     pb.finish_and_clear();
+    // The logged cases of this run's range, with the new ones, in order.
+    done.cases.retain(|i, _| *i < args.cases);
+    cases.extend(done.cases.into_values());
+    cases.sort_by_key(|c| c.index);
+    not_run.extend(done.not_run.into_iter().filter(|(i, _)| *i < args.cases));
+    not_run.sort_by_key(|(i, _)| *i);
     if not_run.len() * 10 > args.cases {
         bail!(
             "{} of {} cases could not be generated: {:?}",
@@ -327,13 +358,21 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
     Ok(())
 }
 
-/// Every case of `opts`, `workers` of them side by side, in case order.
+/// A generated hammer that does not run: not a test of the diagnosis.
+fn is_no_cycles(e: &anyhow::Error) -> bool {
+    e.downcast_ref::<DiagnoseError>()
+        .is_some_and(DiagnoseError::is_no_cycles)
+}
+
+/// The cases `todo` of `opts`, `workers` of them side by side, in case
+/// order, each logged as it finishes.
 fn run_cases(
-    n: usize,
+    todo: &[usize],
     opts: &BenchOptions,
     diag: &Options,
     workers: usize,
     plant_for: Option<PlantFor>,
+    log: Option<&CaseLog>,
     pb: &ProgressBar,
 ) -> Vec<(usize, Result<CaseResult>)> {
     // Cases side by side, one thread each: a case's diagnosis is the same
@@ -351,13 +390,22 @@ fn run_cases(
                 scope.spawn(|| {
                     let mut done = Vec::new();
                     loop {
-                        let i = next.fetch_add(1, Ordering::Relaxed);
-                        if i >= n {
+                        let Some(&i) = todo.get(next.fetch_add(1, Ordering::Relaxed)) else {
                             break done;
-                        }
+                        };
                         let r = run_case_with(opts, i, &one, plant_for);
                         if let Ok(c) = &r {
                             right.fetch_add(usize::from(c.correct), Ordering::Relaxed);
+                        }
+                        // A log that cannot be written costs the resume,
+                        // not the run: said, and the run goes on.
+                        let logged = match (&r, log) {
+                            (Ok(c), Some(log)) => log.case(c),
+                            (Err(e), Some(log)) if is_no_cycles(e) => log.not_run(i, &format!("{e:#}")),
+                            _ => Ok(()),
+                        };
+                        if let Err(e) = logged {
+                            pb.println(format!("case {i}: {e:#}"));
                         }
                         pb.set_message(format!("{} named right", right.load(Ordering::Relaxed)));
                         pb.inc(1);
