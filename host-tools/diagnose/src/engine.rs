@@ -18,7 +18,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use super::features::{pressure_floor, Extractor};
 pub use super::gap::PointWaves;
 use super::model::{Builtin, ModelRunner, Plant};
-use super::pipeline::{confirm, floor, force_balance, group, held_out, nominal, oracle, rank, reference, where_};
+use super::pipeline::{confirm, floor, force_balance, group, held_out, nominal, oracle, part, rank, reference, where_};
 use hammer_sim::effects::EFFECT_NAMES;
 use hammer_sim::SimConfig;
 use std::sync::Arc;
@@ -28,8 +28,8 @@ pub use super::input::{DiagnoseError, MeasuredInput, Progress};
 pub use super::options::{Floors, Options};
 pub use super::report::{
     Alternative, Confirmation, DeadVolume, EffectResult, FittedParam, ForceBalancePoint, ForceBalanceQuantity,
-    InputInfo, ModelForm, ModelFreeStat, NominalMove, OracleCheck, PointShrink, Recalibration, Remainder, Report,
-    Shrink, Verdict, WhereCell,
+    InputInfo, ModelForm, ModelFreeStat, NominalMove, OracleCheck, Parted, PointShrink, Recalibration, Remainder,
+    Report, Shrink, Verdict, WhereCell,
 };
 
 #[derive(Debug, Clone)]
@@ -93,13 +93,13 @@ pub fn diagnose_with(
     let front: Vec<&[f64]> = all().map(|i| i.trace.p_front_pa.as_slice()).collect();
     extractor.pressure_floor_pa = [pressure_floor(&rear), pressure_floor(&front)];
     let runner = ModelRunner::with_plant(plant, hammer.hammer.clone(), extractor);
-    let hammer = hammer_extractor(references, &runner.extractor)?;
+    let read_with = hammer_extractor(references, &runner.extractor)?;
     let dead_volumes = if references.is_empty() {
         Vec::new()
     } else {
-        dead_volume_rows(&runner.extractor, &hammer)
+        dead_volume_rows(&runner.extractor, &read_with)
     };
-    let mut grouped = group::group(inputs, &hammer)?;
+    let mut grouped = group::group(inputs, &read_with)?;
     let total_steps = grouped.points.len() + EFFECT_NAMES.len() + 4;
     let done = AtomicUsize::new(0);
     let step = |what: &str| {
@@ -116,7 +116,7 @@ pub fn diagnose_with(
     // held-out check is run on them (below).
     let own_points = (!references.is_empty()).then(|| grouped.points.clone());
     if !references.is_empty() {
-        let (read, infos) = reference::baselines(references, &hammer)?;
+        let (read, infos) = reference::baselines(references, &read_with)?;
         reference::transplant(&mut grouped.points, &nominal.features, &read)?;
         reference_infos = infos;
         baselines = read;
@@ -157,10 +157,9 @@ pub fn diagnose_with(
     let recalibration = held_out::recalibration(&models, opts.nominal_uncertainty);
     let chambers = chamber_table(&fs, &nominal.bars, &models, &baselines);
     let (alternatives, alternative_sims) = close_call_group(check_fs, check_points, &nominal, &ranking, &shrink, opts);
-
+    let (parted, alone_sims) = part_by_model_alone(inputs, references, hammer, &runner, opts, &alternatives)?;
     plant_ok(&runner)?;
-    let simulations =
-        fs.simulations() + own_fs.as_ref().map_or(0, |f| f.simulations()) + models.simulations() + alternative_sims;
+    let sims = fs.simulations() + own_fs.as_ref().map_or(0, |f| f.simulations()) + models.simulations();
     Ok(Outcome {
         report: Report {
             tool: format!("hammer diagnose {}", env!("CARGO_PKG_VERSION")),
@@ -170,10 +169,7 @@ pub fn diagnose_with(
             dead_volumes,
             fit_points: fs.bars(),
             where_: located.where_,
-            verdict: Verdict {
-                confirmation,
-                ..ranking.verdict_report(alternatives)
-            },
+            verdict: verdict(&ranking, alternatives, parted, confirmation),
             effects: ranking.effects,
             pairs: ranking.pairs,
             recalibration,
@@ -189,7 +185,7 @@ pub fn diagnose_with(
             features_compared: ranking.features_compared,
             fit_cycles: fs.fit_cycles(),
             options: opts.clone(),
-            simulations,
+            simulations: sims + alternative_sims + alone_sims,
             elapsed_s: started.elapsed().as_secs_f64(),
         },
         waves: located.waves,
@@ -323,6 +319,54 @@ fn close_call_group(
         vec![member(named, shrink), member(other, &other_shrink)],
         models.simulations(),
     )
+}
+
+/// Against a record, a close call of the change that the same traces'
+/// diagnosis against the model alone parts ([`part`]), with the
+/// simulations that diagnosis took; `None` without a record or a close
+/// call.
+fn part_by_model_alone(
+    inputs: &[MeasuredInput],
+    references: &[MeasuredInput],
+    hammer: &SimConfig,
+    runner: &ModelRunner,
+    opts: &Options,
+    group: &[Alternative],
+) -> Result<(Option<Parted>, usize), DiagnoseError> {
+    if references.is_empty() || group.is_empty() {
+        return Ok((None, 0));
+    }
+    let alone = diagnose_with(inputs, &[], hammer, runner.plant.clone(), opts, &|_, _, _| {})?.report;
+    Ok((part::by_alone(group, &alone.verdict, &alone.effects), alone.simulations))
+}
+
+/// The report's verdict: the ranking's, its close call as a group unless
+/// the model alone parted it (then named outright, the group kept beside).
+fn verdict(
+    ranking: &rank::Ranking,
+    alternatives: Vec<Alternative>,
+    parted: Option<Parted>,
+    confirmation: Option<Confirmation>,
+) -> Verdict {
+    let Some(p) = parted else {
+        return Verdict {
+            confirmation,
+            ..ranking.verdict_report(alternatives)
+        };
+    };
+    let v = ranking.verdict_report(Vec::new());
+    let reason = format!(
+        "{}; the model alone names {} outright, with no close call: the hammer's own waveforms part the group ({})",
+        v.reason,
+        p.group[0],
+        p.group.join(" | ")
+    );
+    Verdict {
+        reason,
+        confirmation,
+        parted: Some(p),
+        ..v
+    }
 }
 
 /// The dead volumes the records were read through against the model's

@@ -112,6 +112,25 @@ pub struct Verdict {
     /// `pipeline::confirm`, docs/diagnosis.md).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub confirmation: Option<Confirmation>,
+    /// Against a record: a close call of the change that the hammer's own
+    /// waveforms, fitted by the model alone, part (`pipeline::part`). The
+    /// member is named outright in `effects`, and the group is kept here.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub parted: Option<Parted>,
+}
+
+/// A close call against a record, parted by the model alone: both
+/// diagnoses put the same member first, and the model alone's verdict
+/// names it outright, with no close call of its own (docs/diagnosis.md).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Parted {
+    /// The group the change since the record left, the named member first.
+    pub group: Vec<String>,
+    /// The model alone's score of each member (ΔBIC), in the group's order
+    /// (`null` for one it did not fit).
+    pub alone_scores: Vec<Option<f64>>,
+    /// The model alone's verdict, as it named it.
+    pub alone_effects: Vec<String>,
 }
 
 /// An effect named on the waveforms alone, checked with the nominal

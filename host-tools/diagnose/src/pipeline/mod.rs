@@ -12,6 +12,8 @@
 //!    [`floor`]: how large each unseen effect must be to be named here;
 //!    [`oracle`] (benchmarks only): whether the hammer's truth itself would
 //!    pass the confirm stage's rule;
+//!    [`part`] (against a record): a close call of the change that the
+//!    model alone's verdict on the same traces parts;
 //! 4. [`held_out`]: the verdict's model against the held-out data → the shrink;
 //! 5. [`where_`]: the gap and its remainder by signal × stage → where to look.
 //!
@@ -27,6 +29,7 @@ pub(crate) mod held_out;
 pub(crate) mod joint;
 pub(crate) mod nominal;
 pub(crate) mod oracle;
+pub(crate) mod part;
 pub(crate) mod rank;
 pub(crate) mod reference;
 pub(crate) mod rerank;

@@ -62,6 +62,7 @@ impl Ranking {
                         vec![alternatives]
                     },
                     confirmation: None,
+                    parted: None,
                 }
             }
             None => Verdict {
@@ -71,6 +72,7 @@ impl Ranking {
                 reason: self.reason.clone(),
                 alternatives: Vec::new(),
                 confirmation: None,
+                parted: None,
             },
         }
     }

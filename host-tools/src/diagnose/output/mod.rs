@@ -134,6 +134,7 @@ mod tests {
                 reason: "explains 87 % of the nominal chi2".into(),
                 alternatives: vec![],
                 confirmation: None,
+                parted: None,
             },
             recalibration: vec![],
             oracle: None,
@@ -388,6 +389,7 @@ mod tests {
             reason: String::new(),
             alternatives: vec![],
             confirmation: None,
+            parted: None,
         };
         let md = markdown(&r, &[]);
         assert!(md.contains("**none**"));

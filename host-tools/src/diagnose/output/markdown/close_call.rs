@@ -44,4 +44,23 @@ pub(super) fn close_call_md(s: &mut String, report: &Report) {
         }
         line!(s);
     }
+    if let Some(p) = &report.verdict.parted {
+        let scores: Vec<String> = p
+            .group
+            .iter()
+            .zip(&p.alone_scores)
+            .map(|(e, sc)| format!("{e} {}", sc.map_or_else(|| "not fitted".into(), num)))
+            .collect();
+        line!(s, "### A close call of the change, parted by the model alone");
+        line!(s);
+        line!(
+            s,
+            "Against the record, the change could not part {}. The same traces fitted by the model alone name {} outright, with no close call of their own (scores, ΔBIC: {}): together the two readings part the group, and {} is named.",
+            p.group.join(" and "),
+            p.group[0],
+            scores.join(", "),
+            p.group[0]
+        );
+        line!(s);
+    }
 }
