@@ -17,7 +17,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 use super::features::{pressure_floor, Extractor};
 pub use super::gap::PointWaves;
-use super::model::{Builtin, ModelRunner, Plant};
+use super::model::{Builtin, Memo, ModelRunner, Plant, MEMO_BYTES};
 use super::pipeline::{confirm, floor, force_balance, group, held_out, nominal, oracle, part, rank, reference, where_};
 use hammer_sim::effects::EFFECT_NAMES;
 use hammer_sim::SimConfig;
@@ -76,6 +76,20 @@ pub fn diagnose_against(
 /// the traces are read with; `plant` is what is fitted to them, the
 /// built-in simulator of `hammer` or a model of the user's own.
 pub fn diagnose_with(
+    inputs: &[MeasuredInput],
+    references: &[MeasuredInput],
+    hammer: &SimConfig,
+    plant: Arc<dyn Plant>,
+    opts: &Options,
+    progress: Progress,
+) -> Result<Outcome, DiagnoseError> {
+    let memo = Arc::new(Memo::new(plant, MEMO_BYTES));
+    diagnose_remembering(inputs, references, hammer, memo, opts, progress)
+}
+
+/// [`diagnose_with`] on a plant that already remembers its runs
+/// ([`Memo`]): the model-alone diagnosis of a close call shares them.
+fn diagnose_remembering(
     inputs: &[MeasuredInput],
     references: &[MeasuredInput],
     hammer: &SimConfig,
@@ -336,7 +350,7 @@ fn part_by_model_alone(
     if references.is_empty() || group.is_empty() {
         return Ok((None, 0));
     }
-    let alone = diagnose_with(inputs, &[], hammer, runner.plant.clone(), opts, &|_, _, _| {})?.report;
+    let alone = diagnose_remembering(inputs, &[], hammer, runner.plant.clone(), opts, &|_, _, _| {})?.report;
     Ok((part::by_alone(group, &alone.verdict, &alone.effects), alone.simulations))
 }
 

@@ -7,6 +7,7 @@
 //!   parameters and the effects it carries) and the [`ModelTrace`] it returns;
 //! - [`builtin`]: the built-in simulator behind that seam;
 //! - [`fmu`]: a user's FMU behind it, through its model map (issue 46);
+//! - [`memo`]: any plant, its runs remembered within one diagnosis;
 //! - here, [`ModelRunner`]: a plant at given nuisance values, read like a
 //!   measurement (sensor effects, transducer floors, features).
 
@@ -19,10 +20,12 @@ use hammer_sim::params::HammerParams;
 
 pub mod builtin;
 pub mod fmu;
+pub mod memo;
 pub mod plant;
 
 pub use builtin::{Builtin, NUISANCE};
 pub use fmu::FmuPlant;
+pub use memo::{Memo, MEMO_BYTES};
 pub use plant::{Impact, Keep, ModelTrace, Motion, NuisanceParam, Plant};
 
 /// E[u²] of the zero-shift magnitude factor u ~ U(0.5, 1.5) (`sim::sensor`).
