@@ -187,9 +187,9 @@ impl Plant for Memo {
             return Ok(as_kept(&t, keep));
         }
         let t = self.inner.run(supply_bar, nuisance, effects, duration_s, keep)?;
-        let shared = Arc::new(t);
-        self.keep(key, keep, Arc::clone(&shared));
-        Ok(Arc::try_unwrap(shared).unwrap_or_else(|a| (*a).clone()))
+        // One copy kept, the run itself handed back.
+        self.keep(key, keep, Arc::new(t.clone()));
+        Ok(t)
     }
 
     fn fatal(&self) -> Option<String> {
