@@ -15,7 +15,7 @@
 //!   and their input saved).
 //!
 //! Seed corpora live in `fuzz/corpus/<target>/`, written by
-//! `cargo run --release --manifest-path fuzz/Cargo.toml -- seeds`.
+//! `cargo run --release -p hammer-fuzz -- seeds`.
 
 pub mod mutate;
 pub mod smoke;

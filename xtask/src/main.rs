@@ -34,23 +34,33 @@ pub(crate) fn run(dir: &Path, program: &str, args: &[&str]) -> Result<(), String
 
 /// Runs `cargo test` passing its output through and adds up its `test result` lines.
 pub(crate) fn cargo_test(dir: &Path, args: &[&str], totals: &mut (u64, u64)) -> Result<(), String> {
-    counted(dir, args, Stream::Stdout, totals, &|line| {
-        let rest = line.strip_prefix("test result: ")?;
-        let count = |word: &str| {
-            rest.split(';')
-                .find_map(|part| {
-                    part.trim().strip_suffix(word).map(|n| {
-                        n.trim()
-                            .trim_start_matches("ok. ")
-                            .trim_start_matches("FAILED. ")
-                            .parse::<u64>()
-                            .unwrap_or(0)
-                    })
+    counted(dir, args, None, Stream::Stdout, totals, &test_result)
+}
+
+/// [`cargo_test`] with the target directory set on the command itself: a
+/// second lane's cargo must not follow what the first sets in the
+/// environment meanwhile.
+fn cargo_test_into(target_dir: &Path, dir: &Path, args: &[&str], totals: &mut (u64, u64)) -> Result<(), String> {
+    counted(dir, args, Some(target_dir), Stream::Stdout, totals, &test_result)
+}
+
+/// Passed and failed off a `test result: ok. N passed; M failed; …` line.
+fn test_result(line: &str) -> Option<(u64, u64)> {
+    let rest = line.strip_prefix("test result: ")?;
+    let count = |word: &str| {
+        rest.split(';')
+            .find_map(|part| {
+                part.trim().strip_suffix(word).map(|n| {
+                    n.trim()
+                        .trim_start_matches("ok. ")
+                        .trim_start_matches("FAILED. ")
+                        .parse::<u64>()
+                        .unwrap_or(0)
                 })
-                .unwrap_or(0)
-        };
-        Some((count("passed"), count("failed")))
-    })
+            })
+            .unwrap_or(0)
+    };
+    Some((count("passed"), count("failed")))
 }
 
 /// The stream a test runner writes its results to.
@@ -59,12 +69,13 @@ enum Stream {
     Stderr,
 }
 
-/// Runs `cargo args` in `dir` passing `stream` through, and adds to
-/// `totals` what `count` reads off its lines (passed, failed), whether or
-/// not the run fails.
+/// Runs `cargo args` in `dir` (into `target_dir` if given) passing `stream`
+/// through, and adds to `totals` what `count` reads off its lines (passed,
+/// failed), whether or not the run fails.
 fn counted(
     dir: &Path,
     args: &[&str],
+    target_dir: Option<&Path>,
     stream: Stream,
     totals: &mut (u64, u64),
     count: &dyn Fn(&str) -> Option<(u64, u64)>,
@@ -72,6 +83,9 @@ fn counted(
     eprintln!("xtask: ({}) cargo {}", dir.display(), args.join(" "));
     let mut cmd = Command::new("cargo");
     cmd.args(args).current_dir(dir);
+    if let Some(t) = target_dir {
+        cmd.env("CARGO_TARGET_DIR", t).env_remove("CARGO_BUILD_BUILD_DIR");
+    }
     match stream {
         Stream::Stdout => cmd.stdout(Stdio::piped()),
         Stream::Stderr => cmd.stderr(Stdio::piped()),
@@ -133,7 +147,7 @@ fn workspace_tests(root: &Path, totals: &mut (u64, u64)) -> Result<(), String> {
 /// Runs `cargo nextest` passing its output through and adds up its
 /// closing `Summary` line (`N tests run: A passed, B failed, C timed out`).
 fn nextest(dir: &Path, args: &[&str], totals: &mut (u64, u64)) -> Result<(), String> {
-    counted(dir, args, Stream::Stderr, totals, &nextest_summary)
+    counted(dir, args, None, Stream::Stderr, totals, &nextest_summary)
 }
 
 /// Passed and failed (timed out counted as failed) off nextest's closing
@@ -346,7 +360,6 @@ fn ci() -> Result<(), String> {
     let at = |stage: &str| eprintln!("xtask: {stage} done at {:.0} s", started.elapsed().as_secs_f64());
     run(&root, "cargo", &["fmt", "--all", "--", "--check"])?;
     run(&root.join("firmware"), "cargo", &["fmt", "--all", "--", "--check"])?;
-    run(&root.join("fuzz"), "cargo", &["fmt", "--all", "--", "--check"])?;
     run(&root.join("python"), "cargo", &["fmt", "--all", "--", "--check"])?;
     // The estimator must stay no_std and build for the Cortex-M4F.
     run(
@@ -358,11 +371,11 @@ fn ci() -> Result<(), String> {
     at("formatting and the firmware's build");
     let mut totals = (0, 0);
     let mut result = workspace_tests(&root, &mut totals);
-    // Once more with overflow checks on (the test profile): arithmetic that
-    // would wrap on bad input must not hide behind release mode.
-    if result.is_ok() {
-        result = cargo_test(&root, &["test", "-p", "hammer-estimator"], &mut totals);
-    }
+    // A second lane beside the Python package and the ninth effect, whose
+    // builds leave a core idle at times: the fuzzing smoke run, then the
+    // estimator's tests once more with overflow checks on (arithmetic that
+    // would wrap on bad input must not hide behind release mode).
+    let beside = if result.is_ok() { Some(second_lane(&root)) } else { None };
     // The Python package: its wheel built once into a fresh virtualenv,
     // imported, and pytest against it (python/tests, docs/python.md).
     if result.is_ok() {
@@ -374,25 +387,23 @@ fn ci() -> Result<(), String> {
         at("the Python package");
         result = ninth_effect::run(&root, &mut totals);
     }
-    // Fuzzing smoke run: the seeded in-process runner over every target.
-    if result.is_ok() {
-        std::env::set_var("CARGO_TARGET_DIR", root.join("target"));
-        result = cargo_test(
-            &root,
-            &["test", "--release", "--manifest-path", "fuzz/Cargo.toml"],
-            &mut totals,
-        )
-        .and_then(|_| fuzz(&["--execs", "1000000"]));
-        at("the ninth effect and the fuzzing smoke run");
+    if let Some(lane) = beside {
+        let (counts, lane_result) = lane
+            .join()
+            .unwrap_or_else(|_| ((0, 0), Err("the second lane's thread panicked".into())));
+        totals.0 += counts.0;
+        totals.1 += counts.1;
+        result = result.and(lane_result);
+        at("the ninth effect, the overflow checks and the fuzzing smoke run");
     }
     // The closing line CI reads.
     println!("xtask: {} passed, {} failed", totals.0, totals.1);
     result
 }
 
-/// The fuzz crate builds into the workspace's target directory (same
-/// dependencies, same profile: nothing is compiled twice), except under AFL,
-/// whose instrumentation flags need a directory of their own.
+/// `cargo xtask fuzz`: the smoke runner (built as a workspace member, so
+/// nothing is compiled twice) or, with `--afl`, AFL++ in a target directory
+/// of its own (its instrumentation flags must not reach the workspace's).
 fn fuzz(args: &[&str]) -> Result<(), String> {
     let root = root();
     if let Some(i) = args.iter().position(|a| *a == "--afl") {
@@ -409,16 +420,51 @@ fn fuzz(args: &[&str]) -> Result<(), String> {
     let mut cmd = vec![
         "run",
         "--release",
-        "--manifest-path",
-        "fuzz/Cargo.toml",
+        "-p",
+        "hammer-fuzz",
         "--bin",
         "hammer-fuzz",
         "--",
         "smoke",
     ];
     cmd.extend_from_slice(args);
-    std::env::set_var("CARGO_TARGET_DIR", root.join("target"));
     run(&root, "cargo", &cmd)
+}
+
+/// CI's second lane, in a thread of its own: the smoke run, 1,000,000
+/// executions a target, then the estimator's tests with overflow checks on
+/// (the test profile, whose build directory cargo locks apart from the
+/// release one the first lane builds in). The smoke runner is the one the
+/// workspace's tests just built (its crate's tests need it), run straight
+/// from the target directory: a `cargo` call here would wait for the first
+/// lane's lock. Returns the tests counted and the lane's result.
+type Lane = std::thread::JoinHandle<((u64, u64), Result<(), String>)>;
+
+fn second_lane(root: &Path) -> Lane {
+    let root = root.to_path_buf();
+    let target = std::env::var_os("CARGO_TARGET_DIR").map_or_else(|| root.join("target"), PathBuf::from);
+    std::thread::spawn(move || {
+        let mut totals = (0, 0);
+        let result = fuzz_smoke(&target.join("release/hammer-fuzz"))
+            .and_then(|()| cargo_test_into(&target, &root, &["test", "-p", "hammer-estimator"], &mut totals));
+        (totals, result)
+    })
+}
+
+fn fuzz_smoke(runner: &Path) -> Result<(), String> {
+    eprintln!("xtask: {} smoke --execs 1000000", runner.display());
+    let out = Command::new(runner)
+        .args(["smoke", "--execs", "1000000"])
+        .stdin(Stdio::null())
+        .output()
+        .map_err(|e| format!("cannot start {}: {e}", runner.display()))?;
+    print!("{}", String::from_utf8_lossy(&out.stdout));
+    eprint!("{}", String::from_utf8_lossy(&out.stderr));
+    if out.status.success() {
+        Ok(())
+    } else {
+        Err(format!("the fuzzing smoke run failed ({})", out.status))
+    }
 }
 
 /// A coverage-guided run of one target with AFL++ (installs cargo-afl from
@@ -433,6 +479,9 @@ fn afl(target: &str, minutes: u64) -> Result<(), String> {
     if !have {
         run(&root, "cargo", &["install", "cargo-afl", "--locked"])?;
     }
+    // A target directory of its own: AFL's instrumentation flags would
+    // otherwise rebuild (and replace) the workspace's artifacts.
+    std::env::set_var("CARGO_TARGET_DIR", fuzz_dir.join("target"));
     run(
         &fuzz_dir,
         "cargo",

@@ -23,7 +23,8 @@ fn read(path: &Path) -> Result<String, String> {
 
 /// The workspace's files copied to `to`: git's list (tracked and new, not
 /// ignored) in a git checkout, else every file outside build output. The
-/// firmware and the fuzz crate stay out (not workspace members).
+/// firmware (not a member) and the fuzz crate (taken out of the copy's
+/// members in [`run`]) stay out: the registry reaches neither.
 fn copy_workspace(root: &Path, to: &Path) -> Result<(), String> {
     let files = git_files(root).unwrap_or_else(|| {
         let mut out = Vec::new();
@@ -130,9 +131,16 @@ pub fn run(root: &Path, totals: &mut (u64, u64)) -> Result<(), String> {
     if !text.contains(version) {
         return Err(format!("no `{version}` in the workspace manifest"));
     }
+    // The fuzz crate is not copied (above), so it leaves the members.
+    let members = ", \"fuzz\"]";
+    if !text.contains(members) {
+        return Err(format!("no `{members}` in the workspace manifest's members"));
+    }
     write(
         &manifest,
-        &text.replacen(version, "version = \"0.1.0-ninth-effect\"", 1),
+        &text
+            .replacen(version, "version = \"0.1.0-ninth-effect\"", 1)
+            .replacen(members, "]", 1),
     )?;
     let mod_rs = ws.join("host-tools/sim/src/effects/mod.rs");
     write(
