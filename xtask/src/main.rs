@@ -401,9 +401,9 @@ fn ci() -> Result<(), String> {
     result
 }
 
-/// `cargo xtask fuzz`: the smoke runner (built as a workspace member, so
-/// nothing is compiled twice) or, with `--afl`, AFL++ in a target directory
-/// of its own (its instrumentation flags must not reach the workspace's).
+/// `cargo xtask fuzz`: the smoke runner, or with `--afl` AFL++ in a target
+/// directory of its own (its instrumentation flags must not reach the
+/// workspace's). CI runs the runner its tests built ([`second_lane`]).
 fn fuzz(args: &[&str]) -> Result<(), String> {
     let root = root();
     if let Some(i) = args.iter().position(|a| *a == "--afl") {
@@ -431,6 +431,9 @@ fn fuzz(args: &[&str]) -> Result<(), String> {
     run(&root, "cargo", &cmd)
 }
 
+/// A lane's thread: the tests it counted (passed, failed) and its result.
+type Lane = std::thread::JoinHandle<((u64, u64), Result<(), String>)>;
+
 /// CI's second lane, in a thread of its own: the smoke run, 1,000,000
 /// executions a target, then the estimator's tests with overflow checks on
 /// (the test profile, whose build directory cargo locks apart from the
@@ -438,8 +441,6 @@ fn fuzz(args: &[&str]) -> Result<(), String> {
 /// workspace's tests just built (its crate's tests need it), run straight
 /// from the target directory: a `cargo` call here would wait for the first
 /// lane's lock. Returns the tests counted and the lane's result.
-type Lane = std::thread::JoinHandle<((u64, u64), Result<(), String>)>;
-
 fn second_lane(root: &Path) -> Lane {
     let root = root.to_path_buf();
     let target = std::env::var_os("CARGO_TARGET_DIR").map_or_else(|| root.join("target"), PathBuf::from);
