@@ -360,7 +360,6 @@ fn ci() -> Result<(), String> {
     let at = |stage: &str| eprintln!("xtask: {stage} done at {:.0} s", started.elapsed().as_secs_f64());
     run(&root, "cargo", &["fmt", "--all", "--", "--check"])?;
     run(&root.join("firmware"), "cargo", &["fmt", "--all", "--", "--check"])?;
-    run(&root.join("python"), "cargo", &["fmt", "--all", "--", "--check"])?;
     // The estimator must stay no_std and build for the Cortex-M4F.
     run(
         &root,

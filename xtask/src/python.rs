@@ -8,6 +8,7 @@
 //! downloaded here, and the wheel is built by the pinned maturin
 //! (`--no-build-isolation`).
 
+use std::collections::BTreeSet;
 use std::io::{BufRead, BufReader};
 use std::path::Path;
 use std::process::{Command, Stdio};
@@ -28,6 +29,52 @@ fn count(line: &str, totals: &mut (u64, u64)) {
     }
 }
 
+/// The compiled crates in the release profile's dependency directory, by
+/// file name (`libserde-<hash>.rlib`): each name is one unit of the build.
+fn deps(target: &Path) -> BTreeSet<String> {
+    std::fs::read_dir(target.join("release/deps"))
+        .map(|dir| {
+            dir.filter_map(Result::ok)
+                .map(|e| e.file_name().to_string_lossy().into_owned())
+                .filter(|n| n.ends_with(".rlib") || n.ends_with(".so"))
+                .collect()
+        })
+        .unwrap_or_default()
+}
+
+/// Prints which crates the wheel's build compiled apart from the
+/// workspace's: besides the extension and pyo3, each one is a feature
+/// that host-tools/unify does not yet even out, and costs CI its compile.
+fn report_rebuilt(before: &BTreeSet<String>, after: &BTreeSet<String>) {
+    let crate_of = |n: &str| {
+        let stem = n.strip_prefix("lib").unwrap_or(n);
+        stem.rsplit_once('-').map_or(stem, |(c, _)| c).to_string()
+    };
+    let new: BTreeSet<String> = after.difference(before).map(|n| crate_of(n)).collect();
+    let apart: Vec<&String> = new
+        .iter()
+        .filter(|c| {
+            !c.starts_with("pyo3")
+                && !c.starts_with("_native")
+                && c.as_str() != "hammer_monitor_py"
+                && c.as_str() != "target_lexicon"
+        })
+        .collect();
+    eprintln!(
+        "xtask: the wheel's build compiled {} crates, {} of them apart from the workspace's build{}",
+        new.len(),
+        apart.len(),
+        if apart.is_empty() {
+            String::new()
+        } else {
+            format!(
+                " ({}): host-tools/unify/Cargo.toml can even them out",
+                apart.iter().map(|c| c.as_str()).collect::<Vec<_>>().join(", ")
+            )
+        }
+    );
+}
+
 pub fn run(root: &Path, totals: &mut (u64, u64)) -> Result<(), String> {
     let target = std::env::var_os("CARGO_TARGET_DIR").map_or_else(|| root.join("target"), Into::into);
     let hammer = target.join("release/hammer");
@@ -44,20 +91,16 @@ pub fn run(root: &Path, totals: &mut (u64, u64)) -> Result<(), String> {
     let venv_arg = venv.to_string_lossy().into_owned();
     crate::run(root, "python3", &["-m", "venv", "--system-site-packages", &venv_arg])?;
     let python = venv.join("bin/python").to_string_lossy().into_owned();
-    // The extension's final artifacts in a directory of its own (python/
-    // has its own Cargo.lock), its intermediate ones in the workspace's
-    // build directory: the dependencies both resolve alike, with the same
-    // release profile, are built once.
-    std::env::set_var("CARGO_TARGET_DIR", root.join("target/python"));
-    std::env::set_var("CARGO_BUILD_BUILD_DIR", &target);
-    let built = crate::run(
+    // python/ is a workspace member and host-tools/unify evens out its
+    // features: maturin's cargo finds the workspace's artifacts in the same
+    // target directory and compiles little more than the extension itself.
+    let before = deps(&target);
+    crate::run(
         root,
         &python,
         &["-m", "pip", "install", "--no-build-isolation", "--quiet", "./python"],
-    );
-    std::env::set_var("CARGO_TARGET_DIR", &target);
-    std::env::remove_var("CARGO_BUILD_BUILD_DIR");
-    built?;
+    )?;
+    report_rebuilt(&before, &deps(&target));
     crate::run(root, &python, &["-c", "import hammer_monitor"])?;
     eprintln!("xtask: ({}) {python} -m pytest python/tests", root.display());
     let mut child = Command::new(&python)
