@@ -42,36 +42,34 @@ fn deps(target: &Path) -> BTreeSet<String> {
         .unwrap_or_default()
 }
 
-/// Prints which crates the wheel's build compiled apart from the
-/// workspace's: besides the extension and pyo3, each one is a feature
-/// that host-tools/unify does not yet even out, and costs CI its compile.
-fn report_rebuilt(before: &BTreeSet<String>, after: &BTreeSet<String>) {
+/// The crates the wheel's build compiled (files in `after` and not in
+/// `before`), and those of them compiled apart from the workspace's build:
+/// besides the extension and pyo3, each one is a feature host-tools/unify
+/// does not yet even out, and costs CI its compile.
+fn compiled_apart(before: &BTreeSet<String>, after: &BTreeSet<String>) -> (BTreeSet<String>, Vec<String>) {
     let crate_of = |n: &str| {
         let stem = n.strip_prefix("lib").unwrap_or(n);
         stem.rsplit_once('-').map_or(stem, |(c, _)| c).to_string()
     };
     let new: BTreeSet<String> = after.difference(before).map(|n| crate_of(n)).collect();
-    let apart: Vec<&String> = new
-        .iter()
-        .filter(|c| {
-            !c.starts_with("pyo3")
-                && !c.starts_with("_native")
-                && c.as_str() != "hammer_monitor_py"
-                && c.as_str() != "target_lexicon"
-        })
-        .collect();
+    let own = |c: &str| {
+        c.starts_with("pyo3") || c.starts_with("_native") || matches!(c, "hammer_monitor_py" | "target_lexicon")
+    };
+    let apart = new.iter().filter(|c| !own(c)).cloned().collect();
+    (new, apart)
+}
+
+fn report_compiled(before: &BTreeSet<String>, after: &BTreeSet<String>) {
+    let (new, apart) = compiled_apart(before, after);
+    let named = if apart.is_empty() {
+        String::new()
+    } else {
+        format!(" ({}): host-tools/unify/Cargo.toml can even them out", apart.join(", "))
+    };
     eprintln!(
-        "xtask: the wheel's build compiled {} crates, {} of them apart from the workspace's build{}",
+        "xtask: the wheel's build compiled {} crates, {} of them apart from the workspace's build{named}",
         new.len(),
-        apart.len(),
-        if apart.is_empty() {
-            String::new()
-        } else {
-            format!(
-                " ({}): host-tools/unify/Cargo.toml can even them out",
-                apart.iter().map(|c| c.as_str()).collect::<Vec<_>>().join(", ")
-            )
-        }
+        apart.len()
     );
 }
 
@@ -100,7 +98,7 @@ pub fn run(root: &Path, totals: &mut (u64, u64)) -> Result<(), String> {
         &python,
         &["-m", "pip", "install", "--no-build-isolation", "--quiet", "./python"],
     )?;
-    report_rebuilt(&before, &deps(&target));
+    report_compiled(&before, &deps(&target));
     crate::run(root, &python, &["-c", "import hammer_monitor"])?;
     eprintln!("xtask: ({}) {python} -m pytest python/tests", root.display());
     let mut child = Command::new(&python)
@@ -140,5 +138,23 @@ mod tests {
         assert_eq!(t, (31, 1));
         super::count("2 errors in 0.4s", &mut t);
         assert_eq!(t, (31, 3));
+    }
+
+    #[test]
+    fn a_shared_crate_compiled_again_is_named_and_pyo3_is_not() {
+        let set = |names: &[&str]| names.iter().map(|n| n.to_string()).collect();
+        let before = set(&["libserde-1a2b.rlib", "libhammer_sim-3c4d.rlib"]);
+        let after = set(&[
+            "libserde-1a2b.rlib",
+            "libhammer_sim-3c4d.rlib",
+            "libhammer_sim-9f9f.rlib",
+            "libpyo3-5e6f.rlib",
+            "libpyo3_macros-7a7a.so",
+            "lib_native.so",
+        ]);
+        let (new, apart) = super::compiled_apart(&before, &after);
+        assert_eq!(new.len(), 4, "{new:?}");
+        assert_eq!(apart, vec!["hammer_sim".to_string()]);
+        assert!(super::compiled_apart(&after, &after).0.is_empty());
     }
 }
