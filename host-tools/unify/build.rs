@@ -1,3 +1,5 @@
-//! Empty: cargo resolves `[build-dependencies]` only for a package with a
-//! build script, and their features are the point of this crate (Cargo.toml).
+//! Empty, and there for its presence: without a build script cargo leaves a
+//! package's `[build-dependencies]` out of the build (it compiles none of
+//! them), so their features could not be relied on to reach the host's
+//! units. The features are the point of this crate (Cargo.toml).
 fn main() {}
