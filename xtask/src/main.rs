@@ -34,14 +34,7 @@ pub(crate) fn run(dir: &Path, program: &str, args: &[&str]) -> Result<(), String
 
 /// Runs `cargo test` passing its output through and adds up its `test result` lines.
 pub(crate) fn cargo_test(dir: &Path, args: &[&str], totals: &mut (u64, u64)) -> Result<(), String> {
-    counted(dir, args, None, Stream::Stdout, totals, &test_result)
-}
-
-/// [`cargo_test`] with the target directory set on the command itself: a
-/// second lane's cargo must not follow what the first sets in the
-/// environment meanwhile.
-fn cargo_test_into(target_dir: &Path, dir: &Path, args: &[&str], totals: &mut (u64, u64)) -> Result<(), String> {
-    counted(dir, args, Some(target_dir), Stream::Stdout, totals, &test_result)
+    counted(dir, args, Stream::Stdout, totals, &test_result)
 }
 
 /// Passed and failed off a `test result: ok. N passed; M failed; …` line.
@@ -69,13 +62,12 @@ enum Stream {
     Stderr,
 }
 
-/// Runs `cargo args` in `dir` (into `target_dir` if given) passing `stream`
+/// Runs `cargo args` in `dir` passing `stream`
 /// through, and adds to `totals` what `count` reads off its lines (passed,
 /// failed), whether or not the run fails.
 fn counted(
     dir: &Path,
     args: &[&str],
-    target_dir: Option<&Path>,
     stream: Stream,
     totals: &mut (u64, u64),
     count: &dyn Fn(&str) -> Option<(u64, u64)>,
@@ -83,9 +75,6 @@ fn counted(
     eprintln!("xtask: ({}) cargo {}", dir.display(), args.join(" "));
     let mut cmd = Command::new("cargo");
     cmd.args(args).current_dir(dir);
-    if let Some(t) = target_dir {
-        cmd.env("CARGO_TARGET_DIR", t).env_remove("CARGO_BUILD_BUILD_DIR");
-    }
     match stream {
         Stream::Stdout => cmd.stdout(Stdio::piped()),
         Stream::Stderr => cmd.stderr(Stdio::piped()),
@@ -114,6 +103,13 @@ fn counted(
     }
 }
 
+/// The cargo profile CI builds the workspace in (Cargo.toml's
+/// `[profile.ci]`): release, with other people's crates unoptimised (half
+/// of the build's time, none of the physics' hot path). Its artifacts land
+/// in `target/ci/`; the Python step and the ninth effect build in it too,
+/// so that nothing is compiled twice.
+pub const CI_PROFILE: &str = "ci";
+
 /// The workspace's tests. With cargo-nextest on the machine, every test
 /// binary runs side by side, the slowest first (`.config/nextest.toml`),
 /// and the doc-tests (which nextest does not run) after; without it, `cargo
@@ -129,13 +125,24 @@ fn workspace_tests(root: &Path, totals: &mut (u64, u64)) -> Result<(), String> {
     let result = if has_nextest {
         nextest(
             root,
-            &["nextest", "run", "--workspace", "--release", "--no-fail-fast"],
+            &[
+                "nextest",
+                "run",
+                "--workspace",
+                "--cargo-profile",
+                CI_PROFILE,
+                "--no-fail-fast",
+            ],
             totals,
         )
-        .and(cargo_test(root, &["test", "--workspace", "--release", "--doc"], totals))
+        .and(cargo_test(
+            root,
+            &["test", "--workspace", "--profile", CI_PROFILE, "--doc"],
+            totals,
+        ))
     } else {
         eprintln!("xtask: cargo-nextest not found: the test binaries run one after another");
-        cargo_test(root, &["test", "--workspace", "--release"], totals)
+        cargo_test(root, &["test", "--workspace", "--profile", CI_PROFILE], totals)
     };
     eprintln!(
         "xtask: the workspace's tests took {:.0} s",
@@ -147,7 +154,7 @@ fn workspace_tests(root: &Path, totals: &mut (u64, u64)) -> Result<(), String> {
 /// Runs `cargo nextest` passing its output through and adds up its
 /// closing `Summary` line (`N tests run: A passed, B failed, C timed out`).
 fn nextest(dir: &Path, args: &[&str], totals: &mut (u64, u64)) -> Result<(), String> {
-    counted(dir, args, None, Stream::Stderr, totals, &nextest_summary)
+    counted(dir, args, Stream::Stderr, totals, &nextest_summary)
 }
 
 /// Passed and failed (timed out counted as failed) off nextest's closing
@@ -366,14 +373,26 @@ fn ci() -> Result<(), String> {
         "cargo",
         &["build", "--release", "-p", "hammer-estimator", "--target", TARGET],
     )?;
-    build_firmware()?;
-    at("formatting and the firmware's build");
+    // The firmware's images build beside the workspace's test binaries: the
+    // firmware is a workspace and a target folder of its own, so neither
+    // build waits for the other's lock, and embassy-stm32's long compile
+    // leaves a core free at times. The tests need the images when they run.
+    let firmware = std::thread::spawn(build_firmware);
+    let built = run(
+        &root,
+        "cargo",
+        &["test", "--workspace", "--profile", CI_PROFILE, "--no-run"],
+    );
+    firmware
+        .join()
+        .unwrap_or_else(|_| Err("the firmware's build thread panicked".into()))?;
+    built?;
+    at("formatting, the firmware's and the test binaries' builds");
     let mut totals = (0, 0);
     let mut result = workspace_tests(&root, &mut totals);
     // A second lane beside the Python package and the ninth effect, whose
-    // builds leave a core idle at times: the fuzzing smoke run, then the
-    // estimator's tests once more with overflow checks on (arithmetic that
-    // would wrap on bad input must not hide behind release mode).
+    // builds leave a core idle at times: the fuzzing smoke run (the
+    // estimator in it with overflow checks on, as CI's profile builds it).
     let beside = if result.is_ok() { Some(second_lane(&root)) } else { None };
     // The Python package: its wheel built once into a fresh virtualenv,
     // imported, and pytest against it (python/tests, docs/python.md).
@@ -434,20 +453,19 @@ fn fuzz(args: &[&str]) -> Result<(), String> {
 type Lane = std::thread::JoinHandle<((u64, u64), Result<(), String>)>;
 
 /// CI's second lane, in a thread of its own: the smoke run, 1,000,000
-/// executions a target, then the estimator's tests with overflow checks on
-/// (the test profile, whose build directory cargo locks apart from the
-/// release one the first lane builds in). The smoke runner is the one the
-/// workspace's tests just built (its crate's tests need it), run straight
-/// from the target directory: a `cargo` call here would wait for the first
-/// lane's lock. Returns the tests counted and the lane's result.
+/// executions a target. The estimator's overflow checks need no run of
+/// their own: CI's profile builds the estimator with them for every test
+/// (Cargo.toml, `[profile.ci.package.hammer-estimator]`). The smoke runner
+/// is the one the workspace's tests just built (its crate's tests need it),
+/// run straight from the target directory: a `cargo` call here would wait
+/// for the first lane's lock. Returns the tests counted and the lane's
+/// result.
 fn second_lane(root: &Path) -> Lane {
     let root = root.to_path_buf();
     let target = std::env::var_os("CARGO_TARGET_DIR").map_or_else(|| root.join("target"), PathBuf::from);
     std::thread::spawn(move || {
-        let mut totals = (0, 0);
-        let result = fuzz_smoke(&target.join("release/hammer-fuzz"))
-            .and_then(|()| cargo_test_into(&target, &root, &["test", "-p", "hammer-estimator"], &mut totals));
-        (totals, result)
+        let totals = (0, 0);
+        (totals, fuzz_smoke(&target.join(CI_PROFILE).join("hammer-fuzz")))
     })
 }
 
@@ -544,7 +562,7 @@ fn afl(target: &str, minutes: u64) -> Result<(), String> {
 
 const USAGE: &str = "usage: cargo xtask <command>
   ci              every test: formatting, firmware build, host and emulator tests, the Python package
-  python          the Python package: the wheel built into a fresh virtualenv, imported, pytest against it
+  python          the Python package: the wheel built into a fresh virtualenv, imported, pytest against it (in CI's profile: after `cargo xtask ci` has built target/ci/hammer)
   firmware        build both firmware binaries and print their flash and RAM
   size            flash and static RAM of the built firmware binaries, each board's stack region and high-water mark (a 20 s soak)
   bench-firmware  the sampling loop's instructions per sample-set on the Cortex-M4 ISA under QEMU (-icount),

@@ -160,16 +160,37 @@ pub fn run(root: &Path, totals: &mut (u64, u64)) -> Result<(), String> {
     // replaced. The fixture's test is the diagnosis crate's: the registry
     // reaches no further, and the CLI with its MQTT and TLS stack would be
     // built again for nothing (about 50 s on 2 cores).
+    // `-p hammer-unify` beside each package: cargo resolves features for the
+    // selected packages alone, and without the union that crate names, 19
+    // shared crates (serde, syn, libc, …) and all above them would be
+    // compiled again with other features (3 minutes on 2 cores).
     std::env::set_var("CARGO_BUILD_BUILD_DIR", root.join("target"));
     std::env::set_var("CARGO_TARGET_DIR", root.join("target/ninth-effect/target"));
-    crate::cargo_test(&ws, &["test", "--release", "-p", "hammer-sim", "--lib"], totals)?;
+    let unify = ["-p", "hammer-unify"];
     crate::cargo_test(
         &ws,
         &[
             "test",
-            "--release",
+            "--profile",
+            crate::CI_PROFILE,
+            "-p",
+            "hammer-sim",
+            unify[0],
+            unify[1],
+            "--lib",
+        ],
+        totals,
+    )?;
+    crate::cargo_test(
+        &ws,
+        &[
+            "test",
+            "--profile",
+            crate::CI_PROFILE,
             "-p",
             "hammer-diagnose",
+            unify[0],
+            unify[1],
             "--test",
             &format!("{NAME}_ninth_effect"),
         ],

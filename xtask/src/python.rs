@@ -29,10 +29,10 @@ fn count(line: &str, totals: &mut (u64, u64)) {
     }
 }
 
-/// The compiled crates in the release profile's dependency directory, by
+/// The compiled crates in CI's profile's dependency directory, by
 /// file name (`libserde-<hash>.rlib`): each name is one unit of the build.
 fn deps(target: &Path) -> BTreeSet<String> {
-    std::fs::read_dir(target.join("release/deps"))
+    std::fs::read_dir(target.join(crate::CI_PROFILE).join("deps"))
         .map(|dir| {
             dir.filter_map(Result::ok)
                 .map(|e| e.file_name().to_string_lossy().into_owned())
@@ -75,7 +75,7 @@ fn report_compiled(before: &BTreeSet<String>, after: &BTreeSet<String>) {
 
 pub fn run(root: &Path, totals: &mut (u64, u64)) -> Result<(), String> {
     let target = std::env::var_os("CARGO_TARGET_DIR").map_or_else(|| root.join("target"), Into::into);
-    let hammer = target.join("release/hammer");
+    let hammer = target.join(crate::CI_PROFILE).join("hammer");
     if !hammer.is_file() {
         return Err(format!(
             "{}: no hammer binary (the workspace's tests build it)",
@@ -92,12 +92,23 @@ pub fn run(root: &Path, totals: &mut (u64, u64)) -> Result<(), String> {
     // python/ is a workspace member and host-tools/unify evens out its
     // features: maturin's cargo finds the workspace's artifacts in the same
     // target directory and compiles little more than the extension itself.
+    // maturin's build backend takes cargo's options from the environment:
+    // the wheel is built in CI's profile, beside the workspace's artifacts.
     let before = deps(&target);
-    crate::run(
-        root,
-        &python,
-        &["-m", "pip", "install", "--no-build-isolation", "--quiet", "./python"],
-    )?;
+    let pep517_args = format!("--profile {}", crate::CI_PROFILE);
+    eprintln!(
+        "xtask: ({}) MATURIN_PEP517_ARGS=\"{pep517_args}\" {python} -m pip install ./python",
+        root.display()
+    );
+    let status = Command::new(&python)
+        .args(["-m", "pip", "install", "--no-build-isolation", "--quiet", "./python"])
+        .env("MATURIN_PEP517_ARGS", &pep517_args)
+        .current_dir(root)
+        .status()
+        .map_err(|e| format!("cannot start {python}: {e}"))?;
+    if !status.success() {
+        return Err(format!("the Python package's wheel did not build ({status})"));
+    }
     report_compiled(&before, &deps(&target));
     crate::run(root, &python, &["-c", "import hammer_monitor"])?;
     eprintln!("xtask: ({}) {python} -m pytest python/tests", root.display());
