@@ -166,7 +166,6 @@ pub fn run(root: &Path, totals: &mut (u64, u64)) -> Result<(), String> {
     // compiled again with other features (3 minutes on 2 cores).
     std::env::set_var("CARGO_BUILD_BUILD_DIR", root.join("target"));
     std::env::set_var("CARGO_TARGET_DIR", root.join("target/ninth-effect/target"));
-    let unify = ["-p", "hammer-unify"];
     crate::cargo_test(
         &ws,
         &[
@@ -175,8 +174,8 @@ pub fn run(root: &Path, totals: &mut (u64, u64)) -> Result<(), String> {
             crate::CI_PROFILE,
             "-p",
             "hammer-sim",
-            unify[0],
-            unify[1],
+            "-p",
+            "hammer-unify",
             "--lib",
         ],
         totals,
@@ -189,8 +188,8 @@ pub fn run(root: &Path, totals: &mut (u64, u64)) -> Result<(), String> {
             crate::CI_PROFILE,
             "-p",
             "hammer-diagnose",
-            unify[0],
-            unify[1],
+            "-p",
+            "hammer-unify",
             "--test",
             &format!("{NAME}_ninth_effect"),
         ],
