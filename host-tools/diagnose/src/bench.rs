@@ -185,27 +185,7 @@ pub fn structural_generator(jitter: f64, rng: &mut Rng) -> (Structure, VariantPa
         structure = structure.with(&singles[second]);
     }
     let mut p = VariantParams::default();
-    for field in [
-        &mut p.port_conductance,
-        &mut p.port_critical_ratio,
-        &mut p.port_ramp_m,
-        &mut p.rear_dead_m3,
-        &mut p.front_dead_m3,
-        &mut p.valve_conductance,
-        &mut p.valve_critical_ratio,
-        &mut p.spool_tau_s,
-        &mut p.pilot_rear_m2,
-        &mut p.pilot_front_m2,
-        &mut p.pilot_hysteresis_n,
-        &mut p.polytropic_n,
-        &mut p.hose_length_m,
-        &mut p.inlet_volume_m3,
-        &mut p.contact_stiffness_n_per_m,
-        &mut p.contact_damping_ratio,
-        &mut p.tool_mass_kg,
-        &mut p.feed_force_n,
-        &mut p.workpiece_stiffness_n_per_m,
-    ] {
+    for field in p.uncertain_mut() {
         *field *= 1.0 + jitter * (2.0 * rng.uniform() - 1.0);
     }
     (structure, p)

@@ -123,7 +123,9 @@ fn diagnose_remembering(
     progress(0, total_steps, "nominal model");
     let nominal = nominal::nominal(&grouped.points, &runner, opts, &step);
     plant_ok(&runner)?;
-    let nominal = nominal?;
+    // The model-alone diagnosis that may part a close call holds its own.
+    let unpinned = runner.plant.clone();
+    let (runner, nominal, held_nuisance) = nominal::hold_unresponsive(runner, nominal?);
     let mut reference_infos = Vec::new();
     let mut baselines = Vec::new();
     // The hammer's own features, kept before the move onto the model: the
@@ -171,7 +173,7 @@ fn diagnose_remembering(
     let recalibration = held_out::recalibration(&models, opts.nominal_uncertainty);
     let chambers = chamber_table(&fs, &nominal.bars, &models, &baselines);
     let (alternatives, alternative_sims) = close_call_group(check_fs, check_points, &nominal, &ranking, &shrink, opts);
-    let (parted, alone_sims) = part_by_model_alone(inputs, references, hammer, &runner, opts, &alternatives)?;
+    let (parted, alone_sims) = part_by_model_alone(inputs, references, hammer, unpinned, opts, &alternatives)?;
     plant_ok(&runner)?;
     let sims = fs.simulations() + own_fs.as_ref().map_or(0, |f| f.simulations()) + models.simulations();
     Ok(Outcome {
@@ -187,6 +189,7 @@ fn diagnose_remembering(
             effects: ranking.effects,
             pairs: ranking.pairs,
             recalibration,
+            held_nuisance,
             oracle,
             remainder: located.remainder,
             model_form,
@@ -293,7 +296,10 @@ fn own_fit_set<'a>(
     runner: &'a ModelRunner,
     opts: &Options,
 ) -> crate::fitset::FitSet<'a> {
-    nominal::fit_set(own_points, nominal, runner, opts).0
+    let fs = nominal::fit_set(own_points, nominal, runner, opts).0;
+    // Its nominal and moved runs are the record's fit set's, counted there.
+    fs.sims.store(0, Ordering::Relaxed);
+    fs
 }
 
 /// The close call's group, the verdict's (last) effect first, each member
@@ -343,14 +349,14 @@ fn part_by_model_alone(
     inputs: &[MeasuredInput],
     references: &[MeasuredInput],
     hammer: &SimConfig,
-    runner: &ModelRunner,
+    plant: Arc<dyn Plant>,
     opts: &Options,
     group: &[Alternative],
 ) -> Result<(Option<Parted>, usize), DiagnoseError> {
     if references.is_empty() || group.is_empty() {
         return Ok((None, 0));
     }
-    let alone = diagnose_remembering(inputs, &[], hammer, runner.plant.clone(), opts, &|_, _, _| {})?.report;
+    let alone = diagnose_remembering(inputs, &[], hammer, plant, opts, &|_, _, _| {})?.report;
     Ok((part::by_alone(group, &alone.verdict, &alone.effects), alone.simulations))
 }
 

@@ -451,6 +451,11 @@ pub struct Report {
     pub verdict: Verdict,
     /// The nominal parameters as the verdict's fit left them.
     pub recalibration: Vec<Recalibration>,
+    /// Nuisance parameters held at nominal and not fitted: no fitted
+    /// feature moved when they did, at any fit point (a map's parameter
+    /// that does not act in this configuration of the model).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub held_nuisance: Vec<String>,
     /// A benchmark's check of its hammer's truth (never in a diagnosis of
     /// a measurement).
     #[serde(default, skip_serializing_if = "Option::is_none")]

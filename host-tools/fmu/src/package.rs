@@ -16,19 +16,19 @@ use crate::table::{Binding, Table, Val};
 /// The shared library cargo builds from this crate.
 pub const LIBRARY_FILE: &str = "libhammer_fmu.so";
 
-/// The second family's counterparts of the built-in model's nuisance
-/// parameters (`hammer_sim::params::NUISANCE`: its valve's conductance and
-/// pilots, its ports' conductance, its dead volumes, its contact damping).
-pub const VARIANT_NUISANCE: [&str; 8] = [
-    "params.valve_conductance",
-    "params.valve_critical_ratio",
-    "params.pilot_rear_m2",
-    "params.pilot_front_m2",
-    "params.port_conductance",
-    "params.rear_dead_m3",
-    "params.front_dead_m3",
-    "params.contact_damping_ratio",
-];
+/// The second family's nominal values its engineer is unsure of
+/// (`hammer_variants::structure::UNCERTAIN`: the ones the structural
+/// benchmark draws around nominal), as the FMU's parameters. Declaring
+/// fewer left the benchmark's hammers moved where the model could not
+/// follow: with only the eight that have a built-in counterpart, two of
+/// seed 7's twenty controls were flagged, a polytropic exponent read as
+/// heat exchange and a hose as a supply restriction (docs/your-model.md).
+pub fn variant_nuisance() -> Vec<String> {
+    hammer_variants::structure::UNCERTAIN
+        .iter()
+        .map(|name| format!("params.{name}"))
+        .collect()
+}
 
 /// What a model's FMU is called and says of itself.
 struct Identity {
@@ -37,7 +37,7 @@ struct Identity {
     stop_time_s: f64,
     step_s: f64,
     /// The nominal parameters the map's `[[nuisance]]` lists.
-    nuisance: Vec<&'static str>,
+    nuisance: Vec<String>,
 }
 
 fn identity(model: &Model) -> Identity {
@@ -47,14 +47,14 @@ fn identity(model: &Model) -> Identity {
             description: "The paper's small pneumatic impact hammer (hammer-monitor's simulator): piston, two chambers, pilot valve, supply; sensor chain with a seed",
             stop_time_s: cfg.solver.duration_s,
             step_s: cfg.solver.output_step_s,
-            nuisance: NUISANCE.iter().map(|(name, _)| *name).collect(),
+            nuisance: NUISANCE.iter().map(|(name, _)| name.to_string()).collect(),
         },
         Model::Variants(cfg) => Identity {
             model_identifier: "hammer_variants",
             description: "The paper's hammer in hammer-monitor's second model family (hammer-variants): other valve, port, chamber, supply, anvil and sensor laws, fixed-step RK4",
             stop_time_s: cfg.duration_s,
             step_s: hammer_variants::generate::STEP_S * hammer_variants::generate::OUTPUT_EVERY as f64,
-            nuisance: VARIANT_NUISANCE.to_vec(),
+            nuisance: variant_nuisance(),
         },
     }
 }
@@ -165,7 +165,7 @@ pub fn write_fmu(model: &Model, library: &Path, out: &Path) -> Result<Written, S
 /// applies the sensor effects itself, so the sensor effects are left to
 /// `[outside]`), the supply parameter, the nuisance list, and every
 /// physical catalogue effect with its switch and parameters.
-fn model_map(table: &Table, fmu: &Path, nuisance: &[&str]) -> Result<String, String> {
+fn model_map(table: &Table, fmu: &Path, nuisance: &[String]) -> Result<String, String> {
     use crate::import::map::{
         EffectCarrier, EffectParam, ModelMap, Nuisance, Outside, Reference, Signal, Signals, Supply,
     };
@@ -242,8 +242,8 @@ fn model_map(table: &Table, fmu: &Path, nuisance: &[&str]) -> Result<String, Str
         },
         nuisance: nuisance
             .iter()
-            .map(|&p| Nuisance {
-                parameter: p.to_string(),
+            .map(|p| Nuisance {
+                parameter: p.clone(),
                 nominal: start(p).unwrap_or(f64::NAN),
                 relative_uncertainty: NOMINAL_UNCERTAINTY,
             })

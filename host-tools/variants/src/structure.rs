@@ -255,7 +255,61 @@ impl Default for VariantParams {
     }
 }
 
+/// The nominal values of this family that a hammer's engineer knows only
+/// roughly (its laws' coefficients, its volumes, its anvil and tool), by
+/// their field names: the structural benchmark draws each hammer's from
+/// these around nominal, and the family's FMU map declares them as the
+/// nuisance a diagnosis may recalibrate (issue 46). One list, so that the
+/// benchmark never moves a value its own model's map holds fixed. The
+/// geometry (bore, rod, strokes, port edges) is measured, not listed.
+pub const UNCERTAIN: [&str; 19] = [
+    "port_conductance",
+    "port_critical_ratio",
+    "port_ramp_m",
+    "rear_dead_m3",
+    "front_dead_m3",
+    "valve_conductance",
+    "valve_critical_ratio",
+    "spool_tau_s",
+    "pilot_rear_m2",
+    "pilot_front_m2",
+    "pilot_hysteresis_n",
+    "polytropic_n",
+    "hose_length_m",
+    "inlet_volume_m3",
+    "contact_stiffness_n_per_m",
+    "contact_damping_ratio",
+    "tool_mass_kg",
+    "feed_force_n",
+    "workpiece_stiffness_n_per_m",
+];
+
 impl VariantParams {
+    /// The [`UNCERTAIN`] values, in its order.
+    pub fn uncertain_mut(&mut self) -> [&mut f64; 19] {
+        [
+            &mut self.port_conductance,
+            &mut self.port_critical_ratio,
+            &mut self.port_ramp_m,
+            &mut self.rear_dead_m3,
+            &mut self.front_dead_m3,
+            &mut self.valve_conductance,
+            &mut self.valve_critical_ratio,
+            &mut self.spool_tau_s,
+            &mut self.pilot_rear_m2,
+            &mut self.pilot_front_m2,
+            &mut self.pilot_hysteresis_n,
+            &mut self.polytropic_n,
+            &mut self.hose_length_m,
+            &mut self.inlet_volume_m3,
+            &mut self.contact_stiffness_n_per_m,
+            &mut self.contact_damping_ratio,
+            &mut self.tool_mass_kg,
+            &mut self.feed_force_n,
+            &mut self.workpiece_stiffness_n_per_m,
+        ]
+    }
+
     /// This hammer's chambers in the characteristics' terms
     /// (`hammer_estimator::chambers`): the same geometry the plant integrates.
     pub fn chambers(&self) -> hammer_estimator::chambers::ChamberGeometry {
@@ -268,6 +322,32 @@ impl VariantParams {
             impact_position_m: self.x_impact_m,
             rear_outlet_m: self.rear_port_m,
             front_outlet_m: self.front_port_m,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Each name of [`UNCERTAIN`] is the field its accessor moves: moved
+    /// one at a time, exactly that field of the serialised parameters
+    /// changes (the FMU's parameter `params.<name>` is that field).
+    #[test]
+    fn uncertain_names_are_their_fields() {
+        let nominal = serde_json::to_value(VariantParams::default()).unwrap();
+        for (i, name) in UNCERTAIN.iter().enumerate() {
+            let mut p = VariantParams::default();
+            *p.uncertain_mut()[i] *= 1.5;
+            let moved = serde_json::to_value(&p).unwrap();
+            let changed: Vec<&String> = moved
+                .as_object()
+                .unwrap()
+                .iter()
+                .filter(|(k, v)| nominal[k.as_str()] != **v)
+                .map(|(k, _)| k)
+                .collect();
+            assert_eq!(changed, [name], "UNCERTAIN[{i}]");
         }
     }
 }

@@ -8,6 +8,8 @@
 //! - [`builtin`]: the built-in simulator behind that seam;
 //! - [`fmu`]: a user's FMU behind it, through its model map (issue 46);
 //! - [`memo`]: any plant, its runs remembered within one diagnosis;
+//! - [`pinned`]: any plant, the nuisance parameters it did not respond to
+//!   held at nominal;
 //! - here, [`ModelRunner`]: a plant at given nuisance values, read like a
 //!   measurement (sensor effects, transducer floors, features).
 
@@ -21,11 +23,13 @@ use hammer_sim::params::HammerParams;
 pub mod builtin;
 pub mod fmu;
 pub mod memo;
+pub mod pinned;
 pub mod plant;
 
 pub use builtin::{Builtin, NUISANCE};
 pub use fmu::FmuPlant;
 pub use memo::{Memo, MEMO_BYTES};
+pub use pinned::Pinned;
 pub use plant::{Impact, Keep, ModelTrace, Motion, NuisanceParam, Plant};
 
 /// E[u²] of the zero-shift magnitude factor u ~ U(0.5, 1.5) (`sim::sensor`).

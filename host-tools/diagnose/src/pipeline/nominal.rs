@@ -6,13 +6,14 @@
 //! Everything an effect's fit needs is computed here once, so the ranking's
 //! many fits only ever simulate the candidate effect.
 
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::atomic::AtomicUsize;
+use std::sync::Arc;
 
 use super::group::Point;
 use crate::features::{summarize, N_FEATURES};
 use crate::fitset::{in_fit, model_form_group_name, sigmas, FitSet};
 use crate::input::DiagnoseError;
-use crate::model::{Candidate, Keep, ModelRunner, ModelTrace};
+use crate::model::{Candidate, Keep, ModelRunner, ModelTrace, Pinned};
 use crate::options::Options;
 use crate::parallel::parallel;
 use crate::report::ModelForm;
@@ -23,6 +24,12 @@ pub(crate) struct Nominal {
     pub(crate) bars: Vec<f64>,
     pub(crate) runs: Vec<ModelTrace>,
     pub(crate) features: Vec<Vec<f64>>,
+    /// At each fit point (empty elsewhere), the model's features with one
+    /// nuisance parameter moved by one prior standard deviation, one entry
+    /// per parameter (`None`: that run failed).
+    pub(crate) moved: Vec<Vec<Option<Vec<f64>>>>,
+    /// The runs this took.
+    pub(crate) simulations: usize,
 }
 
 /// Simulates the nominal model at every point; `step` is called once per point.
@@ -51,7 +58,78 @@ pub(crate) fn nominal(
                 .ok_or_else(|| DiagnoseError::Model(*bar, "no steady impact cycle".into()))?,
         );
     }
-    Ok(Nominal { bars, runs, features })
+    let moved = if opts.nominal_uncertainty > 0.0 {
+        moved(points, runner, opts)
+    } else {
+        vec![Vec::new(); points.len()]
+    };
+    let simulations = bars.len() + moved.iter().map(Vec::len).sum::<usize>();
+    Ok(Nominal {
+        bars,
+        runs,
+        features,
+        moved,
+        simulations,
+    })
+}
+
+/// The model's features at every fit point with each nuisance parameter
+/// moved by one prior standard deviation (its own, or `nominal_uncertainty`).
+fn moved(points: &[Point], runner: &ModelRunner, opts: &Options) -> Vec<Vec<Option<Vec<f64>>>> {
+    let h = runner.prior_sds(opts.nominal_uncertainty);
+    let n = h.len();
+    let jobs: Vec<(usize, usize)> = (0..points.len())
+        .filter(|&p| points[p].is_fit_point)
+        .flat_map(|p| (0..n).map(move |k| (p, k)))
+        .collect();
+    let cols = parallel(opts.threads, jobs.clone(), &|(p, k)| {
+        let bar = points[p].supply_bar;
+        let run = runner
+            .moved(k, 1.0 + h[k])
+            .run(bar, &Effects::default(), Keep::All)
+            .ok()?;
+        runner.features_of_truth(&run, &Effects::default(), bar)
+    });
+    let mut moved = vec![Vec::new(); points.len()];
+    for ((p, _), col) in jobs.into_iter().zip(cols) {
+        moved[p].push(col);
+    }
+    moved
+}
+
+/// `runner` with the nuisance parameters no fitted feature responded to,
+/// at any fit point, held at nominal ([`Pinned`]), and `nominal`'s moved
+/// runs cut to the parameters left free; the held parameters' names. A
+/// parameter whose moved run failed is kept (the fit finds its failure).
+pub(crate) fn hold_unresponsive(runner: ModelRunner, mut nominal: Nominal) -> (ModelRunner, Nominal, Vec<String>) {
+    let n = runner.nuisance.len();
+    let same = |a: &[f64], b: &[f64]| {
+        (0..N_FEATURES)
+            .filter(|&j| in_fit(j))
+            .all(|j| a[j].to_bits() == b[j].to_bits())
+    };
+    let responds = |k: usize| {
+        nominal
+            .moved
+            .iter()
+            .zip(&nominal.features)
+            .filter(|(m, _)| !m.is_empty())
+            .any(|(m, f)| m.get(k).is_none_or(|c| c.as_ref().is_none_or(|c| !same(c, f))))
+    };
+    let kept: Vec<usize> = (0..n).filter(|&k| responds(k)).collect();
+    let Some(pinned) = Pinned::new(runner.plant.clone(), kept.clone()) else {
+        return (runner, nominal, Vec::new());
+    };
+    let held = pinned.held().to_vec();
+    for m in nominal.moved.iter_mut().filter(|m| !m.is_empty()) {
+        *m = kept.iter().map(|&k| m[k].take()).collect();
+    }
+    let runner = ModelRunner {
+        plant: Arc::new(pinned),
+        nuisance: kept.iter().map(|&k| runner.nuisance[k]).collect(),
+        ..runner
+    };
+    (runner, nominal, held)
 }
 
 /// The fit set of the fit points, with the model-form factors it was weighed by.
@@ -84,16 +162,13 @@ pub(crate) fn fit_set<'a>(
         nominal_features: fit_idx.iter().map(|&i| nominal.features[i].clone()).collect(),
         pressures,
         distinct: fit_bars.len(),
-        sims: AtomicUsize::new(points.len()),
+        sims: AtomicUsize::new(nominal.simulations),
         nuisance: Vec::new(),
         against_reference: points.iter().any(|p| !p.reference_var.is_empty()),
         reference_var: fit_idx.iter().map(|&i| points[i].reference_var.clone()).collect(),
     };
     if opts.nominal_uncertainty > 0.0 {
-        let fit_features: Vec<&[f64]> = fit_idx.iter().map(|&i| nominal.features[i].as_slice()).collect();
-        fs.nuisance = nuisance_sensitivities(&fs, &fit_features, opts);
-        fs.sims
-            .fetch_add(fs.points.len() * runner.nuisance.len(), Ordering::Relaxed);
+        fs.nuisance = nuisance_sensitivities(&fs, &fit_idx, nominal);
     }
     let model_form = if opts.model_form {
         let factors = fs.model_form_factors(&Candidate::default());
@@ -114,29 +189,22 @@ pub(crate) fn fit_set<'a>(
 
 /// Whitened change of every fit feature when one nuisance parameter moves
 /// by one prior standard deviation (one column per parameter, concatenated
-/// over the fit points); a feature the moved model loses counts as no change.
-fn nuisance_sensitivities(fs: &FitSet, nominal_features: &[&[f64]], opts: &Options) -> Vec<Vec<f64>> {
-    let h = fs.runner.prior_sds(opts.nominal_uncertainty);
-    let n = h.len();
-    let jobs: Vec<(usize, usize)> = (0..fs.points.len()).flat_map(|p| (0..n).map(move |k| (p, k))).collect();
-    let runner = fs.runner;
-    let cols = parallel(opts.threads, jobs.clone(), &|(p, k)| {
-        let bar = fs.points[p].0;
-        let run = runner
-            .moved(k, 1.0 + h[k])
-            .run(bar, &Effects::default(), Keep::All)
-            .ok()?;
-        runner.features_of_truth(&run, &Effects::default(), bar)
-    });
+/// over the fit points `fit_idx`); a feature the moved model loses counts
+/// as no change.
+fn nuisance_sensitivities(fs: &FitSet, fit_idx: &[usize], nominal: &Nominal) -> Vec<Vec<f64>> {
+    let n = fs.runner.nuisance.len();
     let mut nuisance = vec![Vec::with_capacity(fs.points.len() * N_FEATURES); n];
-    for ((p, k), col) in jobs.into_iter().zip(cols) {
-        let nom = nominal_features[p];
+    for (p, &i) in fit_idx.iter().enumerate() {
+        let nom = &nominal.features[i];
         let sigma = &fs.points[p].2;
-        for j in 0..N_FEATURES {
-            // One prior standard deviation's change of the feature, whitened.
-            let d = col.as_ref().map_or(f64::NAN, |f| (f[j] - nom[j]) / sigma[j]);
-            let d = if in_fit(j) { d } else { 0.0 };
-            nuisance[k].push(if d.is_finite() { d } else { 0.0 });
+        for (k, col) in nuisance.iter_mut().enumerate() {
+            let moved = nominal.moved[i].get(k).and_then(Option::as_ref);
+            for j in 0..N_FEATURES {
+                // One prior standard deviation's change of the feature, whitened.
+                let d = moved.map_or(f64::NAN, |f| (f[j] - nom[j]) / sigma[j]);
+                let d = if in_fit(j) { d } else { 0.0 };
+                col.push(if d.is_finite() { d } else { 0.0 });
+            }
         }
     }
     nuisance
@@ -172,5 +240,63 @@ mod tests {
         assert!(fs.nuisance.iter().all(|c| c.len() == N_FEATURES));
         assert!(!form.is_empty() && form.iter().all(|m| m.factor >= 1.0));
         assert_eq!(fs.simulations(), 2 + crate::model::NUISANCE.len());
+    }
+
+    /// The built-in model with one more nuisance parameter that it ignores
+    /// (a map's parameter that does not act in the model's configuration).
+    #[derive(Debug)]
+    struct Ignoring {
+        inner: crate::model::Builtin,
+        params: Vec<crate::model::NuisanceParam>,
+    }
+
+    impl crate::model::Plant for Ignoring {
+        fn nuisance(&self) -> &[crate::model::NuisanceParam] {
+            &self.params
+        }
+        fn carries(&self, name: &str) -> bool {
+            self.inner.carries(name)
+        }
+        fn run(&self, bar: f64, nuisance: &[f64], e: &Effects, d: f64, keep: Keep) -> Result<ModelTrace, String> {
+            self.inner.run(bar, &nuisance[..nuisance.len() - 1], e, d, keep)
+        }
+    }
+
+    /// The ignored parameter is held, and named; the fit set the diagnosis
+    /// then builds is the built-in model's own to the bit: the same
+    /// sensitivity columns, the same count of runs less the held one's.
+    #[test]
+    fn a_parameter_the_model_ignores_is_held_at_nominal() {
+        use crate::model::{Builtin, NuisanceParam, Plant};
+        let plain = nominal_runner();
+        let inner = Builtin::new(hammer_sim::SimConfig::default());
+        let mut params = inner.nuisance().to_vec();
+        params.push(NuisanceParam {
+            name: "params.unused".into(),
+            nominal: 2.0,
+            relative_uncertainty: Some(0.2),
+        });
+        let wide = ModelRunner::with_plant(
+            Arc::new(Ignoring { inner, params }),
+            plain.hammer.clone(),
+            plain.extractor.clone(),
+        );
+        let inputs = [measured(4.0, true), measured(7.0, false)];
+        let g = group(&inputs, &plain.extractor).unwrap();
+        let opts = options();
+        let nom = nominal(&g.points, &wide, &opts, &quiet).unwrap();
+        assert_eq!(nom.moved[0].len(), crate::model::NUISANCE.len() + 1);
+        let (held_runner, nom, held) = hold_unresponsive(wide, nom);
+        assert_eq!(held, ["params.unused"]);
+        assert_eq!(held_runner.nuisance, plain.nuisance);
+        let (fs, _) = fit_set(&g.points, &nom, &held_runner, &opts);
+        let own = nominal(&g.points, &plain, &opts, &quiet).unwrap();
+        let (fs_plain, _) = fit_set(&g.points, &own, &plain, &opts);
+        let bits = |c: &[Vec<f64>]| c.iter().flatten().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&fs.nuisance), bits(&fs_plain.nuisance));
+        assert_eq!(fs.simulations(), fs_plain.simulations() + 1);
+        // A model that responds to every parameter holds none.
+        let (_, _, none) = hold_unresponsive(plain, own);
+        assert!(none.is_empty());
     }
 }

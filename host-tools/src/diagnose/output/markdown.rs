@@ -397,6 +397,14 @@ fn footer_md(s: &mut String, report: &Report) {
 fn recalibration_md(s: &mut String, report: &Report) {
     line!(s, "### Recalibrated nominal parameters");
     line!(s);
+    if !report.held_nuisance.is_empty() {
+        line!(
+            s,
+            "Held at nominal, not fitted (no fitted feature moved when they did, at any fit point): {}.",
+            report.held_nuisance.join(", ")
+        );
+        line!(s);
+    }
     if report.recalibration.is_empty() {
         line!(s, "No recalibration (the nominal parameters were held).");
         line!(s);

@@ -137,6 +137,7 @@ mod tests {
                 parted: None,
             },
             recalibration: vec![],
+            held_nuisance: vec![],
             oracle: None,
             remainder: vec![],
             model_form: vec![],
