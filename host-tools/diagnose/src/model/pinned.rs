@@ -6,10 +6,11 @@
 //! where the supply is a stiff line, a polytropic exponent where the
 //! chambers follow another law). Such a parameter's sensitivity column is
 //! exactly zero, so the prior alone holds it at nominal in every fit, and
-//! its Jacobian columns are simulations that cannot change the answer: a
-//! second family's map of 19 parameters made each case about 1.5 times
-//! dearer before they were held. Holding them changes no fitted value but
-//! by the order of a sum; `report.json` names them (`held_nuisance`).
+//! its Jacobian columns are simulations that cannot change the answer (the
+//! second family's map of 19 lists a polytropic exponent, a hose and a
+//! tool, each acting only in its own form). Holding them changes no fitted
+//! value but by the order of a sum; `report.json` names them
+//! (`held_nuisance`).
 
 use std::sync::Arc;
 
