@@ -106,6 +106,22 @@ fn add_docs_row(md: &str, row: &str) -> Result<String, String> {
     Ok(format!("{}\n{row}{}", &md[..at], &md[at..]))
 }
 
+/// The FMU crate's manifest with its library built as an rlib alone. A
+/// package that builds a cdylib gets no hash in its artifacts' names, so
+/// the copy's `libhammer_fmu.rlib` and `.so` (built with nine effects)
+/// would land on the workspace's own in the shared build directory, where
+/// cargo still takes the workspace's as fresh: a second `cargo xtask ci` on
+/// the same checkout then failed to compile hammer-diagnose, and `hammer
+/// fmu`, which packs the newer of the two libraries beside it, would have
+/// packed the copy's. The copy's tests load no FMU.
+fn rlib_only(manifest: &str) -> Result<String, String> {
+    let both = "crate-type = [\"cdylib\", \"rlib\"]";
+    if manifest.matches(both).count() != 1 {
+        return Err(format!("no single `{both}` in host-tools/fmu/Cargo.toml"));
+    }
+    Ok(manifest.replacen(both, "crate-type = [\"rlib\"]", 1))
+}
+
 pub fn run(root: &Path, totals: &mut (u64, u64)) -> Result<(), String> {
     let fixtures = root.join("xtask/fixtures/ninth-effect");
     let ws: PathBuf = root.join("target/ninth-effect/workspace");
@@ -142,6 +158,8 @@ pub fn run(root: &Path, totals: &mut (u64, u64)) -> Result<(), String> {
             .replacen(version, "version = \"0.1.0-ninth-effect\"", 1)
             .replacen(members, "]", 1),
     )?;
+    let fmu_manifest = ws.join("host-tools/fmu/Cargo.toml");
+    write(&fmu_manifest, &rlib_only(&read(&fmu_manifest)?)?)?;
     let mod_rs = ws.join("host-tools/sim/src/effects/mod.rs");
     write(
         &mod_rs,
@@ -156,8 +174,9 @@ pub fn run(root: &Path, totals: &mut (u64, u64)) -> Result<(), String> {
         )?,
     )?;
     // The workspace's build directory, where the dependencies are built
-    // already; final artifacts land apart, so the workspace's own are not
-    // replaced. The fixture's test is the diagnosis crate's: the registry
+    // already; final artifacts land apart, and every library of the copy
+    // has a hash of its own in its name ([`rlib_only`]), so the
+    // workspace's own are not replaced. The fixture's test is the diagnosis crate's: the registry
     // reaches no further, and the CLI with its MQTT and TLS stack would be
     // built again for nothing (about 50 s on 2 cores).
     // `-p hammer-unify` beside each package: cargo resolves features for the
@@ -195,4 +214,65 @@ pub fn run(root: &Path, totals: &mut (u64, u64)) -> Result<(), String> {
         ],
         totals,
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use std::path::Path;
+
+    #[test]
+    fn the_copys_fmu_crate_builds_an_rlib_alone() {
+        let manifest = include_str!("../../host-tools/fmu/Cargo.toml");
+        let copy = super::rlib_only(manifest).unwrap();
+        assert!(copy.contains("crate-type = [\"rlib\"]"), "{copy}");
+        let types: Vec<&str> = copy.lines().filter(|l| l.starts_with("crate-type")).collect();
+        assert_eq!(types, ["crate-type = [\"rlib\"]"]);
+        assert!(
+            super::rlib_only(&copy).is_err(),
+            "a manifest without the line is refused"
+        );
+    }
+
+    /// The copy builds the simulator and the diagnosis with what they
+    /// depend on. Of the members with a cdylib, the FMU crate is the one
+    /// they reach ([`super::rlib_only`]); the others must stay leaves,
+    /// which no member depends on.
+    #[test]
+    fn the_other_cdylib_members_are_leaves() {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap();
+        let text = |p: &Path| std::fs::read_to_string(p).unwrap();
+        let workspace = text(&root.join("Cargo.toml"));
+        let list = &workspace[workspace.find("members = [").unwrap()..];
+        let list = &list[..list.find(']').unwrap()];
+        let members: Vec<(String, String)> = list
+            .split('"')
+            .skip(1)
+            .step_by(2)
+            .map(|m| (m.to_string(), text(&root.join(m).join("Cargo.toml"))))
+            .collect();
+        let package = |manifest: &str| {
+            let line = manifest.lines().find(|l| l.starts_with("name = ")).unwrap();
+            line.split('"').nth(1).unwrap().to_string()
+        };
+        let cdylibs: Vec<&str> = members
+            .iter()
+            .filter(|(_, m)| m.contains("\"cdylib\""))
+            .map(|(dir, _)| dir.as_str())
+            .collect();
+        assert!(cdylibs.contains(&"host-tools/fmu"), "{cdylibs:?}");
+        for (dir, manifest) in members
+            .iter()
+            .filter(|(d, m)| d != "host-tools/fmu" && m.contains("\"cdylib\""))
+        {
+            let name = package(manifest);
+            for (other, m) in &members {
+                assert!(
+                    other == dir
+                        || !m.lines().any(|l| l.trim_start().starts_with(&format!("{name} "))
+                            || l.trim_start().starts_with(&format!("{name}."))),
+                    "{other} depends on {name}, a cdylib: the ninth effect's copy would build it"
+                );
+            }
+        }
+    }
 }
