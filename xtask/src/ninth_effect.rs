@@ -176,9 +176,10 @@ pub fn run(root: &Path, totals: &mut (u64, u64)) -> Result<(), String> {
     // The workspace's build directory, where the dependencies are built
     // already; final artifacts land apart, and every library of the copy
     // has a hash of its own in its name ([`rlib_only`]), so the
-    // workspace's own are not replaced. The fixture's test is the diagnosis crate's: the registry
-    // reaches no further, and the CLI with its MQTT and TLS stack would be
-    // built again for nothing (about 50 s on 2 cores).
+    // workspace's own are not replaced. The fixture's test is the
+    // diagnosis crate's: the registry reaches no further, and the CLI with
+    // its MQTT and TLS stack would be built again for nothing (about 50 s
+    // on 2 cores).
     // `-p hammer-unify` beside each package: cargo resolves features for the
     // selected packages alone, and without the union that crate names, 19
     // shared crates (serde, syn, libc, …) and all above them would be
