@@ -199,6 +199,20 @@ fn bad_fmus_exit_2_naming_the_fmu_and_what_failed() {
     let good = mock_fmu(&dir, "mock", &[], "linux64");
     let no_reset = mock_fmu(&dir, "noreset", &["-DNO_RESET"], "linux64");
     let darwin = mock_fmu(&dir, "darwin", &[], "darwin64");
+    let other_guid = mock_fmu(&dir, "otherguid", &["-DGUID=\"{other}\""], "linux64");
+    // An FMI 3.0 FMU as the Reference FMUs lay it out (an
+    // instantiationToken, not a guid): refused by its version.
+    let fmi3 = dir.join("fmi3.fmu");
+    let xml3 = r#"<fmiModelDescription fmiVersion="3.0" modelName="mock" instantiationToken="{mock}">
+<CoSimulation modelIdentifier="mock"/></fmiModelDescription>"#;
+    let files3 = vec![
+        ("modelDescription.xml".to_string(), xml3.as_bytes().to_vec()),
+        (
+            "binaries/x86_64-linux/mock.so".to_string(),
+            std::fs::read(dir.join("mock.so")).unwrap(),
+        ),
+    ];
+    std::fs::write(&fmi3, hammer_fmu::package::zip_stored(&files3)).unwrap();
     let not_zip = dir.join("text.fmu");
     std::fs::write(&not_zip, "this is not a zip file\n").unwrap();
     let map_with = |name: &str, from: &str, to: &str| {
@@ -278,6 +292,21 @@ fn bad_fmus_exit_2_naming_the_fmu_and_what_failed() {
             vec![],
             "fmi2DoStep at t = ",
         ),
+        (
+            "the FMU's own reason",
+            good.clone(),
+            map_with("m1log", "mode = 0", "mode = 1"),
+            vec![],
+            "the FMU logged: [fmi2Error] logStatusError: the valve's solver did not converge",
+        ),
+        (
+            "GUID refused",
+            other_guid,
+            good_map.clone(),
+            vec![],
+            "fmi2Instantiate returned no instance; the FMU logged: [fmi2Error] logStatusError: Wrong GUID.",
+        ),
+        ("FMI 3.0", fmi3.clone(), good_map.clone(), vec![], "FMI version 3.0"),
         (
             "non-finite",
             good.clone(),

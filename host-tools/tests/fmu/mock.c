@@ -1,9 +1,12 @@
 /* A small FMI 2.0 co-simulation FMU in C for host-tools/tests/fmu_import.rs:
  * a hammer-like cycle (chamber pressures and acceleration periodic at
  * freq_hz, scaled by the supply pressure) whose `mode` parameter makes it
- * misbehave the ways a foreign FMU can: 1 doStep fails, 2 a NaN output,
+ * misbehave the ways a foreign FMU can: 1 doStep fails (and logs why
+ * through the host's logger, as FMUs do), 2 a NaN output,
  * 3 doStep hangs, 4 doStep crashes, 5 the outputs never cycle. Built
- * with -DNO_RESET it lacks fmi2Reset (a missing FMI function). It prints
+ * with -DNO_RESET it lacks fmi2Reset (a missing FMI function); with
+ * -DGUID='"{...}"' it refuses the description's GUID, "{mock}", as a
+ * binary rebuilt apart from its description does. It prints
  * to standard output at initialisation, as FMUs do.
  * Value references: 0 supply_bar, 1 freq_hz, 2 mode (Integer),
  * 3 derived (calculatedParameter), 10 p_rear, 11 p_front, 12 accel. */
@@ -18,9 +21,21 @@ typedef void *fmi2Component;
 typedef int fmi2Status;
 typedef unsigned int fmi2ValueReference;
 
+#ifndef GUID
+#define GUID "{mock}"
+#endif
+
+/* fmi2CallbackFunctions, as far as the logger and the environment. */
+typedef struct {
+    void (*logger)(void *env, const char *instance, fmi2Status status, const char *category, const char *message, ...);
+    void *allocate, *free, *step_finished;
+    void *env;
+} Callbacks;
+
 typedef struct {
     double supply_bar, freq_hz, t, out[3];
     int mode;
+    const Callbacks *cb;
 } Mock;
 
 static void outputs(Mock *m) {
@@ -37,8 +52,14 @@ const char *fmi2GetVersion(void) { return "2.0"; }
 const char *fmi2GetTypesPlatform(void) { return "default"; }
 
 fmi2Component fmi2Instantiate(const char *name, int type, const char *guid, const char *res, const void *cb, int vis, int log) {
-    (void)name; (void)type; (void)guid; (void)res; (void)cb; (void)vis; (void)log;
+    (void)type; (void)res; (void)vis; (void)log;
+    const Callbacks *callbacks = cb;
+    if (strcmp(guid, GUID) != 0) {
+        callbacks->logger(callbacks->env, name, 3, "logStatusError", "Wrong GUID.");
+        return NULL;
+    }
     Mock *m = calloc(1, sizeof(Mock));
+    m->cb = cb;
     m->supply_bar = 5.0;
     m->freq_hz = 40.0;
     return m;
@@ -111,7 +132,10 @@ fmi2Status fmi2DoStep(fmi2Component c, double t, double h, int no_set) {
     Mock *m = c;
     (void)no_set;
     if (m->t > 0.02) {
-        if (m->mode == 1) return 3;
+        if (m->mode == 1) {
+            m->cb->logger(m->cb->env, "mock", 3, "logStatusError", "the valve's solver did not converge");
+            return 3;
+        }
         if (m->mode == 3) for (;;) pause();
         if (m->mode == 4) raise(SIGSEGV);
     }

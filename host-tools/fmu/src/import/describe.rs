@@ -102,7 +102,13 @@ impl Description {
         let mut take = |k: &str| root.remove(k).ok_or(format!("fmiModelDescription has no {k}"));
         let fmi_version = take("fmiVersion")?;
         let model_name = take("modelName")?;
-        let guid = take("guid")?;
+        // FMI 3.0 names it instantiationToken: such an FMU is read far
+        // enough to be refused by its version, not for a missing guid.
+        let guid = match take("guid") {
+            Ok(g) => g,
+            Err(_) if !fmi_version.starts_with("2.") => root.remove("instantiationToken").unwrap_or_default(),
+            Err(e) => return Err(e),
+        };
         let generation_tool = root.remove("generationTool");
         let flag = |m: &Option<HashMap<String, String>>, k: &str| {
             m.as_ref().and_then(|m| m.get(k)).is_some_and(|v| v == "true")
@@ -205,6 +211,18 @@ fn unescape(s: &str) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn an_fmi_3_description_reads_as_far_as_its_version() {
+        // As the Reference FMUs write it: an instantiationToken, no guid.
+        let xml = r#"<fmiModelDescription fmiVersion="3.0" modelName="BouncingBall" instantiationToken="{1AE5}">
+  <CoSimulation modelIdentifier="BouncingBall"/></fmiModelDescription>"#;
+        let d = Description::parse(xml).unwrap();
+        assert_eq!((d.fmi_version.as_str(), d.guid.as_str()), ("3.0", "{1AE5}"));
+        // FMI 2.0 without its guid is still refused for it.
+        let e = Description::parse(&xml.replace("3.0", "2.0")).unwrap_err();
+        assert!(e.contains("no guid"), "{e}");
+    }
 
     #[test]
     fn a_description_reads_and_settability_is_judged() {

@@ -44,13 +44,36 @@ unsafe extern "C" fn logger(
             unsafe { CStr::from_ptr(p) }.to_string_lossy().into_owned()
         }
     };
+    let (category, message) = (text(category), text(message));
     eprintln!(
         "fmu log: {} [{}] {}: {}",
         text(instance),
         status_name(status),
-        text(category),
-        text(message)
+        category,
+        message
     );
+    let mut kept = LOGGED.lock().unwrap_or_else(|p| p.into_inner());
+    if kept.len() == LOG_KEPT {
+        kept.remove(0);
+    }
+    // Its own words, shortened and on one line: they go into an error message.
+    let line: String = format!("[{}] {category}: {message}", status_name(status))
+        .chars()
+        .map(|c| if c.is_control() { ' ' } else { c })
+        .take(200)
+        .collect();
+    kept.push(line);
+}
+
+/// The FMU's last messages since [`take_log`]: a failing call's error
+/// carries them, because the FMU's reason ("Wrong GUID.", a solver that
+/// did not converge) is there and nowhere else.
+static LOGGED: std::sync::Mutex<Vec<String>> = std::sync::Mutex::new(Vec::new());
+const LOG_KEPT: usize = 4;
+
+/// What the FMU logged since the last call, emptied.
+pub fn take_log() -> Vec<String> {
+    std::mem::take(&mut *LOGGED.lock().unwrap_or_else(|p| p.into_inner()))
 }
 
 #[repr(C)]

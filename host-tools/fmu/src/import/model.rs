@@ -186,7 +186,10 @@ impl FmuModel {
         if !desc.fmi_version.starts_with("2.") {
             return Err(fail(
                 FailKind::Description,
-                format!("FMI version {}: the import runs FMI 2.0", desc.fmi_version),
+                format!(
+                    "FMI version {}: the import runs FMI 2.0 co-simulation; export the model as FMI 2.0 (docs/your-model.md)",
+                    desc.fmi_version
+                ),
             ));
         }
         let id = desc.model_identifier.clone().ok_or_else(|| {

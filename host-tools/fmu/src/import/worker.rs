@@ -158,6 +158,7 @@ pub fn serve() -> i32 {
                 return 2;
             }
         };
+        fmi2::take_log();
         let (reply, columns) = match request {
             Request::Open {
                 so,
@@ -208,9 +209,23 @@ pub fn serve() -> i32 {
                 }
             },
         };
+        let reply = match reply {
+            Reply::Failed(e) => Reply::Failed(with_log(e)),
+            r => r,
+        };
         if send(&mut stdout, &reply, columns).is_err() {
             return 2;
         }
     }
     0
+}
+
+/// A failure with what the FMU logged while the request ran.
+fn with_log(e: String) -> String {
+    let log = fmi2::take_log();
+    if log.is_empty() {
+        e
+    } else {
+        format!("{e}; the FMU logged: {}", log.join(" | "))
+    }
 }
