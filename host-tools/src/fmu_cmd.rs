@@ -1,5 +1,6 @@
 //! `hammer fmu`: the export (`--out X.fmu`), the pre-flight of a foreign
-//! FMU (`check`), its speed against the built-in path (`speed`), and the
+//! FMU (`check`), its speed against the built-in path (`speed`), a
+//! source-code FMU built for this platform (`compile`), and the
 //! hidden worker process that runs a foreign FMU (`worker`, started by
 //! `hammer_fmu::import`, never by hand).
 
@@ -50,6 +51,10 @@ pub enum FmuAction {
     /// Times runs of the FMU against the built-in simulator's path at the
     /// same supply pressure and duration, and what a diagnosis costs.
     Speed(SpeedArgs),
+    /// Builds a linux64 binary from a source-code FMU's sources with the
+    /// system's C compiler ($CC, else cc; $CXX, else c++, for C++) and
+    /// writes the FMU with it.
+    Compile(CompileArgs),
     /// The worker process that runs a foreign FMU (started by the import).
     #[command(hide = true)]
     Worker,
@@ -74,6 +79,16 @@ pub struct RunArgs {
 }
 
 #[derive(Args, Debug)]
+pub struct CompileArgs {
+    /// The source-code FMU (FMI 2.0 co-simulation, with `sources/`).
+    pub fmu: PathBuf,
+    /// The FMU to write (default: `X.linux64.fmu` beside `X.fmu`; never
+    /// the FMU itself).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+#[derive(Args, Debug)]
 pub struct SpeedArgs {
     #[command(flatten)]
     pub run: RunArgs,
@@ -92,6 +107,7 @@ pub fn run(args: &FmuArgs) -> Result<()> {
         None => export(args),
         Some(FmuAction::Check(a)) => check(a),
         Some(FmuAction::Speed(a)) => speed(a),
+        Some(FmuAction::Compile(a)) => compile(a),
         Some(FmuAction::Worker) => std::process::exit(hammer_fmu::import::worker::serve()),
     }
 }
@@ -217,6 +233,33 @@ fn check(a: &RunArgs) -> Result<()> {
         c.cycles,
         c.period_s * 1e3,
         c.spread * 100.0
+    );
+    Ok(())
+}
+
+fn compile(a: &CompileArgs) -> Result<()> {
+    let out = a.out.clone().unwrap_or_else(|| a.fmu.with_extension("linux64.fmu"));
+    let same = |p: &std::path::Path| std::fs::canonicalize(p).ok();
+    if out == a.fmu || (same(&out).is_some() && same(&out) == same(&a.fmu)) {
+        anyhow::bail!(
+            "FMU {}: --out is the FMU itself; write the compiled one elsewhere",
+            a.fmu.display()
+        );
+    }
+    let c = hammer_fmu::import::compile::compile(&a.fmu, &out)?;
+    outln!(
+        "compiled {} source file(s) of {} ({}) with {} into {}; wrote {}",
+        c.sources.len(),
+        a.fmu.display(),
+        c.sources.join(", "),
+        c.linker,
+        c.binary,
+        c.out.display()
+    );
+    outln!(
+        "next: hammer fmu check {} --model-map MAP (a map beside it is read as {})",
+        c.out.display(),
+        hammer_fmu::package::map_path(&c.out).display()
     );
     Ok(())
 }

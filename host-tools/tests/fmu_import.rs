@@ -141,14 +141,27 @@ fn mock_fmu(dir: &Path, name: &str, flags: &[&str], platform: &str) -> PathBuf {
         .status()
         .unwrap();
     assert!(ok.success(), "cc {}", src.display());
+    let ext = if platform == "linux64" { "so" } else { "dylib" };
+    let files = vec![
+        ("modelDescription.xml".to_string(), mock_description("").into_bytes()),
+        (format!("binaries/{platform}/mock.{ext}"), std::fs::read(&so).unwrap()),
+    ];
+    let fmu = dir.join(format!("{name}.fmu"));
+    std::fs::write(&fmu, hammer_fmu::package::zip_stored(&files)).unwrap();
+    fmu
+}
+
+/// The mock's modelDescription.xml; `sources`, if not empty, go into the
+/// co-simulation interface (`<SourceFiles>…`).
+fn mock_description(sources: &str) -> String {
     let var = |name: &str, vr: u32, attrs: &str, ty: &str| {
         format!(r#"<ScalarVariable name="{name}" valueReference="{vr}" {attrs}><{ty}/></ScalarVariable>"#)
     };
     let par = r#"causality="parameter" variability="fixed" initial="exact""#;
-    let xml = format!(
+    format!(
         r#"<?xml version="1.0" encoding="UTF-8"?>
 <fmiModelDescription fmiVersion="2.0" modelName="mock" guid="{{mock}}" generationTool="hammer-monitor tests (C)">
-<CoSimulation modelIdentifier="mock" canBeInstantiatedOnlyOncePerProcess="true"/>
+<CoSimulation modelIdentifier="mock" canBeInstantiatedOnlyOncePerProcess="true">{sources}</CoSimulation>
 <DefaultExperiment stepSize="1e-4"/>
 <ModelVariables>{}{}{}{}{}{}{}</ModelVariables></fmiModelDescription>"#,
         var("supply_bar", 0, par, "Real start=\"5\""),
@@ -163,15 +176,7 @@ fn mock_fmu(dir: &Path, name: &str, flags: &[&str], platform: &str) -> PathBuf {
         var("p_rear", 10, r#"causality="output""#, "Real"),
         var("p_front", 11, r#"causality="output""#, "Real"),
         var("accel", 12, r#"causality="output""#, "Real"),
-    );
-    let ext = if platform == "linux64" { "so" } else { "dylib" };
-    let files = vec![
-        ("modelDescription.xml".to_string(), xml.into_bytes()),
-        (format!("binaries/{platform}/mock.{ext}"), std::fs::read(&so).unwrap()),
-    ];
-    let fmu = dir.join(format!("{name}.fmu"));
-    std::fs::write(&fmu, hammer_fmu::package::zip_stored(&files)).unwrap();
-    fmu
+    )
 }
 
 const MOCK_MAP: &str = r#"
@@ -186,6 +191,74 @@ pressure = "gauge"
 [fixed]
 mode = 0
 "#;
+
+/// A source-code FMU, as tools export one for another platform: sources
+/// and no binary, its functions named with the model identifier as FMI 2.0
+/// asks of sources, one file C++. Refused with the way out; `hammer fmu
+/// compile` builds it into an FMU whose binary has the standard names (the
+/// import resolves no other), which then checks; sources that do not
+/// compile are exit 2 with the compiler's words.
+#[test]
+fn a_source_fmu_is_compiled_and_then_checks() {
+    if Command::new("cc").arg("--version").output().is_err() {
+        assert!(std::env::var_os("CI").is_none(), "CI is set but there is no C compiler");
+        eprintln!("SKIPPED: no C compiler (cc) for the mock FMU");
+        return;
+    }
+    let dir = tmp_dir("source");
+    let mock = std::fs::read(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fmu/mock.c")).unwrap();
+    let source_fmu = |name: &str, all_c: &str| {
+        let files = vec![
+            (
+                "modelDescription.xml".to_string(),
+                mock_description(r#"<SourceFiles><File name="all.c"/><File name="extra.cpp"/></SourceFiles>"#)
+                    .into_bytes(),
+            ),
+            ("sources/all.c".to_string(), all_c.as_bytes().to_vec()),
+            ("sources/mock.c".to_string(), mock.clone()),
+            (
+                "sources/extra.cpp".to_string(),
+                b"extern \"C\" int mock_extra(void) { return 1; }\n".to_vec(),
+            ),
+        ];
+        let fmu = dir.join(format!("{name}.fmu"));
+        std::fs::write(&fmu, hammer_fmu::package::zip_stored(&files)).unwrap();
+        fmu
+    };
+    let fmu = source_fmu("src", "#define FMI2_FUNCTION_PREFIX mock_\n#include \"mock.c\"\n");
+    let map = dir.join("src.map.toml");
+    std::fs::write(&map, MOCK_MAP).unwrap();
+    let check = |fmu: &Path| {
+        hammer(&[
+            "fmu",
+            "check",
+            fmu.to_str().unwrap(),
+            "--model-map",
+            map.to_str().unwrap(),
+            "--duration",
+            "0.3",
+        ])
+    };
+    let (code, out, err) = check(&fmu);
+    assert_eq!(code, 2, "{out}{err}");
+    assert!(err.contains("it has sources: `hammer fmu compile"), "{err}");
+    let (code, out, err) = hammer(&["fmu", "compile", fmu.to_str().unwrap()]);
+    assert_eq!(code, 0, "{out}{err}");
+    assert!(out.contains("compiled 2 source file(s)"), "{out}");
+    assert!(out.contains("with c++ into binaries/linux64/mock.so"), "{out}");
+    let compiled = dir.join("src.linux64.fmu");
+    let (code, out, err) = check(&compiled);
+    assert_eq!(code, 0, "the compiled FMU checks: {out}{err}");
+    assert!(out.contains("steady cycling"), "{out}");
+    // Sources that do not compile: the FMU, the file and the compiler's error.
+    let broken = source_fmu("broken", "this is not C;\n");
+    let (code, out, err) = hammer(&["fmu", "compile", broken.to_str().unwrap()]);
+    assert_eq!(code, 2, "{out}{err}");
+    assert!(err.contains("broken.fmu: compiling all.c: cc failed"), "{err}");
+    assert!(err.contains("sources/all.c:1:"), "the FMU's own path: {err}");
+    assert!(!err.contains("hammer-fmu-"), "not where it was unpacked: {err}");
+    assert!(!dir.join("broken.linux64.fmu").exists());
+}
 
 /// Each bad FMU or map: exit 2, the FMU (or map) named, what failed said.
 #[test]

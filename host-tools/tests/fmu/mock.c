@@ -6,7 +6,10 @@
  * 3 doStep hangs, 4 doStep crashes, 5 the outputs never cycle. Built
  * with -DNO_RESET it lacks fmi2Reset (a missing FMI function); with
  * -DGUID='"{...}"' it refuses the description's GUID, "{mock}", as a
- * binary rebuilt apart from its description does. It prints
+ * binary rebuilt apart from its description does. Included after
+ * `#define FMI2_FUNCTION_PREFIX mock_` it is a source-code FMU's file: its
+ * functions named with the model identifier as FMI 2.0 asks of sources
+ * (the test's `hammer fmu compile` gives the binary the standard names). It prints
  * to standard output at initialisation, as FMUs do.
  * Value references: 0 supply_bar, 1 freq_hz, 2 mode (Integer),
  * 3 derived (calculatedParameter), 10 p_rear, 11 p_front, 12 accel. */
@@ -20,6 +23,28 @@
 typedef void *fmi2Component;
 typedef int fmi2Status;
 typedef unsigned int fmi2ValueReference;
+
+#ifdef FMI2_FUNCTION_PREFIX
+#define PASTE_(a, b) a##b
+#define PASTE(a, b) PASTE_(a, b)
+#define fmi2GetVersion PASTE(FMI2_FUNCTION_PREFIX, fmi2GetVersion)
+#define fmi2GetTypesPlatform PASTE(FMI2_FUNCTION_PREFIX, fmi2GetTypesPlatform)
+#define fmi2Instantiate PASTE(FMI2_FUNCTION_PREFIX, fmi2Instantiate)
+#define fmi2FreeInstance PASTE(FMI2_FUNCTION_PREFIX, fmi2FreeInstance)
+#define fmi2SetDebugLogging PASTE(FMI2_FUNCTION_PREFIX, fmi2SetDebugLogging)
+#define fmi2SetupExperiment PASTE(FMI2_FUNCTION_PREFIX, fmi2SetupExperiment)
+#define fmi2EnterInitializationMode PASTE(FMI2_FUNCTION_PREFIX, fmi2EnterInitializationMode)
+#define fmi2ExitInitializationMode PASTE(FMI2_FUNCTION_PREFIX, fmi2ExitInitializationMode)
+#define fmi2Terminate PASTE(FMI2_FUNCTION_PREFIX, fmi2Terminate)
+#define fmi2Reset PASTE(FMI2_FUNCTION_PREFIX, fmi2Reset)
+#define fmi2SetReal PASTE(FMI2_FUNCTION_PREFIX, fmi2SetReal)
+#define fmi2SetInteger PASTE(FMI2_FUNCTION_PREFIX, fmi2SetInteger)
+#define fmi2SetBoolean PASTE(FMI2_FUNCTION_PREFIX, fmi2SetBoolean)
+#define fmi2GetReal PASTE(FMI2_FUNCTION_PREFIX, fmi2GetReal)
+#define fmi2GetInteger PASTE(FMI2_FUNCTION_PREFIX, fmi2GetInteger)
+#define fmi2GetBoolean PASTE(FMI2_FUNCTION_PREFIX, fmi2GetBoolean)
+#define fmi2DoStep PASTE(FMI2_FUNCTION_PREFIX, fmi2DoStep)
+#endif
 
 #ifndef GUID
 #define GUID "{mock}"

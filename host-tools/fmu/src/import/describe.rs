@@ -75,6 +75,9 @@ pub struct Description {
     pub default_step_s: Option<f64>,
     pub default_stop_s: Option<f64>,
     pub variables: Vec<Variable>,
+    /// The co-simulation interface's `SourceFiles` (a source-code FMU's,
+    /// relative to `sources/`), in order.
+    pub source_files: Vec<String>,
 }
 
 impl Description {
@@ -85,10 +88,19 @@ impl Description {
         let mut experiment: Option<HashMap<String, String>> = None;
         let mut variables = Vec::new();
         let mut open: Option<HashMap<String, String>> = None;
-        for (name, attrs) in elements(xml)? {
+        let mut source_files = Vec::new();
+        // Which interface a `File` belongs to: the last one opened (end
+        // tags are not seen, and files appear only inside an interface).
+        let mut in_cosim = false;
+        for (name, mut attrs) in elements(xml)? {
             match name.as_str() {
                 "fmiModelDescription" => root = Some(attrs),
-                "CoSimulation" => cosim = Some(attrs),
+                "ModelExchange" => in_cosim = false,
+                "CoSimulation" => {
+                    in_cosim = true;
+                    cosim = Some(attrs)
+                }
+                "File" if in_cosim => source_files.extend(attrs.remove("name")),
                 "DefaultExperiment" => experiment = Some(attrs),
                 "ScalarVariable" => open = Some(attrs),
                 "Real" | "Integer" | "Boolean" | "String" | "Enumeration" => {
@@ -124,11 +136,54 @@ impl Description {
             default_step_s: num("stepSize"),
             default_stop_s: num("stopTime"),
             variables,
+            source_files,
         })
     }
 
     pub fn variable(&self, name: &str) -> Option<&Variable> {
         self.variables.iter().find(|v| v.name == name)
+    }
+}
+
+/// What a source-code FMU's `sources/buildDescription.xml` says to build
+/// for one model identifier (FMI 3.0's build description, which FMI 2.0
+/// FMUs may carry too): the first `BuildConfiguration` for it.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Build {
+    pub sources: Vec<String>,
+    /// `(name, value)`: `-Dname=value` (`-Dname` without a value).
+    pub definitions: Vec<(String, Option<String>)>,
+    pub include_dirs: Vec<String>,
+}
+
+impl Build {
+    /// The configuration for `model_identifier` (one that names none fits
+    /// any); None when there is none.
+    pub fn parse(xml: &str, model_identifier: &str) -> Result<Option<Self>, String> {
+        let mut found: Option<Build> = None;
+        let mut current: Option<Build> = None;
+        for (name, mut attrs) in elements(xml)? {
+            match name.as_str() {
+                "BuildConfiguration" => {
+                    if found.is_none() {
+                        found = current.take();
+                    }
+                    let fits = attrs.get("modelIdentifier").is_none_or(|id| id == model_identifier);
+                    current = fits.then(Build::default);
+                }
+                "SourceFile" => current.iter_mut().for_each(|b| b.sources.extend(attrs.remove("name"))),
+                "PreprocessorDefinition" => {
+                    if let (Some(b), Some(n)) = (current.as_mut(), attrs.remove("name")) {
+                        b.definitions.push((n, attrs.remove("value")));
+                    }
+                }
+                "IncludeDirectory" => current
+                    .iter_mut()
+                    .for_each(|b| b.include_dirs.extend(attrs.remove("name"))),
+                _ => {}
+            }
+        }
+        Ok(found.or(current))
     }
 }
 
@@ -225,6 +280,35 @@ mod tests {
     }
 
     #[test]
+    fn a_source_fmus_files_are_the_co_simulation_interfaces() {
+        let xml = r#"<fmiModelDescription fmiVersion="2.0" modelName="m" guid="{1}">
+  <ModelExchange modelIdentifier="m"><SourceFiles><File name="me.c"/></SourceFiles></ModelExchange>
+  <CoSimulation modelIdentifier="m"><SourceFiles><File name="all.c"/><File name="extra.c"/></SourceFiles></CoSimulation>
+</fmiModelDescription>"#;
+        assert_eq!(Description::parse(xml).unwrap().source_files, ["all.c", "extra.c"]);
+        // The build description: the configuration for this identifier.
+        let build = r#"<fmiBuildDescription fmiVersion="3.0">
+  <BuildConfiguration modelIdentifier="other"><SourceFileSet><SourceFile name="o.c"/></SourceFileSet></BuildConfiguration>
+  <BuildConfiguration modelIdentifier="m"><SourceFileSet language="C99">
+    <SourceFile name="a.c"/><SourceFile name="b.c"/>
+    <PreprocessorDefinition name="FMI_VERSION" value="2"/><PreprocessorDefinition name="NDEBUG"/>
+    <IncludeDirectory name="include"/>
+  </SourceFileSet></BuildConfiguration>
+</fmiBuildDescription>"#;
+        let b = Build::parse(build, "m").unwrap().unwrap();
+        assert_eq!(b.sources, ["a.c", "b.c"]);
+        assert_eq!(
+            b.definitions,
+            [
+                ("FMI_VERSION".to_string(), Some("2".to_string())),
+                ("NDEBUG".to_string(), None)
+            ]
+        );
+        assert_eq!(b.include_dirs, ["include"]);
+        assert_eq!(Build::parse(build, "nope").unwrap(), None);
+    }
+
+    #[test]
     fn a_description_reads_and_settability_is_judged() {
         let xml = r#"<?xml version="1.0"?>
 <!-- a comment with <b>tags</b> -->
@@ -245,6 +329,7 @@ mod tests {
         assert!(d.once_per_process);
         assert_eq!((d.default_step_s, d.default_stop_s), (Some(1e-4), Some(1.5)));
         assert_eq!(d.variables.len(), 4);
+        assert!(d.source_files.is_empty());
         let k = d.variable("k").unwrap();
         assert_eq!((k.vr, k.kind, k.unit.as_deref()), (3, VarKind::Real, Some("N")));
         assert_eq!(k.not_settable(false), None);

@@ -7,6 +7,7 @@
 //! - [`archive`]: the `.fmu` zip unpacked into a private directory;
 //! - [`describe`]: modelDescription.xml (identity, capabilities, variables);
 //! - [`check`]: the map against the description (unknown, unsettable, missing);
+//! - [`compile`]: a source-code FMU built for this platform (`hammer fmu compile`);
 //! - [`fmi2`]: the foreign library called (worker process only);
 //! - [`worker`]: the worker process's loop and the pipe protocol;
 //! - [`pool`]: the host's worker processes (time limit, crash, reuse);
@@ -16,6 +17,7 @@
 
 pub mod archive;
 pub mod check;
+pub mod compile;
 pub mod cycling;
 pub mod describe;
 pub mod fmi2;
@@ -42,6 +44,8 @@ pub enum FailKind {
     Description,
     /// No binary for this platform, or it does not load.
     NoBinary,
+    /// A source-code FMU's sources did not compile or link.
+    Compile,
     /// The binary lacks an FMI function the import calls.
     MissingFunction,
     /// The map does not fit the FMU (or a setting names no parameter).

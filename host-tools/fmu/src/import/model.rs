@@ -210,11 +210,16 @@ impl FmuModel {
             return Err(fail(
                 FailKind::NoBinary,
                 format!(
-                    "no binary for this platform (binaries/linux64/{id}.so); it has binaries for: {}",
+                    "no binary for this platform (binaries/linux64/{id}.so); it has binaries for: {}{}",
                     if found.is_empty() {
                         "none".to_string()
                     } else {
                         found.join(", ")
+                    },
+                    if desc.source_files.is_empty() && !unpacked.dir.join("sources/buildDescription.xml").is_file() {
+                        "; export it with a linux64 binary or with its sources (docs/your-model.md)".to_string()
+                    } else {
+                        format!("; it has sources: `hammer fmu compile {}` builds one", fmu.display())
                     }
                 ),
             ));
