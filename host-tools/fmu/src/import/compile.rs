@@ -47,29 +47,8 @@ pub fn compile(fmu: &Path, out: &Path) -> Result<Compiled, FmuError> {
     };
     let bytes = std::fs::read(fmu).map_err(|e| fail(FailKind::Open, format!("cannot read it: {e}")))?;
     let files = entries(&bytes).map_err(|e| fail(FailKind::NotZip, e))?;
-    let xml = files
-        .iter()
-        .find(|(n, _)| n == "modelDescription.xml")
-        .map(|(_, b)| String::from_utf8_lossy(b).into_owned())
-        .ok_or_else(|| fail(FailKind::Description, "no modelDescription.xml in it".into()))?;
-    let desc =
-        Description::parse(&xml).map_err(|e| fail(FailKind::Description, format!("modelDescription.xml: {e}")))?;
-    if !desc.fmi_version.starts_with("2.") {
-        return Err(fail(
-            FailKind::Description,
-            format!(
-                "FMI version {}: the import runs FMI 2.0 co-simulation",
-                desc.fmi_version
-            ),
-        ));
-    }
-    let id = desc.model_identifier.clone().ok_or_else(|| {
-        fail(
-            FailKind::Description,
-            "no co-simulation interface (model exchange only)".into(),
-        )
-    })?;
     let unpacked = unpack(fmu).map_err(|e| fail(FailKind::NotZip, e))?;
+    let (desc, id) = Description::read_cosim(&unpacked.dir).map_err(|e| fail(FailKind::Description, e))?;
     let sources_dir = unpacked.dir.join("sources");
     let build = match std::fs::read_to_string(sources_dir.join("buildDescription.xml")) {
         Ok(text) => Build::parse(&text, &id)

@@ -140,6 +140,26 @@ impl Description {
         })
     }
 
+    /// The description of the FMU unpacked in `dir`, as the import runs
+    /// it: FMI 2.0 with a co-simulation interface, whose model identifier
+    /// (naming its binary) comes with it. Errors say which it is not.
+    pub fn read_cosim(dir: &std::path::Path) -> Result<(Self, String), String> {
+        let xml = std::fs::read_to_string(dir.join("modelDescription.xml"))
+            .map_err(|_| "no modelDescription.xml in it".to_string())?;
+        let desc = Self::parse(&xml).map_err(|e| format!("modelDescription.xml: {e}"))?;
+        if !desc.fmi_version.starts_with("2.") {
+            return Err(format!(
+                "FMI version {}: the import runs FMI 2.0 co-simulation; export the model as FMI 2.0 (docs/your-model.md)",
+                desc.fmi_version
+            ));
+        }
+        let id = desc
+            .model_identifier
+            .clone()
+            .ok_or("no co-simulation interface (model exchange only)")?;
+        Ok((desc, id))
+    }
+
     pub fn variable(&self, name: &str) -> Option<&Variable> {
         self.variables.iter().find(|v| v.name == name)
     }

@@ -178,26 +178,7 @@ impl FmuModel {
             return Err(fail(FailKind::Open, format!("cannot read it: {e}")));
         }
         let unpacked = unpack(fmu).map_err(|e| fail(FailKind::NotZip, e))?;
-        let xml_path = unpacked.dir.join("modelDescription.xml");
-        let xml = std::fs::read_to_string(&xml_path)
-            .map_err(|_| fail(FailKind::Description, "no modelDescription.xml in it".into()))?;
-        let desc =
-            Description::parse(&xml).map_err(|e| fail(FailKind::Description, format!("modelDescription.xml: {e}")))?;
-        if !desc.fmi_version.starts_with("2.") {
-            return Err(fail(
-                FailKind::Description,
-                format!(
-                    "FMI version {}: the import runs FMI 2.0 co-simulation; export the model as FMI 2.0 (docs/your-model.md)",
-                    desc.fmi_version
-                ),
-            ));
-        }
-        let id = desc.model_identifier.clone().ok_or_else(|| {
-            fail(
-                FailKind::Description,
-                "no co-simulation interface (model exchange only)".into(),
-            )
-        })?;
+        let (desc, id) = Description::read_cosim(&unpacked.dir).map_err(|e| fail(FailKind::Description, e))?;
         let so = unpacked.dir.join("binaries/linux64").join(format!("{id}.so"));
         if !so.is_file() {
             let found: Vec<String> = std::fs::read_dir(unpacked.dir.join("binaries"))
