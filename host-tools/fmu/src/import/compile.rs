@@ -79,10 +79,8 @@ pub fn compile(fmu: &Path, out: &Path) -> Result<Compiled, FmuError> {
             ));
         }
     }
-    let cxx = build
-        .sources
-        .iter()
-        .any(|s| [".cpp", ".cc", ".cxx", ".C"].iter().any(|e| s.ends_with(e)));
+    let is_cxx = |s: &str| [".cpp", ".cc", ".cxx", ".C"].iter().any(|e| s.ends_with(e));
+    let cxx = build.sources.iter().any(|s| is_cxx(s));
     let driver = |var: &str, default: &str| std::env::var(var).unwrap_or_else(|_| default.to_string());
     let (cc, cxx_driver) = (driver("CC", "cc"), driver("CXX", "c++"));
     let objects = unpacked.dir.join("objects");
@@ -100,9 +98,8 @@ pub fn compile(fmu: &Path, out: &Path) -> Result<Compiled, FmuError> {
     }
     let mut objs = Vec::new();
     for (i, s) in build.sources.iter().enumerate() {
-        let is_cxx = [".cpp", ".cc", ".cxx", ".C"].iter().any(|e| s.ends_with(e));
         let obj = objects.join(format!("{i}.o"));
-        let mut cmd = Command::new(if is_cxx { &cxx_driver } else { &cc });
+        let mut cmd = Command::new(if is_cxx(s) { &cxx_driver } else { &cc });
         cmd.current_dir(&sources_dir)
             .args(&flags)
             .arg("-c")
