@@ -127,14 +127,14 @@ fn hammer_fmu_check_passes_the_projects_fmu() {
     assert!(out.contains("steady cycling"), "{out}");
 }
 
-/// Whether there is a C compiler for the mock FMU (CI installs gcc: there
-/// a missing one fails the test).
-fn have_cc() -> bool {
-    if Command::new("cc").arg("--version").output().is_ok() {
+/// Whether there is a compiler `cc` (or `c++`) for the mock FMU (CI
+/// installs gcc and g++: there a missing one fails the test).
+fn have(compiler: &str) -> bool {
+    if Command::new(compiler).arg("--version").output().is_ok() {
         return true;
     }
-    assert!(std::env::var_os("CI").is_none(), "CI is set but there is no C compiler");
-    eprintln!("SKIPPED: no C compiler (cc) for the mock FMU");
+    assert!(std::env::var_os("CI").is_none(), "CI is set but there is no {compiler}");
+    eprintln!("SKIPPED: no compiler ({compiler}) for the mock FMU");
     false
 }
 
@@ -211,7 +211,7 @@ mode = 0
 /// compile are exit 2 with the compiler's words.
 #[test]
 fn a_source_fmu_is_compiled_and_then_checks() {
-    if !have_cc() {
+    if !have("cc") || !have("c++") {
         return;
     }
     let dir = tmp_dir("source");
@@ -272,7 +272,7 @@ fn a_source_fmu_is_compiled_and_then_checks() {
 /// Each bad FMU or map: exit 2, the FMU (or map) named, what failed said.
 #[test]
 fn bad_fmus_exit_2_naming_the_fmu_and_what_failed() {
-    if !have_cc() {
+    if !have("cc") {
         return;
     }
     let dir = tmp_dir("bad");
