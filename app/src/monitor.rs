@@ -247,7 +247,14 @@ impl Monitor {
             let s = self.capture_buf.get(i);
             let _ = samples.push([s.rear, s.front, s.accel]);
         }
-        self.capture = CaptureState::Streaming { sent: end };
+        // The last chunk ends the capture at once: the host may ask for the
+        // next one as soon as this chunk reaches it, before the link task
+        // calls again (it stops when the outgoing queue is nearly full).
+        self.capture = if end >= self.capture_len {
+            CaptureState::Idle
+        } else {
+            CaptureState::Streaming { sent: end }
+        };
         Some(DeviceMsg::Capture(CaptureChunk {
             capture_id: self.capture_id,
             offset: sent as u32,

@@ -86,6 +86,34 @@ fn reports_are_the_estimators_and_a_capture_reassembles_one_cycle() {
     );
 }
 
+/// The host asks for the next capture as soon as the last chunk reaches it;
+/// the link task may not have called for a chunk again by then (it stops
+/// while the outgoing queue is nearly full), so the capture must end with its
+/// last chunk, not one call later. (`hammer commission` was refused `Busy`
+/// between two captures under load.)
+#[test]
+fn the_next_capture_is_accepted_as_soon_as_the_last_chunk_leaves() {
+    let samples = codes(5.0, 0.6);
+    let mut m = monitor();
+    let mut out = vec![];
+    let mut emit = |msg| out.push(msg);
+    m.on_command(HostMsg::StartCapture { cycles: 1 }, 0, &mut emit);
+    m.on_samples(&samples, &mut emit);
+    let mut last = None;
+    while let Some(DeviceMsg::Capture(c)) = m.next_capture_chunk() {
+        if c.offset as usize + c.samples.len() >= c.total as usize {
+            last = Some(c);
+            break;
+        }
+    }
+    assert!(last.is_some(), "the capture completed");
+    out.clear();
+    let mut emit = |msg| out.push(msg);
+    m.on_command(HostMsg::StartCapture { cycles: 1 }, 0, &mut emit);
+    assert_eq!(out, vec![DeviceMsg::Ack(CommandKind::StartCapture)]);
+    assert_eq!(m.next_capture_chunk(), None, "nothing left of the first capture");
+}
+
 #[test]
 fn commands_are_applied_or_rejected_with_a_reason() {
     let mut m = monitor();
