@@ -302,7 +302,7 @@ fn own_fit_set<'a>(
     fs
 }
 
-/// The close call's group, the verdict's (last) effect first, each member
+/// The close call's group, the verdict's grouped effect first, each member
 /// with its own held-out check; empty without a close call. With the
 /// simulations the runner-up's check cost.
 fn close_call_group(
@@ -313,13 +313,13 @@ fn close_call_group(
     shrink: &Shrink,
     opts: &Options,
 ) -> (Vec<Alternative>, usize) {
-    let (Some(named), Some(other)) = (&ranking.verdict, &ranking.close_call) else {
+    let (Some(named), Some(call)) = (&ranking.verdict, &ranking.close_call) else {
         return (Vec::new(), 0);
     };
-    let models = held_out::models(fs, &nominal.bars, Some(other), opts);
+    let models = held_out::models(fs, &nominal.bars, Some(&call.other), opts);
     let other_shrink = held_out::shrink(points, &nominal.features, &models);
     let member = |e: &EffectResult, s: &Shrink| {
-        let name = e.name.rsplit('+').next().unwrap_or_default().to_string();
+        let name = call.effect_of(e);
         let params = match e.name.contains('+') {
             true => e.params.get(&name).cloned().unwrap_or_default(),
             false => e.params.clone(),
@@ -336,7 +336,7 @@ fn close_call_group(
         }
     };
     (
-        vec![member(named, shrink), member(other, &other_shrink)],
+        vec![member(named, shrink), member(&call.other, &other_shrink)],
         models.simulations(),
     )
 }

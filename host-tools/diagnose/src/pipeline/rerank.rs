@@ -24,7 +24,7 @@
 use super::confirm::{form_factors, largest_moves, reweighed};
 use super::held_out::CHECK_SEARCH;
 use super::joint::{self, Joint};
-use super::rank::{parted, within_close_call, Ranking};
+use super::rank::{parted, within_close_call, CloseCall, Ranking};
 use crate::effects::{catalogue_params, free_params};
 use crate::fitset::FitSet;
 use crate::model::Candidate;
@@ -144,7 +144,10 @@ pub(crate) fn rerank(fs: &FitSet, ranking: &mut Ranking, form: &[f64], opts: &Op
     let runner_up = scored
         .get(1)
         .filter(|r| kept && within_close_call(best.score, r.score, opts) && !parted(best.ranked, r.ranked, opts));
-    ranking.close_call = runner_up.map(refitted_result);
+    ranking.close_call = runner_up.map(|r| CloseCall {
+        other: refitted_result(r),
+        member: 0,
+    });
     let why = reason(&scored, &c, ranking.verdict.as_ref(), opts);
     ranking.reason = match form_holds {
         true => format!("{}; {why}", ranking.reason),

@@ -112,11 +112,17 @@ fn top_result(r: &Report) -> Option<&EffectResult> {
             .iter()
             .filter_map(|g| Some(g.first()?.effect.as_str())),
     );
-    let joined = names.join("+");
+    // In either order: a close call may group a pair's first.
+    names.sort_unstable();
+    let same = |e: &&EffectResult| {
+        let mut of: Vec<&str> = e.name.split('+').collect();
+        of.sort_unstable();
+        of == names
+    };
     r.effects
         .iter()
         .chain(&r.pairs)
-        .find(|e| e.name == joined)
+        .find(same)
         .or_else(|| r.effects.first())
 }
 
