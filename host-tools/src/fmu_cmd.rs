@@ -225,11 +225,11 @@ fn check(a: &RunArgs) -> Result<()> {
         detail: format!("a run of {} s at {} bar: {e}", a.duration, a.supply_bar),
     })?;
     outln!(
-        "run: {} s at {} bar in {took:.3} s ({} samples every {} s): steady cycling, {} cycles in its second half, period {:.2} ms (spread {:.2} %)",
+        "run: {} s at {} bar in {took:.3} s ({} samples every {:.4} ms): steady cycling, {} cycles in its second half, period {:.2} ms (spread {:.2} %)",
         a.duration,
         a.supply_bar,
         s.p_rear_pa.len(),
-        s.dt_s,
+        s.dt_s * 1e3,
         c.cycles,
         c.period_s * 1e3,
         c.spread * 100.0

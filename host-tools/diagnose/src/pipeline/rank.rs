@@ -206,13 +206,7 @@ pub(crate) fn rank(fs: &FitSet, opts: &Options, step: &(dyn Fn(&str) + Sync)) ->
         verdict = Some(v);
     }
     step("pairs");
-    let (mut close_call, mut reason) = close_call_of(ranked.as_ref(), &pairs, &effects, reason, opts);
-    if let (None, Some(named)) = (&close_call, &ranked) {
-        if let Some((c, why)) = first_close_call(fs, named, &effects, chi2_nominal, ln_n, opts) {
-            reason = format!("{reason}; {why}");
-            close_call = Some(c);
-        }
-    }
+    let (close_call, reason) = close_call_of(fs, ranked.as_ref(), &pairs, &effects, reason, opts);
     Ranking {
         effects,
         pairs,
@@ -363,9 +357,11 @@ fn own_evidence(z: Option<f64>, score: f64, share: f64, min_share: f64, opts: &O
     }
 }
 
-/// The close call of the ranking's verdict `ranked` (see [`close_call`]),
-/// and the reason with it said.
+/// The close call of the ranking's verdict `ranked` (see [`close_call`],
+/// and for a pair's first [`first_close_call`]), and the reason with it
+/// said.
 fn close_call_of(
+    fs: &FitSet,
     ranked: Option<&EffectResult>,
     pairs: &[EffectResult],
     singles: &[EffectResult],
@@ -386,7 +382,10 @@ fn close_call_of(
             let why = close_call_reason(named, &c, opts);
             (Some(c), format!("{reason}; {why}"))
         }
-        None => (None, reason),
+        None => match pair.then(|| first_close_call(fs, named, singles, opts)).flatten() {
+            Some((c, why)) => (Some(c), format!("{reason}; {why}")),
+            None => (None, reason),
+        },
     }
 }
 
@@ -403,12 +402,11 @@ fn first_close_call(
     fs: &FitSet,
     named: &EffectResult,
     singles: &[EffectResult],
-    chi2_nominal: f64,
-    ln_n: f64,
     opts: &Options,
 ) -> Option<(CloseCall, String)> {
     let (_, second) = named.name.split_once('+')?;
     let runner_up = first_runner_up(named, singles, opts)?;
+    let (chi2_nominal, ln_n) = (fs.chi2(&Candidate::default())?, fs.ln_cycles());
     let second_single = singles.iter().find(|e| e.name == second)?;
     let mut init = runner_up.fitted.clone();
     init.extend(second_single.fitted.iter().cloned());
