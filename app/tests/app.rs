@@ -33,14 +33,22 @@ fn monitor() -> Box<Monitor> {
     Box::new(Monitor::new(Config::default(), "host-test").unwrap())
 }
 
-#[test]
-fn reports_are_the_estimators_and_a_capture_reassembles_one_cycle() {
-    let samples = codes(5.0, 0.6);
+/// A monitor asked for a one-cycle capture and fed `samples`, with what
+/// it sent on the way (the capture's chunks not yet taken).
+fn captured(samples: &[RawSample]) -> (Box<Monitor>, Vec<DeviceMsg>) {
     let mut m = monitor();
     let mut out = vec![];
     let mut emit = |msg| out.push(msg);
     m.on_command(HostMsg::StartCapture { cycles: 1 }, 0, &mut emit);
-    m.on_samples(&samples, &mut emit);
+    m.on_samples(samples, &mut emit);
+    (m, out)
+}
+
+#[test]
+fn reports_are_the_estimators_and_a_capture_reassembles_one_cycle() {
+    let samples = codes(5.0, 0.6);
+    let (mut m, mut out) = captured(&samples);
+    let mut emit = |msg| out.push(msg);
     while let Some(c) = m.next_capture_chunk() {
         emit(c);
     }
@@ -93,12 +101,7 @@ fn reports_are_the_estimators_and_a_capture_reassembles_one_cycle() {
 /// between two captures under load.)
 #[test]
 fn the_next_capture_is_accepted_as_soon_as_the_last_chunk_leaves() {
-    let samples = codes(5.0, 0.6);
-    let mut m = monitor();
-    let mut out = vec![];
-    let mut emit = |msg| out.push(msg);
-    m.on_command(HostMsg::StartCapture { cycles: 1 }, 0, &mut emit);
-    m.on_samples(&samples, &mut emit);
+    let (mut m, mut out) = captured(&codes(5.0, 0.6));
     let mut last = None;
     while let Some(DeviceMsg::Capture(c)) = m.next_capture_chunk() {
         if c.offset as usize + c.samples.len() >= c.total as usize {
