@@ -64,7 +64,7 @@ pub(crate) fn confirm(fs: &FitSet, ranking: &mut Ranking, form: &[f64], opts: &O
     let c = check_member(fs, &verdict, last, form, opts)?;
     if !c.kept {
         drop_last(fs, ranking, &[other, last], &c, min_share, opts);
-        return Some(c);
+        return Some(as_single(fs, ranking, form, opts, c));
     }
     // Where both are waveform-only, the first is checked the same way once
     // the second holds: on the same-structure benchmark at ±20 % (seed 7,
@@ -73,10 +73,27 @@ pub(crate) fn confirm(fs: &FitSet, ranking: &mut Ranking, form: &[f64], opts: &O
     if unseen(other) {
         if let Some(first) = check_member(fs, &verdict, other, form, opts).filter(|f| !f.kept) {
             drop_last(fs, ranking, &[last, other], &first, min_share, opts);
-            return Some(first);
+            return Some(as_single(fs, ranking, form, opts, first));
         }
     }
     Some(c)
+}
+
+/// A pair left with one member is a single like any other: where that
+/// member is one only the waveforms show, it is re-ranked with every such
+/// single ([`super::rerank`]), its size and the nominal values fitted
+/// together and the others beside it, with a close call where one is as
+/// good. The re-ranking's finding is returned; the dropped member's stays
+/// in the reason. An effect the force balance sees stays named on its
+/// signature, and `dropped` is returned.
+///
+/// Why: the member left was named unchecked. On the same structure at
+/// ±10 % (seed 7, cases 49 and 90) a hidden supply restriction was dropped
+/// from beside a leak and the leak named alone; at ±20 % (seed 13, case
+/// 26) a leak dropped from beside a valve delay left the delay named, where
+/// the hidden heat exchange, refitted alone, explains 88 % of the gap.
+fn as_single(fs: &FitSet, ranking: &mut Ranking, form: &[f64], opts: &Options, dropped: Confirmation) -> Confirmation {
+    super::rerank::rerank(fs, ranking, form, opts).unwrap_or(dropped)
 }
 
 /// `member` of the pair `verdict` checked with the nominal values refitted
@@ -279,6 +296,31 @@ mod tests {
     use crate::pipeline::tests::hammer_at_4_and_7 as hammer;
     use crate::pipeline::tests::{nominal_runner, options, quiet};
 
+    /// The ranking and the check on `inputs`, the ranking's verdict
+    /// replaced by `forced`'s effects fitted together where it names any.
+    fn diagnosed(inputs: &[MeasuredInput], forced: &[&str]) -> (Option<Confirmation>, Ranking) {
+        let (runner, opts) = (nominal_runner(), options());
+        let g = group(inputs, &runner.extractor).unwrap();
+        let nom = nominal(&g.points, &runner, &opts, &quiet).unwrap();
+        let (fs, form) = fit_set(&g.points, &nom, &runner, &opts);
+        let mut ranking = rank(&fs, &opts, &quiet);
+        if !forced.is_empty() {
+            let fitted = fit_effects(&fs, forced, &[], ranking.chi2_nominal, fs.ln_cycles(), &opts).unwrap();
+            ranking.verdict = Some(fitted);
+        }
+        let form: Vec<f64> = form.iter().map(|m| m.factor).collect();
+        let checked = confirm(&fs, &mut ranking, &form, &opts);
+        (checked, ranking)
+    }
+
+    /// A hammer with heat exchange at the catalogue's default.
+    fn heat_hammer() -> Vec<MeasuredInput> {
+        hammer(&|c| {
+            let e = hammer_sim::effects::entry("heat_transfer").unwrap();
+            e.set(&mut c.effects, e.default_params()).unwrap();
+        })
+    }
+
     /// A sound hammer whose valve opens 15 % less and whose front dead
     /// volume is 15 % larger than nominal (within the ±20 % the diagnosis
     /// allows): a leak fitted to it does not hold once the nominal values
@@ -288,27 +330,11 @@ mod tests {
     /// the check drops what the nominal values explain, not every effect.
     #[test]
     fn a_leak_the_nominal_values_explain_is_dropped_and_heat_exchange_kept() {
-        let runner = nominal_runner();
-        let opts = options();
-        let diagnosed = |inputs: &[MeasuredInput], forced: Option<&str>| {
-            let g = group(inputs, &runner.extractor).unwrap();
-            let nom = nominal(&g.points, &runner, &opts, &quiet).unwrap();
-            let (fs, form) = fit_set(&g.points, &nom, &runner, &opts);
-            let mut ranking = rank(&fs, &opts, &quiet);
-            if let Some(name) = forced {
-                let fitted = fit_effects(&fs, &[name], &[], ranking.chi2_nominal, fs.ln_cycles(), &opts).unwrap();
-                ranking.verdict = Some(fitted);
-            }
-            let form: Vec<f64> = form.iter().map(|m| m.factor).collect();
-            let checked = confirm(&fs, &mut ranking, &form, &opts);
-            (checked, ranking)
-        };
-
         let sound = hammer(&|c| {
             c.valve.full_open_area_m2 *= 0.85;
             c.hammer.front_dead_volume_m3 *= 1.15;
         });
-        let (checked, ranking) = diagnosed(&sound, Some("leakage"));
+        let (checked, ranking) = diagnosed(&sound, &["leakage"]);
         // The leak forced as the ranking's single is re-ranked with every
         // waveform-only effect (`rerank`): none holds.
         let c = checked.expect("a leak is named on the waveforms alone: checked");
@@ -316,14 +342,30 @@ mod tests {
         assert!(ranking.verdict.is_none());
         assert!(ranking.reason.contains("none holds"), "{}", ranking.reason);
 
-        let heat = hammer(&|c| {
-            let e = hammer_sim::effects::entry("heat_transfer").unwrap();
-            e.set(&mut c.effects, e.default_params()).unwrap();
-        });
-        let (checked, ranking) = diagnosed(&heat, None);
+        let (checked, ranking) = diagnosed(&heat_hammer(), &[]);
         let c = checked.expect("heat exchange is named on the waveforms alone: checked");
         assert_eq!(c.effect, "heat_transfer");
-        assert!(c.kept && c.score > opts.min_score, "{c:?}");
+        assert!(c.kept && c.score > options().min_score, "{c:?}");
+        assert_eq!(ranking.verdict.map(|v| v.name).as_deref(), Some("heat_transfer"));
+    }
+
+    /// A pair one of whose members does not hold leaves the other a
+    /// single, and that single is re-ranked like the ranking's own: on a
+    /// hammer with heat exchange, a valve delay and a leak forced as the
+    /// ranking's pair lose the delay, and the re-ranking names heat
+    /// exchange in place of the leak the pair was left with (before, the
+    /// leak was named unchecked).
+    #[test]
+    fn a_pair_left_with_one_member_is_re_ranked_as_a_single() {
+        let (checked, ranking) = diagnosed(&heat_hammer(), &["valve_delay", "leakage"]);
+        assert!(
+            ranking.reason.contains("valve_delay did not hold") && ranking.reason.contains("leakage named alone"),
+            "{}",
+            ranking.reason
+        );
+        let c = checked.expect("the single left is re-ranked");
+        assert_eq!(c.effect, "heat_transfer", "{c:?}");
+        assert!(c.kept, "{c:?}");
         assert_eq!(ranking.verdict.map(|v| v.name).as_deref(), Some("heat_transfer"));
     }
 }

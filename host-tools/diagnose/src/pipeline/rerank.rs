@@ -18,8 +18,9 @@
 //! close call ([`super::rank`]'s rule).
 //!
 //! An effect the force balance sees is named on its own signature and is
-//! not re-ranked here; nor is a pair (its second is checked by
-//! [`super::confirm`]).
+//! not re-ranked here; nor is a pair (its members are checked by
+//! [`super::confirm`], and a pair left with one member is re-ranked here as
+//! a single).
 
 use super::confirm::{form_factors, largest_moves, reweighed};
 use super::held_out::CHECK_SEARCH;
