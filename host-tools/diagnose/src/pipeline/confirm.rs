@@ -36,7 +36,8 @@ use crate::report::{Confirmation, EffectResult, FittedParam, NominalMove};
 
 /// A single or nothing: re-ranked ([`super::rerank`]). A pair: checks its
 /// member the waveforms alone named (both, where both are), and drops one
-/// that does not hold, leaving the other.
+/// that does not hold, leaving the other, which is then a single
+/// ([`as_single`]).
 ///
 /// `form` holds the model-form factors the fit set's weights carry (empty:
 /// none): the check re-measures them on the verdict's refitted model (see
@@ -89,9 +90,10 @@ pub(crate) fn confirm(fs: &FitSet, ranking: &mut Ranking, form: &[f64], opts: &O
 ///
 /// Why: the member left was named unchecked. On the same structure at
 /// ±10 % (seed 7, cases 49 and 90) a hidden supply restriction was dropped
-/// from beside a leak and the leak named alone; at ±20 % (seed 13, case
-/// 26) a leak dropped from beside a valve delay left the delay named, where
-/// the hidden heat exchange, refitted alone, explains 88 % of the gap.
+/// from beside a leak and the leak named alone (re-ranked: the
+/// restriction); at ±20 % (seed 13, case 26) a leak dropped from beside a
+/// valve delay left a 7 ms delay named on a hammer with heat exchange
+/// (re-ranked: the delay does not hold, and none is named).
 fn as_single(fs: &FitSet, ranking: &mut Ranking, form: &[f64], opts: &Options, dropped: Confirmation) -> Confirmation {
     super::rerank::rerank(fs, ranking, form, opts).unwrap_or(dropped)
 }
