@@ -352,6 +352,25 @@ fn bad_fmus_exit_2_naming_the_fmu_and_what_failed() {
             "fixed: the FMU has no variable nope",
         ),
         (
+            "fixed after initialisation",
+            good.clone(),
+            {
+                // Friction through a piston-force input set during the run:
+                // the map names a parameter fixed once initialised.
+                let p = dir.join("fixed_input.map.toml");
+                let accel = "accel = { output = \"accel\", unit = \"m/s2\" }";
+                let text = MOCK_MAP.replacen(
+                    accel,
+                    &format!("{accel}\nvelocity = {{ output = \"accel\", unit = \"m/s\" }}"),
+                    1,
+                ) + "[outside]\npiston_force = { input = \"freq_hz\", unit = \"N\" }\n";
+                std::fs::write(&p, text).unwrap();
+                p
+            },
+            vec![],
+            "outside.piston_force: freq_hz is fixed after initialisation",
+        ),
+        (
             "calculated parameter",
             good.clone(),
             map_with("calculated", "mode = 0", "derived = 1"),
@@ -428,11 +447,30 @@ fn bad_fmus_exit_2_naming_the_fmu_and_what_failed() {
             "{what}: never quotes the file: {err}"
         );
     }
-    // The diagnosis with a crashing or hanging FMU: exit 2, the FMU named,
-    // what failed said; never a panic of the host.
+    // The diagnosis with a crashing or hanging FMU, or one whose every run
+    // fails (so the nominal model's too): exit 2, the FMU named, what
+    // failed said; never a panic of the host.
     let traces = friction_traces(&dir);
     for (what, map, extra, says) in [
         ("crash", map_with("d4", "mode = 0", "mode = 4"), vec![], "SIGSEGV"),
+        (
+            "doStep fails",
+            map_with("d1", "mode = 0", "mode = 1"),
+            vec![],
+            "fmi2DoStep at t = ",
+        ),
+        (
+            "non-finite",
+            map_with("d2", "mode = 0", "mode = 2"),
+            vec![],
+            "non-finite output",
+        ),
+        (
+            "no steady cycling",
+            map_with("d5", "mode = 0", "mode = 5"),
+            vec![],
+            "the nominal model does not run at 4 bar: no steady impact cycle",
+        ),
         (
             "time-out",
             map_with("d3", "mode = 0", "mode = 3"),
@@ -711,6 +749,9 @@ fn largest_difference(a: &serde_json::Value, b: &serde_json::Value, path: &str, 
 /// names, with every number of report.json within 1e-6 relative (the
 /// import runs the same solver, so in fact bit for bit), and the report
 /// carries the FMU's identity: name, GUID, FMI version, tool, map hash.
+/// The FMU's diagnosis runs on one thread (`--threads 1`: one instance,
+/// as a single runtime-licence seat allows), the built-in one on the
+/// machine's cores: the verdict does not depend on it.
 #[test]
 fn diagnose_through_the_projects_fmu_is_the_built_in_path() {
     let dir = tmp_dir("diagnose-own");
@@ -724,16 +765,21 @@ fn diagnose_through_the_projects_fmu_is_the_built_in_path() {
         let fmu_arg;
         if let Some(m) = model {
             fmu_arg = m.to_string_lossy().into_owned();
-            args.extend(["--model", &fmu_arg]);
+            args.extend(["--model", &fmu_arg, "--threads", "1"]);
         }
         let out_arg = out.to_string_lossy().into_owned();
         args.extend(["--out", &out_arg]);
         let (code, stdout, err) = hammer(&args);
         assert_eq!(code, 0, "{stdout}{err}");
+        if model.is_some() {
+            assert!(stdout.contains("simulations on 1 thread,"), "{stdout}");
+        }
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap()
     };
     let builtin = diagnose("builtin", None);
-    let through = diagnose("fmu", Some(&fmu));
+    let mut through = diagnose("fmu", Some(&fmu));
+    assert_eq!(through["options"]["threads"], 1, "the report says what ran");
+    through["options"]["threads"] = builtin["options"]["threads"].clone();
     assert_eq!(through["verdict"]["effects"], builtin["verdict"]["effects"]);
     assert!(
         builtin["verdict"]["effects"].to_string().contains("coulomb_friction"),

@@ -67,6 +67,12 @@ pub struct DiagnoseArgs {
     /// The longest one run of the FMU may take, s (then its process is stopped and the diagnosis ends).
     #[arg(long, value_name = "S", default_value_t = 60.0, requires = "model")]
     pub model_time_limit: f64,
+    /// Simulations side by side, and so the most FMU instances alive at
+    /// once: a tool's runtime licence may draw a seat for each
+    /// (docs/your-model.md). The verdict is the same on any number
+    /// [default: the machine's cores].
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u16).range(1..))]
+    pub threads: Option<u16>,
 }
 
 #[derive(Args, Debug)]
@@ -117,6 +123,11 @@ pub struct BenchArgs {
     /// rule that names it? Where not, a `none` is the features' ceiling.
     #[arg(long, conflicts_with_all = ["structural", "model"])]
     pub oracle: bool,
+    /// Cases side by side, one thread and one FMU instance each (with
+    /// `--isolability`, simulations side by side) [default: the machine's
+    /// cores].
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u16).range(1..))]
+    pub threads: Option<u16>,
     /// Go on with the run whose cases `--out DIR` logged (`DIR/cases.jsonl`):
     /// only the cases it lacks are run. The options must be the run's own;
     /// `--cases` may grow. Without it, a new log replaces an old one.
@@ -197,7 +208,7 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
     let (inputs, references, base) = (read.inputs, read.references, read.base);
     let opts = Options {
         nominal_uncertainty: args.nominal_uncertainty,
-        ..Options::default()
+        ..options(args.threads, true)
     };
     let pb = progress_bar(1, "{spinner} diagnose [{bar:30}] {pos}/{len} {msg} ({elapsed})");
     let plant: Arc<dyn Plant> = match &args.model {
@@ -214,21 +225,47 @@ pub fn run(args: &DiagnoseArgs) -> Result<()> {
         pb.set_length(total as u64);
         pb.set_position(done as u64);
         pb.set_message(what.to_string());
-    })?;
+    })
+    .map_err(|e| name_the_model(e, args.model.as_deref()))?;
     pb.finish_and_clear();
     let written = write_all(&args.out, &outcome)?;
     print!("{}", summary(&outcome.report));
     println!(
-        "wrote {} ({} simulations, {:.1} s)",
+        "wrote {} ({} simulations on {} thread{}, {:.1} s)",
         written
             .iter()
             .map(|p| p.display().to_string())
             .collect::<Vec<_>>()
             .join(", "),
         outcome.report.simulations,
+        opts.threads,
+        if opts.threads == 1 { "" } else { "s" },
         outcome.report.elapsed_s
     );
     Ok(())
+}
+
+/// The diagnosis' options on `threads` (default: the machine's cores),
+/// keeping the waveforms for the figures or not.
+fn options(threads: Option<u16>, figures: bool) -> Options {
+    let defaults = Options::default();
+    Options {
+        threads: threads.map_or(defaults.threads, usize::from),
+        figures,
+        ..defaults
+    }
+}
+
+/// A nominal model that does not run is the FMU's to answer for: the
+/// error names it where the model's own message does not (a run that
+/// goes through but holds no impact cycle is the diagnosis' finding).
+fn name_the_model(e: DiagnoseError, fmu: Option<&Path>) -> anyhow::Error {
+    match (&e, fmu) {
+        (DiagnoseError::Model(_, why), Some(fmu)) if !why.contains(&fmu.display().to_string()) => {
+            anyhow::anyhow!("FMU {}: {e}", fmu.display())
+        }
+        _ => e.into(),
+    }
 }
 
 /// A user's FMU with its map as the diagnosis' model, in at most
@@ -265,10 +302,7 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         model: None,
         oracle: args.oracle,
     };
-    let diag = Options {
-        figures: false,
-        ..Options::default()
-    };
+    let diag = options(args.threads, false);
     let workers = diag.threads.clamp(1, args.cases.max(1));
     let fmu = match &args.model {
         Some(fmu) => Some(open_plant(
@@ -435,10 +469,7 @@ fn write_result(dir: &Path, name: &str, value: &impl serde::Serialize, text: &st
 }
 
 fn isolability(args: &BenchArgs) -> Result<()> {
-    let diag = Options {
-        figures: false,
-        ..Options::default()
-    };
+    let diag = options(args.threads, false);
     let rows = super::isolability::matrix(&args.points, args.duration, &diag)?;
     let text = super::isolability::render(&rows);
     print!("{text}");
