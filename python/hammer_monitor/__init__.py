@@ -225,6 +225,7 @@ def diagnose(
     model: PathLike | None = None,
     model_map: PathLike | None = None,
     model_time_limit_s: float = 60.0,
+    threads: int | None = None,
 ):
     """The sim-to-real gap diagnosis, as ``hammer diagnose`` runs it (docs/diagnosis.md).
 
@@ -253,7 +254,10 @@ def diagnose(
     ``model_time_limit_s`` the longest one run may take. The FMU runs in
     worker processes of this Python (``sys.executable``): an FMU that
     crashes or hangs raises ``ValueError`` naming it, never this process.
-    ``config`` still describes the measured hammer.
+    ``config`` still describes the measured hammer. ``threads`` is how many
+    simulations, and so FMU instances (a tool's runtime-licence seats), run
+    side by side (``--threads``; default: the machine's cores); the verdict
+    is the same on any number.
     """
     report, waves = _native.diagnose(
         _traces(measured, "measured"),
@@ -265,6 +269,7 @@ def diagnose(
         _path(model),
         _path(model_map),
         float(model_time_limit_s),
+        None if threads is None else int(threads),
     )
     report = json.loads(report)
     if not figures:

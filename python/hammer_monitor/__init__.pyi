@@ -62,9 +62,11 @@ def diagnose(
     model: PathLike | None = None,
     model_map: PathLike | None = None,
     model_time_limit_s: float = 60.0,
+    threads: int | None = None,
 ) -> dict[str, Any] | tuple[dict[str, Any], list[dict[str, Any]]]:
     """`hammer diagnose`: report.json's content as a dict; with figures=True also the
     waveforms per operating point (t_s in s, pressures in Pa gauge, accel_mps2, velocity_mps).
     measured and reference take trace files or `hammer commission` folders.
     supply_bar in bar. model: your FMU (`hammer diagnose --model`), run in worker
-    processes of this Python. Raises ValueError with the CLI's message."""
+    processes of this Python. threads: simulations (FMU instances) side by side, default
+    the machine's cores. Raises ValueError with the CLI's message."""

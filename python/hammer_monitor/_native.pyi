@@ -28,5 +28,6 @@ def diagnose(
     model: str | None = None,
     model_map: str | None = None,
     model_time_limit_s: float = 60.0,
+    threads: int | None = None,
 ) -> tuple[str, str | None]: ...
 def fmu_worker() -> int: ...

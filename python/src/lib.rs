@@ -187,7 +187,7 @@ fn simulate(
 /// `hammer diagnose` on traces: `report.json`'s content as JSON, and with
 /// `figures` the waveforms the CLI draws (per operating point) as JSON.
 #[pyfunction]
-#[pyo3(signature = (measured, reference=Vec::new(), fit_on=Vec::new(), config=None, nominal_uncertainty=0.2, figures=false, model=None, model_map=None, model_time_limit_s=60.0))]
+#[pyo3(signature = (measured, reference=Vec::new(), fit_on=Vec::new(), config=None, nominal_uncertainty=0.2, figures=false, model=None, model_map=None, model_time_limit_s=60.0, threads=None))]
 #[allow(clippy::too_many_arguments)]
 fn diagnose(
     py: Python<'_>,
@@ -200,7 +200,18 @@ fn diagnose(
     model: Option<PathBuf>,
     model_map: Option<PathBuf>,
     model_time_limit_s: f64,
+    threads: Option<i64>,
 ) -> PyResult<(String, Option<String>)> {
+    let threads = match threads.map(usize::try_from) {
+        None => None,
+        Some(Ok(n)) if n >= 1 => Some(n),
+        Some(_) => {
+            return Err(PyValueError::new_err(format!(
+                "threads: at least 1, got {}",
+                threads.unwrap_or(0)
+            )))
+        }
+    };
     let worker = model.as_ref().map(|_| model::python_worker(py)).transpose()?;
     let run = move || -> anyhow::Result<(String, Option<String>)> {
         // The CLI's reading of its inputs (commissioning folders included).
@@ -212,10 +223,12 @@ fn diagnose(
             allow_stale_reference: false,
         })?;
         let (inputs, references, base) = (read.inputs, read.references, read.base);
+        let defaults = Options::default();
         let opts = Options {
             nominal_uncertainty,
             figures,
-            ..Options::default()
+            threads: threads.unwrap_or(defaults.threads),
+            ..defaults
         };
         let quiet = |_: usize, _: usize, _: &str| {};
         let outcome = match (model, worker) {

@@ -79,13 +79,22 @@ def test_your_own_model_as_an_fmu_is_the_clis_model_diagnosis(hammer, friction_t
     out = tmp_path / "cli"
     hammer.run("diagnose", "--measured", a, "--measured", b, "--fit-on", a, "--model", fmu, "--out", out)
     cli = json.loads((out / "report.json").read_text())
-    report = hm.diagnose([a, b], fit_on=[a], model=fmu)
+    report = hm.diagnose([a, b], fit_on=[a], model=fmu, threads=1)
+    assert report["options"]["threads"] == 1
     assert report["model"]["name"] == cli["model"]["name"]
     assert report["model"]["guid"] == cli["model"]["guid"]
     assert report["verdict"]["effects"] == cli["verdict"]["effects"] == ["coulomb_friction"]
     assert report["verdict"]["params"] == cli["verdict"]["params"]
     builtin = hm.diagnose([a, b], fit_on=[a])
     assert builtin["verdict"]["params"] == report["verdict"]["params"]
+
+
+def test_threads_must_be_one_or_more(friction_traces):
+    a, b = friction_traces
+    with pytest.raises(ValueError, match="threads: at least 1"):
+        hm.diagnose([a, b], fit_on=[a], threads=0)
+    with pytest.raises(ValueError, match="threads: at least 1, got -2"):
+        hm.diagnose([a, b], fit_on=[a], threads=-2)
 
 
 def test_a_missing_fmu_is_refused_naming_it(friction_traces, tmp_path):
