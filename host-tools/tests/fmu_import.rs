@@ -280,6 +280,25 @@ fn bad_fmus_exit_2_naming_the_fmu_and_what_failed() {
     let no_reset = mock_fmu(&dir, "noreset", &["-DNO_RESET"], "linux64");
     let darwin = mock_fmu(&dir, "darwin", &[], "darwin64");
     let other_guid = mock_fmu(&dir, "otherguid", &["-DGUID=\"{other}\""], "linux64");
+    // A binary that needs a library this machine lacks, as one linked on a
+    // newer distribution needs its glibc: linked against a stub, the stub
+    // then removed.
+    let stub = dir.join("libhammerabsent.so");
+    let linked = Command::new("cc")
+        .args(["-shared", "-fPIC", "-x", "c", "-", "-o"])
+        .arg(&stub)
+        .stdin(std::process::Stdio::null())
+        .status()
+        .unwrap();
+    assert!(linked.success(), "cc the stub");
+    let search = format!("-L{}", dir.display());
+    let unloadable = mock_fmu(
+        &dir,
+        "unloadable",
+        &["-Wl,--no-as-needed", &search, "-lhammerabsent"],
+        "linux64",
+    );
+    std::fs::remove_file(&stub).unwrap();
     // An FMI 3.0 FMU as the Reference FMUs lay it out (an
     // instantiationToken, not a guid): refused by its version.
     let fmi3 = dir.join("fmi3.fmu");
@@ -336,6 +355,13 @@ fn bad_fmus_exit_2_naming_the_fmu_and_what_failed() {
             good_map.clone(),
             vec![],
             "no binary for this platform",
+        ),
+        (
+            "binary does not load",
+            unloadable,
+            good_map.clone(),
+            vec![],
+            "libhammerabsent.so: cannot open shared object file: No such file or directory (built on a newer Linux",
         ),
         (
             "missing function",

@@ -197,7 +197,14 @@ impl Instance {
     /// Loads the library at `so`, resolves [`FUNCTIONS`] and instantiates
     /// a co-simulation instance with `guid` and the resources at `resources`.
     pub fn new(so: &Path, guid: &str, resources: &Path) -> Result<Self, String> {
-        let h = open(so, false)?;
+        // A binary that does not load is most often one linked on a newer
+        // Linux than this one (its glibc) or needing a library not here.
+        let h = open(so, false).map_err(|e| {
+            format!(
+                "{e} (built on a newer Linux than this machine's, or needing a library it lacks? \
+                 docs/your-model.md, \"Exporting your model\")"
+            )
+        })?;
         let sym = |name: &str| -> Result<*mut c_void, String> {
             let c = CString::new(name).map_err(|_| "a NUL in a name")?;
             // SAFETY: dlsym on a live handle.
