@@ -477,29 +477,16 @@ fn bad_fmus_exit_2_naming_the_fmu_and_what_failed() {
     // fails (so the nominal model's too): exit 2, the FMU named, what
     // failed said; never a panic of the host.
     let traces = friction_traces(&dir);
+    let mode = |n: u8| map_with(&format!("d{n}"), "mode = 0", &format!("mode = {n}"));
+    let no_cycle = "the nominal model does not run at 4 bar: no steady impact cycle";
     for (what, map, extra, says) in [
-        ("crash", map_with("d4", "mode = 0", "mode = 4"), vec![], "SIGSEGV"),
-        (
-            "doStep fails",
-            map_with("d1", "mode = 0", "mode = 1"),
-            vec![],
-            "fmi2DoStep at t = ",
-        ),
-        (
-            "non-finite",
-            map_with("d2", "mode = 0", "mode = 2"),
-            vec![],
-            "non-finite output",
-        ),
-        (
-            "no steady cycling",
-            map_with("d5", "mode = 0", "mode = 5"),
-            vec![],
-            "the nominal model does not run at 4 bar: no steady impact cycle",
-        ),
+        ("crash", mode(4), vec![], "SIGSEGV"),
+        ("doStep fails", mode(1), vec![], "fmi2DoStep at t = "),
+        ("non-finite", mode(2), vec![], "non-finite output"),
+        ("no steady cycling", mode(5), vec![], no_cycle),
         (
             "time-out",
-            map_with("d3", "mode = 0", "mode = 3"),
+            mode(3),
             vec!["--model-time-limit", "1"],
             "time limit of 1.000 s",
         ),
