@@ -257,8 +257,9 @@ fn options(threads: Option<u16>, figures: bool) -> Options {
 }
 
 /// A nominal model that does not run is the FMU's to answer for: the
-/// error names it where the model's own message does not (a run that
-/// goes through but holds no impact cycle is the diagnosis' finding).
+/// error names it where the model's own message does not (the
+/// diagnosis' own finding, a run that holds no impact cycle, names no
+/// file).
 fn name_the_model(e: DiagnoseError, fmu: Option<&Path>) -> anyhow::Error {
     match (&e, fmu) {
         (DiagnoseError::Model(_, why), Some(fmu)) if !why.contains(&fmu.display().to_string()) => {
