@@ -202,15 +202,9 @@ fn diagnose(
     model_time_limit_s: f64,
     threads: Option<i64>,
 ) -> PyResult<(String, Option<String>)> {
-    let threads = match threads.map(usize::try_from) {
-        None => None,
-        Some(Ok(n)) if n >= 1 => Some(n),
-        Some(_) => {
-            return Err(PyValueError::new_err(format!(
-                "threads: at least 1, got {}",
-                threads.unwrap_or(0)
-            )))
-        }
+    let threads = match threads {
+        Some(n) if n < 1 => return Err(PyValueError::new_err(format!("threads: at least 1, got {n}"))),
+        n => n.map(|n| n as usize),
     };
     let worker = model.as_ref().map(|_| model::python_worker(py)).transpose()?;
     let run = move || -> anyhow::Result<(String, Option<String>)> {
