@@ -2,6 +2,7 @@
 //! test: host tests, the no_std estimator built for the target, the firmware.
 
 mod elf;
+mod lane;
 mod ninth_effect;
 mod python;
 
@@ -16,6 +17,11 @@ fn root() -> PathBuf {
         .parent()
         .expect("xtask lives in the workspace")
         .to_path_buf()
+}
+
+/// The workspace's target directory: `CARGO_TARGET_DIR` if set.
+pub(crate) fn target_dir(root: &Path) -> PathBuf {
+    std::env::var_os("CARGO_TARGET_DIR").map_or_else(|| root.join("target"), PathBuf::from)
 }
 
 pub(crate) fn run(dir: &Path, program: &str, args: &[&str]) -> Result<(), String> {
@@ -34,7 +40,7 @@ pub(crate) fn run(dir: &Path, program: &str, args: &[&str]) -> Result<(), String
 
 /// Runs `cargo test` passing its output through and adds up its `test result` lines.
 pub(crate) fn cargo_test(dir: &Path, args: &[&str], totals: &mut (u64, u64)) -> Result<(), String> {
-    counted(dir, args, Stream::Stdout, totals, &test_result)
+    counted(dir, args, Stream::Stdout, totals, &mut test_result)
 }
 
 /// Passed and failed off a `test result: ok. N passed; M failed; …` line.
@@ -70,7 +76,7 @@ fn counted(
     args: &[&str],
     stream: Stream,
     totals: &mut (u64, u64),
-    count: &dyn Fn(&str) -> Option<(u64, u64)>,
+    count: &mut dyn FnMut(&str) -> Option<(u64, u64)>,
 ) -> Result<(), String> {
     eprintln!("xtask: ({}) cargo {}", dir.display(), args.join(" "));
     let mut cmd = Command::new("cargo");
@@ -112,9 +118,10 @@ pub const CI_PROFILE: &str = "ci";
 
 /// The workspace's tests. With cargo-nextest on the machine, every test
 /// binary runs side by side, the slowest first (`.config/nextest.toml`),
-/// and the doc-tests (which nextest does not run) after; without it, `cargo
-/// test` runs the binaries one after another.
-fn workspace_tests(root: &Path, totals: &mut (u64, u64)) -> Result<(), String> {
+/// after the doc-tests (which nextest does not run), and `started_tests` is
+/// called once nextest's build is done; without it, `cargo test` runs the
+/// binaries one after another.
+fn workspace_tests(root: &Path, totals: &mut (u64, u64), started_tests: &mut dyn FnMut()) -> Result<(), String> {
     let started = std::time::Instant::now();
     let has_nextest = Command::new("cargo")
         .args(["nextest", "--version"])
@@ -123,7 +130,17 @@ fn workspace_tests(root: &Path, totals: &mut (u64, u64)) -> Result<(), String> {
         .status()
         .is_ok_and(|s| s.success());
     let result = if has_nextest {
-        nextest(
+        // The doc-tests first: their cargo call takes the build's lock,
+        // which the second lane's builds hold once it has started.
+        let docs = cargo_test(root, &["test", "--workspace", "--profile", CI_PROFILE, "--doc"], totals);
+        // nextest's own cargo call is done when it says it is starting.
+        let mut count = |line: &str| {
+            if line.trim_start().starts_with("Starting ") {
+                started_tests();
+            }
+            nextest_summary(line)
+        };
+        let run = counted(
             root,
             &[
                 "nextest",
@@ -133,13 +150,11 @@ fn workspace_tests(root: &Path, totals: &mut (u64, u64)) -> Result<(), String> {
                 CI_PROFILE,
                 "--no-fail-fast",
             ],
+            Stream::Stderr,
             totals,
-        )
-        .and(cargo_test(
-            root,
-            &["test", "--workspace", "--profile", CI_PROFILE, "--doc"],
-            totals,
-        ))
+            &mut count,
+        );
+        docs.and(run)
     } else {
         eprintln!("xtask: cargo-nextest not found: the test binaries run one after another");
         cargo_test(root, &["test", "--workspace", "--profile", CI_PROFILE], totals)
@@ -149,12 +164,6 @@ fn workspace_tests(root: &Path, totals: &mut (u64, u64)) -> Result<(), String> {
         started.elapsed().as_secs_f64()
     );
     result
-}
-
-/// Runs `cargo nextest` passing its output through and adds up its
-/// closing `Summary` line (`N tests run: A passed, B failed, C timed out`).
-fn nextest(dir: &Path, args: &[&str], totals: &mut (u64, u64)) -> Result<(), String> {
-    counted(dir, args, Stream::Stderr, totals, &nextest_summary)
 }
 
 /// Passed and failed (timed out counted as failed) off nextest's closing
@@ -389,29 +398,24 @@ fn ci() -> Result<(), String> {
     built?;
     at("formatting, the firmware's and the test binaries' builds");
     let mut totals = (0, 0);
-    let mut result = workspace_tests(&root, &mut totals);
-    // A second lane beside the Python package and the ninth effect, whose
-    // builds leave a core idle at times: the fuzzing smoke run (the
-    // estimator in it with overflow checks on, as CI's profile builds it).
-    let beside = if result.is_ok() { Some(second_lane(&root)) } else { None };
-    // The Python package: its wheel built once into a fresh virtualenv,
-    // imported, and pytest against it (python/tests, docs/python.md).
-    if result.is_ok() {
-        at("the workspace's tests");
-        result = python::run(&root, &mut totals);
+    // The second lane (`lane.rs`): the fuzzing smoke run, the wheel and the
+    // ninth effect, at the lowest priority beside the tests.
+    let mut beside = None;
+    let mut result = workspace_tests(&root, &mut totals, &mut || {
+        beside.get_or_insert_with(|| lane::start(&root));
+    });
+    at("the workspace's tests");
+    // Without nextest the lane starts now, and runs alone.
+    let beside = beside.unwrap_or_else(|| lane::start(&root));
+    let lane_result = lane::finish(beside, &mut totals);
+    at("the second lane (the fuzzing smoke run, the wheel, the ninth effect)");
+    // The Python package's tests against the lane's wheel
+    // (python/tests, docs/python.md).
+    if lane_result.is_ok() {
+        result = result.and(python::test(&root, &mut totals));
+        at("the Python package's tests");
     }
-    // A ninth effect through the registry alone (a copy of the workspace).
-    if result.is_ok() {
-        at("the Python package");
-        result = ninth_effect::run(&root, &mut totals);
-    }
-    if let Some(lane) = beside {
-        let lane_result = lane
-            .join()
-            .unwrap_or_else(|_| Err("the second lane's thread panicked".into()));
-        result = result.and(lane_result);
-        at("the ninth effect and the fuzzing smoke run");
-    }
+    result = result.and(lane_result);
     // The closing line CI reads.
     println!("xtask: {} passed, {} failed", totals.0, totals.1);
     result
@@ -419,7 +423,7 @@ fn ci() -> Result<(), String> {
 
 /// `cargo xtask fuzz`: the smoke runner, or with `--afl` AFL++ in a target
 /// directory of its own (its instrumentation flags must not reach the
-/// workspace's). CI runs the runner its tests built ([`second_lane`]).
+/// workspace's). CI runs the runner its tests built (`lane.rs`).
 fn fuzz(args: &[&str]) -> Result<(), String> {
     let root = root();
     if let Some(i) = args.iter().position(|a| *a == "--afl") {
@@ -445,37 +449,6 @@ fn fuzz(args: &[&str]) -> Result<(), String> {
     ];
     cmd.extend_from_slice(args);
     run(&root, "cargo", &cmd)
-}
-
-/// A lane's thread and its result.
-type Lane = std::thread::JoinHandle<Result<(), String>>;
-
-/// CI's second lane, in a thread of its own: the smoke run, 1,000,000
-/// executions a target. The estimator's overflow checks need no run of
-/// their own: CI's profile builds the estimator with them for every test
-/// (Cargo.toml, `[profile.ci.package.hammer-estimator]`). The smoke runner
-/// is the one the workspace's tests just built (its crate's tests need it),
-/// run straight from the target directory: a `cargo` call here would wait
-/// for the first lane's lock.
-fn second_lane(root: &Path) -> Lane {
-    let target = std::env::var_os("CARGO_TARGET_DIR").map_or_else(|| root.join("target"), PathBuf::from);
-    std::thread::spawn(move || fuzz_smoke(&target.join(CI_PROFILE).join("hammer-fuzz")))
-}
-
-fn fuzz_smoke(runner: &Path) -> Result<(), String> {
-    eprintln!("xtask: {} smoke --execs 1000000", runner.display());
-    let out = Command::new(runner)
-        .args(["smoke", "--execs", "1000000"])
-        .stdin(Stdio::null())
-        .output()
-        .map_err(|e| format!("cannot start {}: {e}", runner.display()))?;
-    print!("{}", String::from_utf8_lossy(&out.stdout));
-    eprint!("{}", String::from_utf8_lossy(&out.stderr));
-    if out.status.success() {
-        Ok(())
-    } else {
-        Err(format!("the fuzzing smoke run failed ({})", out.status))
-    }
 }
 
 /// A coverage-guided run of one target with AFL++ (installs cargo-afl from
@@ -582,6 +555,8 @@ fn main() -> ExitCode {
         Some("firmware") => build_firmware(),
         Some("size") => size_and_stack(),
         Some("ninth-effect") => ninth_effect::run(&root(), &mut (0, 0)),
+        // CI's second lane, which `ci` starts (lane.rs).
+        Some("ci-lane") => lane::run(&root()),
         Some("soak") => build_firmware().and_then(|_| {
             let mut cmd = vec!["run", "--release", "-p", "hammer-host", "--bin", "hammer", "--", "soak"];
             let rest: Vec<&str> = args[1..].iter().map(String::as_str).collect();

@@ -73,22 +73,44 @@ fn report_compiled(before: &BTreeSet<String>, after: &BTreeSet<String>) {
     );
 }
 
+/// `cargo xtask python`: the wheel built, then its tests.
 pub fn run(root: &Path, totals: &mut (u64, u64)) -> Result<(), String> {
-    let target = std::env::var_os("CARGO_TARGET_DIR").map_or_else(|| root.join("target"), Into::into);
-    let hammer = target.join(crate::CI_PROFILE).join("hammer");
-    if !hammer.is_file() {
-        return Err(format!(
+    build(root)?;
+    test(root, totals)
+}
+
+/// The virtualenv's interpreter.
+fn venv_python(root: &Path) -> String {
+    root.join("target/python-venv/bin/python")
+        .to_string_lossy()
+        .into_owned()
+}
+
+/// The `hammer` CLI the workspace's tests built, which pytest runs.
+fn hammer(root: &Path) -> Result<std::path::PathBuf, String> {
+    let hammer = crate::target_dir(root).join(crate::CI_PROFILE).join("hammer");
+    if hammer.is_file() {
+        Ok(hammer)
+    } else {
+        Err(format!(
             "{}: no hammer binary (the workspace's tests build it)",
             hammer.display()
-        ));
+        ))
     }
+}
+
+/// A fresh virtualenv with the wheel built and installed into it: no clock
+/// in it, so CI builds it in its second lane (`lane.rs`).
+pub fn build(root: &Path) -> Result<(), String> {
+    let target = crate::target_dir(root);
+    hammer(root)?;
     let venv = root.join("target/python-venv");
     if venv.exists() {
         std::fs::remove_dir_all(&venv).map_err(|e| format!("{}: {e}", venv.display()))?;
     }
     let venv_arg = venv.to_string_lossy().into_owned();
     crate::run(root, "python3", &["-m", "venv", "--system-site-packages", &venv_arg])?;
-    let python = venv.join("bin/python").to_string_lossy().into_owned();
+    let python = venv_python(root);
     // python/ is a workspace member and host-tools/unify evens out its
     // features: maturin's cargo finds the workspace's artifacts in the same
     // target directory and compiles little more than the extension itself.
@@ -110,6 +132,14 @@ pub fn run(root: &Path, totals: &mut (u64, u64)) -> Result<(), String> {
         return Err(format!("the Python package's wheel did not build ({status})"));
     }
     report_compiled(&before, &deps(&target));
+    Ok(())
+}
+
+/// The package imported and pytest against it, at the normal priority: a
+/// test times an interrupt, and the FMU's runs have a time limit.
+pub fn test(root: &Path, totals: &mut (u64, u64)) -> Result<(), String> {
+    let hammer = hammer(root)?;
+    let python = venv_python(root);
     crate::run(root, &python, &["-c", "import hammer_monitor"])?;
     eprintln!("xtask: ({}) {python} -m pytest python/tests", root.display());
     let mut child = Command::new(&python)
