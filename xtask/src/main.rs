@@ -1,5 +1,13 @@
 //! Project automation. `cargo xtask ci` is the one command that runs every
 //! test: host tests, the no_std estimator built for the target, the firmware.
+//! Its stages and their measured times: docs/ci.md.
+//!
+//! - `main.rs`: the commands, the stages of `ci`, the firmware's build and
+//!   budgets;
+//! - `lane.rs`: CI's second lane, the work without a clock beside the tests;
+//! - `python.rs`: the Python package's wheel and its tests;
+//! - `ninth_effect.rs`: a test effect added through the registry alone;
+//! - `elf.rs`: sizes and symbols read off the firmware's ELF files.
 
 mod elf;
 mod lane;
