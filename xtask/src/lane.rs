@@ -22,12 +22,28 @@ use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::thread::JoinHandle;
+use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 /// The lane's process, seen from `cargo xtask ci`.
 pub struct Lane {
     handle: JoinHandle<Result<(), String>>,
     log: PathBuf,
 }
+
+/// How the lane ended.
+pub struct LaneEnd {
+    pub result: Result<(), String>,
+    /// The wheel is in the fresh virtualenv: Python's tests can run
+    /// whatever failed after it.
+    pub wheel_built: bool,
+}
+
+/// The variable that carries CI's start (seconds since the Unix epoch) to
+/// the lane's process.
+const CI_STARTED: &str = "XTASK_CI_STARTED";
+
+/// The line the lane prints once the wheel is installed.
+const WHEEL_BUILT: &str = "xtask: lane: the wheel is built and installed";
 
 /// The log the lane writes to, in the target directory.
 fn log_path(root: &Path) -> PathBuf {
@@ -37,12 +53,16 @@ fn log_path(root: &Path) -> PathBuf {
 /// Starts `nice -n 19 xtask ci-lane` with its output to [`log_path`]. The
 /// workspace's test binaries must be built (the lane runs the fuzz runner
 /// they built, and its cargo calls would wait for the build's lock).
-pub fn start(root: &Path) -> Lane {
+pub fn start(root: &Path, ci_started: SystemTime) -> Lane {
     let log = log_path(root);
+    // Emptied here, before anything can fail: an old run's log must not
+    // be read as this one's.
+    let file = std::fs::File::create(&log).map_err(|e| format!("{}: {e}", log.display()));
+    let started = ci_started.duration_since(UNIX_EPOCH).unwrap_or_default().as_secs_f64();
     let (root, path) = (root.to_path_buf(), log.clone());
     let handle = std::thread::spawn(move || {
+        let file = file?;
         let exe = std::env::current_exe().map_err(|e| format!("xtask's own path: {e}"))?;
-        let file = std::fs::File::create(&path).map_err(|e| format!("{}: {e}", path.display()))?;
         let err = file.try_clone().map_err(|e| format!("{}: {e}", path.display()))?;
         eprintln!(
             "xtask: ({}) nice -n 19 xtask ci-lane > {} (the fuzzing smoke run, the wheel, the ninth effect)",
@@ -53,6 +73,7 @@ pub fn start(root: &Path) -> Lane {
             .args(["-n", "19"])
             .arg(&exe)
             .arg("ci-lane")
+            .env(CI_STARTED, format!("{started:.3}"))
             .current_dir(&root)
             .stdin(Stdio::null())
             .stdout(file)
@@ -69,8 +90,8 @@ pub fn start(root: &Path) -> Lane {
 }
 
 /// Waits for the lane, prints its log and adds its tests to `totals`.
-pub fn finish(lane: Lane, totals: &mut (u64, u64)) -> Result<(), String> {
-    let result = lane
+pub fn finish(lane: Lane, totals: &mut (u64, u64)) -> LaneEnd {
+    let mut result = lane
         .handle
         .join()
         .unwrap_or_else(|_| Err("the second lane's thread panicked".into()));
@@ -89,15 +110,17 @@ pub fn finish(lane: Lane, totals: &mut (u64, u64)) -> Result<(), String> {
             totals.0 += passed;
             totals.1 += failed;
         }
-        None if result.is_ok() => return Err(format!("{}: no closing line", lane.log.display())),
+        None if result.is_ok() => result = Err(format!("{}: no closing line", lane.log.display())),
         None => {}
     }
-    result
+    let wheel_built = text.lines().any(|l| l == WHEEL_BUILT);
+    LaneEnd { result, wheel_built }
 }
 
 /// The lane's closing line, as [`run`] prints it.
 const CLOSING: &str = "xtask: the second lane: ";
 
+/// Passed and failed off the lane's closing line, `None` off any other.
 fn closing_counts(line: &str) -> Option<(u64, u64)> {
     let rest = line.strip_prefix(CLOSING)?;
     let (passed, failed) = rest.split_once(" passed, ")?;
@@ -109,21 +132,32 @@ fn closing_counts(line: &str) -> Option<(u64, u64)> {
 /// compile into the workspace's build directory, and the wheel's build
 /// counts what it compiled there).
 pub fn run(root: &Path) -> Result<(), String> {
-    let started = std::time::Instant::now();
-    let at = |stage: &str| eprintln!("xtask: lane: {stage} done at {:.0} s", started.elapsed().as_secs_f64());
+    // CI's clock if `ci` started the lane, else the lane's own.
+    let t0 = std::env::var(CI_STARTED)
+        .ok()
+        .and_then(|s| s.parse::<f64>().ok())
+        .map_or_else(SystemTime::now, |s| UNIX_EPOCH + Duration::from_secs_f64(s));
+    let at = move |stage: &str| {
+        let s = SystemTime::now().duration_since(t0).unwrap_or_default().as_secs_f64();
+        eprintln!("xtask: lane: {stage} done at {s:.0} s");
+    };
     let runner = crate::target_dir(root).join(crate::CI_PROFILE).join("hammer-fuzz");
-    let smoke = std::thread::spawn(move || fuzz_smoke(&runner));
+    let smoke = std::thread::spawn(move || {
+        let smoked = fuzz_smoke(&runner);
+        at("the fuzzing smoke run");
+        smoked
+    });
     let mut totals = (0, 0);
-    let mut result = crate::python::build(root).map(|_| ());
-    at("the Python package's wheel");
+    let mut result = crate::python::build(root);
     if result.is_ok() {
+        eprintln!("{WHEEL_BUILT}");
+        at("the Python package's wheel");
         result = crate::ninth_effect::run(root, &mut totals);
         at("the ninth effect");
     }
     let smoked = smoke
         .join()
         .unwrap_or_else(|_| Err("the smoke run's thread panicked".into()));
-    at("the fuzzing smoke run");
     println!("{CLOSING}{} passed, {} failed", totals.0, totals.1);
     result.and(smoked)
 }

@@ -48,7 +48,18 @@ pub(crate) fn run(dir: &Path, program: &str, args: &[&str]) -> Result<(), String
 
 /// Runs `cargo test` passing its output through and adds up its `test result` lines.
 pub(crate) fn cargo_test(dir: &Path, args: &[&str], totals: &mut (u64, u64)) -> Result<(), String> {
-    counted(dir, args, Stream::Stdout, totals, &mut test_result)
+    counted(dir, args, &[], Stream::Stdout, totals, &mut test_result)
+}
+
+/// [`cargo_test`] with `envs` set for cargo alone (never in xtask's own
+/// environment, which other threads' commands inherit).
+pub(crate) fn cargo_test_with(
+    dir: &Path,
+    args: &[&str],
+    envs: &[(&str, &Path)],
+    totals: &mut (u64, u64),
+) -> Result<(), String> {
+    counted(dir, args, envs, Stream::Stdout, totals, &mut test_result)
 }
 
 /// Passed and failed off a `test result: ok. N passed; M failed; …` line.
@@ -82,13 +93,14 @@ enum Stream {
 fn counted(
     dir: &Path,
     args: &[&str],
+    envs: &[(&str, &Path)],
     stream: Stream,
     totals: &mut (u64, u64),
     count: &mut dyn FnMut(&str) -> Option<(u64, u64)>,
 ) -> Result<(), String> {
     eprintln!("xtask: ({}) cargo {}", dir.display(), args.join(" "));
     let mut cmd = Command::new("cargo");
-    cmd.args(args).current_dir(dir);
+    cmd.args(args).current_dir(dir).envs(envs.iter().copied());
     match stream {
         Stream::Stdout => cmd.stdout(Stdio::piped()),
         Stream::Stderr => cmd.stderr(Stdio::piped()),
@@ -98,13 +110,22 @@ fn counted(
         Stream::Stdout => Box::new(child.stdout.take().expect("piped")),
         Stream::Stderr => Box::new(child.stderr.take().expect("piped")),
     };
-    for line in BufReader::new(out).lines() {
-        let line = line.map_err(|e| e.to_string())?;
+    // Lossy lines: a test's stray bytes must not stop the reading (and with
+    // it the count) before cargo is done.
+    let mut reader = BufReader::new(out);
+    let mut bytes = vec![];
+    loop {
+        bytes.clear();
+        if reader.read_until(b'\n', &mut bytes).map_err(|e| e.to_string())? == 0 {
+            break;
+        }
+        let text = String::from_utf8_lossy(&bytes);
+        let line = text.trim_end_matches(['\n', '\r']);
         match stream {
             Stream::Stdout => println!("{line}"),
             Stream::Stderr => eprintln!("{line}"),
         }
-        if let Some((passed, failed)) = count(&line) {
+        if let Some((passed, failed)) = count(line) {
             totals.0 += passed;
             totals.1 += failed;
         }
@@ -143,11 +164,12 @@ fn workspace_tests(root: &Path, totals: &mut (u64, u64), started_tests: &mut dyn
         let docs = cargo_test(root, &["test", "--workspace", "--profile", CI_PROFILE, "--doc"], totals);
         // nextest's own cargo call is done when it says it is starting.
         let mut count = |line: &str| {
-            if line.trim_start().starts_with("Starting ") {
+            if nextest_started(line) {
                 started_tests();
             }
             nextest_summary(line)
         };
+        // Without colour: the lines read here must start with their words.
         let run = counted(
             root,
             &[
@@ -157,7 +179,10 @@ fn workspace_tests(root: &Path, totals: &mut (u64, u64), started_tests: &mut dyn
                 "--cargo-profile",
                 CI_PROFILE,
                 "--no-fail-fast",
+                "--color",
+                "never",
             ],
+            &[],
             Stream::Stderr,
             totals,
             &mut count,
@@ -172,6 +197,14 @@ fn workspace_tests(root: &Path, totals: &mut (u64, u64), started_tests: &mut dyn
         started.elapsed().as_secs_f64()
     );
     result
+}
+
+/// nextest's line before its first test, `Starting 445 tests across 58
+/// binaries (2 tests skipped)`: its cargo call is done by then.
+fn nextest_started(line: &str) -> bool {
+    line.trim_start()
+        .strip_prefix("Starting ")
+        .is_some_and(|rest| rest.contains(" tests across ") || rest.contains(" test across "))
 }
 
 /// Passed and failed (timed out counted as failed) off nextest's closing
@@ -381,6 +414,8 @@ fn size_and_stack() -> Result<(), String> {
 fn ci() -> Result<(), String> {
     let root = root();
     let started = std::time::Instant::now();
+    // The lane's process says when its stages are done on this clock.
+    let ci_started = std::time::SystemTime::now();
     let at = |stage: &str| eprintln!("xtask: {stage} done at {:.0} s", started.elapsed().as_secs_f64());
     run(&root, "cargo", &["fmt", "--all", "--", "--check"])?;
     run(&root.join("firmware"), "cargo", &["fmt", "--all", "--", "--check"])?;
@@ -410,20 +445,26 @@ fn ci() -> Result<(), String> {
     // ninth effect, at the lowest priority beside the tests.
     let mut beside = None;
     let mut result = workspace_tests(&root, &mut totals, &mut || {
-        beside.get_or_insert_with(|| lane::start(&root));
+        beside.get_or_insert_with(|| lane::start(&root, ci_started));
     });
     at("the workspace's tests");
-    // Without nextest the lane starts now, and runs alone.
-    let beside = beside.unwrap_or_else(|| lane::start(&root));
-    let lane_result = lane::finish(beside, &mut totals);
+    // Without nextest, or if nextest never said it was starting, the lane
+    // starts now and runs alone.
+    let beside = beside.unwrap_or_else(|| {
+        eprintln!("xtask: the second lane starts after the tests");
+        lane::start(&root, ci_started)
+    });
+    let lane_end = lane::finish(beside, &mut totals);
     at("the second lane (the fuzzing smoke run, the wheel, the ninth effect)");
     // The Python package's tests against the lane's wheel
-    // (python/tests, docs/python.md).
-    if lane_result.is_ok() {
+    // (python/tests, docs/python.md), whatever else failed, if it built.
+    if lane_end.wheel_built {
         result = result.and(python::test(&root, &mut totals));
         at("the Python package's tests");
+    } else {
+        eprintln!("xtask: the Python package's wheel did not build: its tests did not run");
     }
-    result = result.and(lane_result);
+    result = result.and(lane_end.result);
     // The closing line CI reads.
     println!("xtask: {} passed, {} failed", totals.0, totals.1);
     result
@@ -563,7 +604,7 @@ fn main() -> ExitCode {
         Some("firmware") => build_firmware(),
         Some("size") => size_and_stack(),
         Some("ninth-effect") => ninth_effect::run(&root(), &mut (0, 0)),
-        // CI's second lane, which `ci` starts (lane.rs).
+        // CI's second lane, which `ci` starts (lane.rs); not for people.
         Some("ci-lane") => lane::run(&root()),
         Some("soak") => build_firmware().and_then(|_| {
             let mut cmd = vec!["run", "--release", "-p", "hammer-host", "--bin", "hammer", "--", "soak"];
@@ -614,5 +655,17 @@ mod tests {
             super::nextest_summary("        PASS [   1.2s] (1/419) a::b summary"),
             None
         );
+    }
+
+    /// The second lane starts on nextest's line before its first test, and
+    /// not on a test's own output that starts with the same word.
+    #[test]
+    fn nextests_start_is_its_starting_line() {
+        assert!(super::nextest_started(
+            "    Starting 445 tests across 58 binaries (2 tests skipped)"
+        ));
+        assert!(super::nextest_started("    Starting 1 test across 1 binary"));
+        assert!(!super::nextest_started("Starting the broker on port 1883"));
+        assert!(!super::nextest_started("        PASS [   1.2s] (1/419) a::b starting"));
     }
 }

@@ -184,9 +184,15 @@ pub fn run(root: &Path, totals: &mut (u64, u64)) -> Result<(), String> {
     // selected packages alone, and without the union that crate names, 19
     // shared crates (serde, syn, libc, …) and all above them would be
     // compiled again with other features (3 minutes on 2 cores).
-    std::env::set_var("CARGO_BUILD_BUILD_DIR", root.join("target"));
-    std::env::set_var("CARGO_TARGET_DIR", root.join("target/ninth-effect/target"));
-    crate::cargo_test(
+    // Set for these cargo calls alone: in CI the smoke run's thread is
+    // alive beside them (lane.rs).
+    let build_dir = crate::target_dir(root);
+    let target_dir = root.join("target/ninth-effect/target");
+    let envs = [
+        ("CARGO_BUILD_BUILD_DIR", build_dir.as_path()),
+        ("CARGO_TARGET_DIR", target_dir.as_path()),
+    ];
+    crate::cargo_test_with(
         &ws,
         &[
             "test",
@@ -198,9 +204,10 @@ pub fn run(root: &Path, totals: &mut (u64, u64)) -> Result<(), String> {
             "hammer-unify",
             "--lib",
         ],
+        &envs,
         totals,
     )?;
-    crate::cargo_test(
+    crate::cargo_test_with(
         &ws,
         &[
             "test",
@@ -213,6 +220,7 @@ pub fn run(root: &Path, totals: &mut (u64, u64)) -> Result<(), String> {
             "--test",
             &format!("{NAME}_ninth_effect"),
         ],
+        &envs,
         totals,
     )
 }

@@ -10,7 +10,7 @@
 
 use std::collections::BTreeSet;
 use std::io::{BufRead, BufReader};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 
 /// Adds pytest's closing counts (`3 failed, 12 passed in 4.2s`) to `totals`.
@@ -79,15 +79,18 @@ pub fn run(root: &Path, totals: &mut (u64, u64)) -> Result<(), String> {
     test(root, totals)
 }
 
+/// The fresh virtualenv the wheel is installed into.
+fn venv(root: &Path) -> PathBuf {
+    root.join("target/python-venv")
+}
+
 /// The virtualenv's interpreter.
 fn venv_python(root: &Path) -> String {
-    root.join("target/python-venv/bin/python")
-        .to_string_lossy()
-        .into_owned()
+    venv(root).join("bin/python").to_string_lossy().into_owned()
 }
 
 /// The `hammer` CLI the workspace's tests built, which pytest runs.
-fn hammer(root: &Path) -> Result<std::path::PathBuf, String> {
+fn hammer(root: &Path) -> Result<PathBuf, String> {
     let hammer = crate::target_dir(root).join(crate::CI_PROFILE).join("hammer");
     if hammer.is_file() {
         Ok(hammer)
@@ -104,7 +107,7 @@ fn hammer(root: &Path) -> Result<std::path::PathBuf, String> {
 pub fn build(root: &Path) -> Result<(), String> {
     let target = crate::target_dir(root);
     hammer(root)?;
-    let venv = root.join("target/python-venv");
+    let venv = venv(root);
     if venv.exists() {
         std::fs::remove_dir_all(&venv).map_err(|e| format!("{}: {e}", venv.display()))?;
     }
