@@ -18,7 +18,6 @@
 //! The lane writes to a log of its own, printed whole when it is done, so
 //! that its lines do not interleave with the tests'.
 
-use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::thread::JoinHandle;
@@ -95,13 +94,10 @@ pub fn finish(lane: Lane, totals: &mut (u64, u64)) -> LaneEnd {
         .handle
         .join()
         .unwrap_or_else(|_| Err("the second lane's thread panicked".into()));
-    let mut text = String::new();
-    if let Ok(mut f) = std::fs::File::open(&lane.log) {
-        // A lossy read: a child's stray bytes must not cost the log.
-        let mut bytes = vec![];
-        let _ = f.read_to_end(&mut bytes);
-        text = String::from_utf8_lossy(&bytes).into_owned();
-    }
+    // A lossy read: a child's stray bytes must not cost the log.
+    let text = std::fs::read(&lane.log)
+        .map(|bytes| String::from_utf8_lossy(&bytes).into_owned())
+        .unwrap_or_default();
     println!("---- the second lane ({}) ----", lane.log.display());
     print!("{text}");
     println!("---- end of the second lane ----");
