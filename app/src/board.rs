@@ -17,6 +17,16 @@ pub trait SampleSource {
     /// many; `Err` reports lost samples (the stream continues after them).
     /// Must be cancel-safe: dropping the future loses no samples.
     async fn read(&mut self, buf: &mut [RawSample]) -> Result<usize, Overrun>;
+
+    /// Whether the source holds its samples while the app is busy, so the
+    /// sampling task waits for a free block of the chambers' reader rather
+    /// than read on past it. An ADC cannot: its DMA runs on, and a board
+    /// within its budget never needs to (the emulated board measures that
+    /// budget, so it does not wait either). The native board's link can: its
+    /// host waits, and the host's own scheduling then costs no reading.
+    fn holds_samples(&self) -> bool {
+        false
+    }
 }
 
 /// The byte link's transmit side (UART, USB VCP, a pipe in tests).

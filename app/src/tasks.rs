@@ -164,7 +164,10 @@ impl<M: RawMutex> Default for Shared<M> {
 /// (the source's `read` must be cancel-safe: a command may interrupt it),
 /// streams capture chunks when the queue has room, sends a periodic status.
 /// Reads each block straight into a free one of the chambers' reader's
-/// (`blocks`, [`reading`]), and hands it over after the estimator took it.
+/// (`blocks`, [`reading`]), and hands it over after the estimator took it;
+/// with none free, a source that holds its samples
+/// ([`SampleSource::holds_samples`]) waits for one, and any other's block is
+/// read into the task's own buffer and never reaches the reader.
 pub async fn sampling<S: SampleSource, M: RawMutex, C: Clock>(
     source: &mut S,
     monitor: &mut Monitor,
@@ -184,14 +187,25 @@ pub async fn sampling<S: SampleSource, M: RawMutex, C: Clock>(
     let mut feed = Feed::default();
     loop {
         let at = monitor.estimator().next_index();
-        let mut slot = blocks.try_send();
-        // Commands are answered even when no samples flow.
-        let first = {
-            let buf = match slot.as_deref_mut() {
-                Some(b) => &mut b.sets[..],
-                None => &mut own[..],
-            };
-            select(source.read(buf), shared.commands.receive()).await
+        // Commands are answered even when no samples flow, and while a
+        // source that holds its samples waits for the reader.
+        let (mut slot, command) = if source.holds_samples() {
+            match select(blocks.send(), shared.commands.receive()).await {
+                Either::First(b) => (Some(b), None),
+                Either::Second(cmd) => (None, Some(cmd)),
+            }
+        } else {
+            (blocks.try_send(), None)
+        };
+        let first = match command {
+            Some(cmd) => Either::Second(cmd),
+            None => {
+                let buf = match slot.as_deref_mut() {
+                    Some(b) => &mut b.sets[..],
+                    None => &mut own[..],
+                };
+                select(source.read(buf), shared.commands.receive()).await
+            }
         };
         shared.supervisor.beat(Duty::Sampling);
         let t0 = clock.now_us();

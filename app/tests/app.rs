@@ -7,9 +7,10 @@ use embassy_sync::pipe::Pipe;
 use embassy_sync::zerocopy_channel;
 use hammer_app::chambers::{Block, Pipeline, READER_BLOCKS};
 use hammer_app::{
-    link_rx, link_tx, reading, sampling, ChamberReader, Clock, LinkRx, LinkSamples, LinkTx, Monitor, ReaderRoom, Shared,
+    link_rx, link_tx, reading, sampling, ChamberReader, Clock, LinkRx, LinkSamples, LinkTx, Monitor, Overrun,
+    ReaderRoom, SampleSource, Shared,
 };
-use hammer_estimator::{Config, Estimator, RawSample};
+use hammer_estimator::{Config, CycleReport, Estimator, Flags, RawSample};
 use hammer_sim::simulate::simulate;
 use hammer_sim::SimConfig;
 use hammer_wire::*;
@@ -228,24 +229,37 @@ impl Clock for FakeClock {
     }
 }
 
-#[test]
-fn tasks_over_a_link_report_reject_garbage_and_count_gaps() {
-    let samples = codes(6.0, 0.4);
-    // The host's reference: the estimator, then the chambers' reader.
-    let mut host = Pipeline::new(Config::default(), Box::new(ReaderRoom::new())).unwrap();
-    let mut expected = vec![];
-    // Block 5 of the stream is lost on the way: the host-side reference sees a gap there.
-    let blocks: Vec<&[RawSample]> = samples.chunks(BLOCK_SAMPLES).collect();
-    for (i, b) in blocks.iter().enumerate() {
-        if i == 5 {
-            host.push_gap(b.len() as u32);
-        } else {
-            host.push_block(b, &mut |r| expected.push(r));
-        }
+/// The link's samples; `1` says whether the board holds them while its
+/// reader has no free block (`SampleSource::holds_samples`).
+struct Samples<'a>(LinkSamples<'a, NoopRawMutex>, bool);
+impl SampleSource for Samples<'_> {
+    async fn read(&mut self, buf: &mut [RawSample]) -> Result<usize, Overrun> {
+        self.0.read(buf).await
     }
-    // The last report waits for the 8 ms after its impact, which never come.
-    assert!(host.counters().read >= 5, "{:?}", host.counters());
+    fn holds_samples(&self) -> bool {
+        self.1
+    }
+}
 
+/// How the device's tasks are run by [`over_a_link`].
+#[derive(Clone, Copy)]
+struct Run {
+    /// The stream's block left out on the way, if any.
+    lost: Option<usize>,
+    /// The board's source holds its samples.
+    hold: bool,
+    /// The reader starts only once its blocks have all been full for this
+    /// many rounds of the tasks, as a reader's thread waits its turn on a
+    /// busy host.
+    late_rounds: u32,
+}
+
+/// The device's tasks over an in-memory link, fed `samples` in blocks by a
+/// host that sends a Hello and a line of garbage first, then asks for the
+/// status until it has seen every sample sent and `want_reports` reports
+/// (or a hundred times). What came back, and the blocks the reader lost.
+fn over_a_link(samples: &[RawSample], run: Run, want_reports: usize) -> (Vec<DeviceMsg>, u32) {
+    let blocks: Vec<&[RawSample]> = samples.chunks(BLOCK_SAMPLES).collect();
     let host_to_dev: Pipe<NoopRawMutex, 4096> = Pipe::new();
     let dev_to_host: Pipe<NoopRawMutex, 4096> = Pipe::new();
     let shared: Shared<NoopRawMutex> = Shared::new();
@@ -258,14 +272,31 @@ fn tasks_over_a_link_report_reject_garbage_and_count_gaps() {
     let (mut blocks_tx, mut blocks_rx) = channel.split();
     let device = select4(
         async {
-            let mut src = LinkSamples::new(&shared);
+            let mut src = Samples(LinkSamples::new(&shared), run.hold);
             sampling(&mut src, &mut monitor, &shared, &clock, &mut blocks_tx).await
         },
-        reading(&mut board_reader, &shared, &mut blocks_rx),
+        async {
+            let mut full_for = 0;
+            core::future::poll_fn(|cx| {
+                full_for = if blocks_rx.is_full() { full_for + 1 } else { 0 };
+                if full_for >= run.late_rounds {
+                    return core::task::Poll::Ready(());
+                }
+                cx.waker().wake_by_ref();
+                core::task::Poll::Pending
+            })
+            .await;
+            reading(&mut board_reader, &shared, &mut blocks_rx).await
+        },
         link_rx(&mut rx, &shared),
         link_tx(&mut tx, &shared),
     );
-    let want_reports = expected.len();
+    let sent: usize = blocks
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| Some(*i) != run.lost)
+        .map(|(_, b)| b.len())
+        .sum();
     let host = async {
         let mut frame = [0u8; MAX_FRAME];
         let mut send = async |m: &HostMsg| {
@@ -278,7 +309,7 @@ fn tasks_over_a_link_report_reject_garbage_and_count_gaps() {
         .await;
         host_to_dev.write_all(&[0x55, 0x12, 0x00]).await; // garbage
         for (i, b) in blocks.iter().enumerate() {
-            if i == 5 {
+            if Some(i) == run.lost {
                 continue;
             }
             let block = SampleBlock {
@@ -289,7 +320,6 @@ fn tasks_over_a_link_report_reject_garbage_and_count_gaps() {
         }
         // Samples and commands travel in separate queues: ask for the status
         // until it has seen every sample sent.
-        let want = (samples.len() - BLOCK_SAMPLES) as u64;
         let mut dec = Decoder::<MAX_FRAME>::new();
         let mut got = vec![];
         let mut buf = [0u8; 256];
@@ -309,7 +339,7 @@ fn tasks_over_a_link_report_reject_garbage_and_count_gaps() {
                 // Every sample seen, and every report read that can be.
                 let reports = got.iter().filter(|m| matches!(m, DeviceMsg::Report(_))).count();
                 match status {
-                    Some(seen) if seen == want && reports >= want_reports => return got,
+                    Some(seen) if seen == sent as u64 && reports >= want_reports => return got,
                     Some(_) => break,
                     None => {}
                 }
@@ -321,6 +351,46 @@ fn tasks_over_a_link_report_reject_garbage_and_count_gaps() {
         Either::First(_) => unreachable!("device tasks never return"),
         Either::Second(got) => got,
     };
+    (
+        got,
+        shared.reader_blocks_dropped.load(std::sync::atomic::Ordering::Relaxed),
+    )
+}
+
+fn reports(got: &[DeviceMsg]) -> Vec<CycleReport> {
+    got.iter()
+        .filter_map(|m| if let DeviceMsg::Report(r) = m { Some(*r) } else { None })
+        .collect()
+}
+
+/// The host's reference: the estimator, then the chambers' reader, on the
+/// same blocks (`lost` seen as a gap).
+fn expected_reports(samples: &[RawSample], lost: Option<usize>) -> (Vec<CycleReport>, u32) {
+    let mut host = Pipeline::new(Config::default(), Box::new(ReaderRoom::new())).unwrap();
+    let mut expected = vec![];
+    for (i, b) in samples.chunks(BLOCK_SAMPLES).enumerate() {
+        if Some(i) == lost {
+            host.push_gap(b.len() as u32);
+        } else {
+            host.push_block(b, &mut |r| expected.push(r));
+        }
+    }
+    (expected, host.counters().read)
+}
+
+#[test]
+fn tasks_over_a_link_report_reject_garbage_and_count_gaps() {
+    let samples = codes(6.0, 0.4);
+    // Block 5 of the stream is lost on the way: the host-side reference sees a gap there.
+    let run = Run {
+        lost: Some(5),
+        hold: false,
+        late_rounds: 0,
+    };
+    let (expected, read) = expected_reports(&samples, run.lost);
+    // The last report waits for the 8 ms after its impact, which never come.
+    assert!(read >= 5, "{read}");
+    let (got, reader_dropped) = over_a_link(&samples, run, expected.len());
     // The garbage is answered by the receive task at once, the Hello by the
     // sampling task: their order may vary.
     assert!(got
@@ -331,12 +401,9 @@ fn tasks_over_a_link_report_reject_garbage_and_count_gaps() {
         reason: RejectReason::CorruptFrame,
     };
     assert_eq!(got.iter().filter(|m| **m == rejected).count(), 1);
-    let reports: Vec<CycleReport> = got
-        .iter()
-        .filter_map(|m| if let DeviceMsg::Report(r) = m { Some(*r) } else { None })
-        .collect();
     assert_eq!(
-        reports, expected,
+        reports(&got),
+        expected,
         "device reports equal the host estimator's and reader's on the same samples"
     );
     let DeviceMsg::Status(s) = got.last().unwrap() else {
@@ -347,6 +414,34 @@ fn tasks_over_a_link_report_reject_garbage_and_count_gaps() {
     assert_eq!(s.adc_overruns, 1);
     assert_eq!(s.frames_dropped, 0);
     assert_eq!(s.samples as usize, samples.len() - BLOCK_SAMPLES);
+    assert_eq!(reader_dropped, 0);
+}
+
+/// A reader that waits its turn (a native board's thread on a busy host),
+/// here for longer than the stream takes to arrive: an ADC's blocks run on
+/// past it and are lost to the reading, counted; a source that holds its
+/// samples waits for it, and every cycle is read as the host's reference
+/// reads it.
+#[test]
+fn a_late_reader_costs_readings_only_where_the_source_cannot_wait() {
+    let samples = codes(6.0, 0.4);
+    let (expected, read) = expected_reports(&samples, None);
+    assert!(read >= 5, "{read}");
+    let late = |hold| {
+        let run = Run {
+            lost: None,
+            hold,
+            late_rounds: 2_000,
+        };
+        over_a_link(&samples, run, expected.len())
+    };
+    let (got, reader_dropped) = late(false);
+    let read_ones = |rs: &[CycleReport]| rs.iter().filter(|r| !r.flags.contains(Flags::CHAMBERS_UNREAD)).count();
+    assert!(reader_dropped > 0, "{reader_dropped}");
+    assert!(read_ones(&reports(&got)) < read_ones(&expected), "{:?}", reports(&got));
+    let (got, reader_dropped) = late(true);
+    assert_eq!(reader_dropped, 0);
+    assert_eq!(reports(&got), expected);
 }
 
 /// The device's default configuration on the wire: the mapping from the

@@ -7,13 +7,30 @@ use std::os::unix::net::UnixStream;
 use std::time::Instant;
 
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
-use hammer_app::{Clock, LinkRx, LinkSamples, LinkTx, Monitor, Shared};
+use hammer_app::{Clock, LinkRx, LinkSamples, LinkTx, Monitor, Overrun, SampleSource, Shared};
+use hammer_estimator::RawSample;
 
 struct HostClock(Instant);
 
 impl Clock for HostClock {
     fn now_us(&self) -> u64 {
         self.0.elapsed().as_micros() as u64
+    }
+}
+
+/// The link's samples, held by the host while the chambers' reader catches
+/// up. The reader's thread may wait its turn on a busy machine for longer
+/// than its blocks last; a real board's budget is measured on the emulated
+/// one, so here the host's scheduling costs no chamber reading.
+struct HostSamples<'a>(LinkSamples<'a, CriticalSectionRawMutex>);
+
+impl SampleSource for HostSamples<'_> {
+    async fn read(&mut self, buf: &mut [RawSample]) -> Result<usize, Overrun> {
+        self.0.read(buf).await
+    }
+
+    fn holds_samples(&self) -> bool {
+        true
     }
 }
 
@@ -62,7 +79,7 @@ pub fn start_native_board(cfg: hammer_estimator::Config) -> std::io::Result<Unix
         .name("board-sampling".into())
         .spawn(move || {
             let clock = HostClock(Instant::now());
-            let mut source = LinkSamples::new(shared);
+            let mut source = HostSamples(LinkSamples::new(shared));
             futures::executor::block_on(hammer_app::sampling(
                 &mut source,
                 &mut monitor,

@@ -431,9 +431,9 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         read,
         write: writer.clone(),
     };
-    // The drift needs the native app fed at the hammer's pace: fed faster,
-    // it drops samples, and the reports around a gap carry no chamber
-    // reading.
+    // The drift feeds the native app at the hammer's pace, as a board is
+    // fed: fed faster, its reports could outrun the link's queue
+    // (`hammer_app::tasks::OUTGOING`) and be dropped.
     let drift = args.drift.reference.is_some();
     let feeder = feeder.map(|codes| {
         let (writer, paced) = (writer.clone(), !headless || drift);
